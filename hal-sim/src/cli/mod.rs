@@ -1,0 +1,2 @@
+//! Subcommands of the `piezo` binary, one module each.
+pub mod demo;

@@ -1,0 +1,7 @@
+//! hal-sim: the laptop stand-in for a piezo stage.
+//!
+//! A simulated actuator behind mock converters that implement embedded-hal 1.0, driven by
+//! the firmware's own pipeline from `piezo-core`; plus the host tools of the `piezo` CLI.
+
+pub mod cli;
+pub mod plot;

@@ -1,0 +1,1 @@
+//! Feedforward hysteresis compensation: IMS, MBW without inversion, direct WPMBW inverse, PI inverses, multivariable IMS.

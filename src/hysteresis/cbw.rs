@@ -1,0 +1,180 @@
+//! Classical Bouc-Wen (CBW) in piezo form.
+
+use super::{
+    ensure, ensure_finite, rk4_input, sane_input, step_piecewise_affine, BwState, Hysteresis,
+    ParamError,
+};
+use crate::real::Real;
+
+/// Classical Bouc-Wen, piezo form: `y = d*u - h` (000 eq. 2, 003 eq. 2, 004 eq. 1) with
+/// `dh/dt = alpha*du/dt - beta*|du/dt|*|h|^(n-1)*h - gamma*du/dt*|h|^n`
+/// (000 eq. 1 with the exponent `n` of 001 eq. 2; `alpha, beta, gamma` are the lecture's
+/// `A_bw, B_bw, G_bw`).
+///
+/// Parameters are accepted only when the loops are bounded (004 eq. 3):
+/// `alpha > 0`, `beta + gamma > 0`, `beta - gamma >= 0`, and `n >= 1`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cbw<T> {
+    d: T,
+    alpha: T,
+    beta: T,
+    gamma: T,
+    n: T,
+    /// RK4 sub-step bound in the input domain (V), used only for `n != 1`.
+    max_du: T,
+}
+
+impl<T: Real> Cbw<T> {
+    /// `d` piezo coefficient (um/V), `alpha` (um/V), `beta, gamma` (1/V for n = 1), `n`.
+    pub fn new(d: T, alpha: T, beta: T, gamma: T, n: T) -> Result<Self, ParamError> {
+        ensure_finite(
+            &[d, alpha, beta, gamma, n],
+            "CBW: all parameters must be finite",
+        )?;
+        ensure(alpha > T::ZERO, "CBW: alpha > 0 (004 eq. 3)")?;
+        ensure(beta + gamma > T::ZERO, "CBW: beta + gamma > 0 (004 eq. 3)")?;
+        ensure(
+            beta - gamma >= T::ZERO,
+            "CBW: beta - gamma >= 0 (004 eq. 3)",
+        )?;
+        ensure(n >= T::ONE, "CBW: n >= 1")?;
+        let h_max = (alpha / (beta + gamma)).powf(T::ONE / n);
+        let lipschitz = n * (beta + gamma.abs()) * h_max.abs_pow(n - T::ONE);
+        let max_du = T::from_f64(0.1) / lipschitz;
+        ensure(
+            max_du.is_finite() && max_du > T::ZERO,
+            "CBW: parameters out of range",
+        )?;
+        Ok(Self {
+            d,
+            alpha,
+            beta,
+            gamma,
+            n,
+            max_du,
+        })
+    }
+
+    /// CBW with `n = 1`, the form used for piezo actuators (003, 004).
+    pub fn with_n1(d: T, alpha: T, beta: T, gamma: T) -> Result<Self, ParamError> {
+        Self::new(d, alpha, beta, gamma, T::ONE)
+    }
+
+    pub fn d(&self) -> T {
+        self.d
+    }
+    pub fn alpha(&self) -> T {
+        self.alpha
+    }
+    pub fn beta(&self) -> T {
+        self.beta
+    }
+    pub fn gamma(&self) -> T {
+        self.gamma
+    }
+    pub fn n(&self) -> T {
+        self.n
+    }
+
+    /// The bound of `|h|` on the major loop: `(alpha / (beta + gamma))^(1/n)`.
+    pub fn h_bound(&self) -> T {
+        (self.alpha / (self.beta + self.gamma)).powf(T::ONE / self.n)
+    }
+
+    /// `dh/du` at state `h` for input direction `s = sgn(du/dt)`.
+    #[inline]
+    pub fn slope(&self, h: T, s: T) -> T {
+        self.alpha - (self.beta * s * h.sgn() + self.gamma) * h.abs_pow(self.n)
+    }
+
+    /// Exact (n = 1) or RK4 (n != 1) input-domain update of `h` over `du`.
+    #[inline]
+    pub fn advance_h(&self, h: T, u0: T, du: T) -> T {
+        let s = du.sgn();
+        if self.n == T::ONE {
+            step_piecewise_affine(h, du, self.alpha, |sigma| {
+                self.beta * s + self.gamma * sigma
+            })
+        } else {
+            rk4_input(h, u0, du, self.max_du, |h, _| self.slope(h, s))
+        }
+    }
+}
+
+impl<T: Real> Hysteresis<T> for Cbw<T> {
+    type State = BwState<T>;
+
+    fn init(&self, u0: T) -> BwState<T> {
+        BwState {
+            u: sane_input(u0, T::ZERO),
+            h: T::ZERO,
+        }
+    }
+
+    #[inline]
+    fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
+        let u = sane_input(u, s.u);
+        s.h = self.advance_h(s.h, s.u, u - s.u);
+        s.u = u;
+        self.d * u - s.h
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Backup slide of 000, parameter set 1.
+    fn set1() -> Cbw<f64> {
+        Cbw::with_n1(0.16, 0.07, 0.02, 0.01).unwrap()
+    }
+
+    #[test]
+    fn rejects_parameters_that_break_004_eq3() {
+        assert_eq!(
+            Cbw::with_n1(0.16, 0.07, 0.01, 0.02).unwrap_err().0,
+            "CBW: beta - gamma >= 0 (004 eq. 3)"
+        );
+        assert_eq!(
+            Cbw::with_n1(0.16, -0.07, 0.02, 0.01).unwrap_err().0,
+            "CBW: alpha > 0 (004 eq. 3)"
+        );
+        assert!(Cbw::new(0.16, 0.07, 0.02, 0.01, 0.5).is_err());
+        assert!(Cbw::with_n1(f64::NAN, 0.07, 0.02, 0.01).is_err());
+    }
+
+    #[test]
+    fn closed_form_equals_fine_rk4() {
+        let m = set1();
+        let mut h_exact = 0.0;
+        let mut h_rk4 = 0.0;
+        let mut u = 0.0;
+        for k in 1..2000 {
+            let un = 100.0 * (k as f64 * 0.01).sin();
+            let du = un - u;
+            h_exact = m.advance_h(h_exact, u, du);
+            h_rk4 = rk4_input(h_rk4, u, du, 1e-3, |h, _| m.slope(h, du.signum()));
+            u = un;
+        }
+        assert!((h_exact - h_rk4).abs() < 1e-8, "{h_exact} vs {h_rk4}");
+    }
+
+    #[test]
+    fn saturates_at_h_bound() {
+        let m = set1();
+        let mut s = m.init(0.0);
+        m.step(&mut s, 2000.0, 1.0);
+        assert!((s.h - m.h_bound()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn nan_input_holds_state() {
+        let m = set1();
+        let mut s = m.init(0.0);
+        m.step(&mut s, 10.0, 1e-3);
+        let before = s;
+        let y = m.step(&mut s, f64::NAN, 1e-3);
+        assert_eq!(s, before);
+        assert!(y.is_finite());
+    }
+}

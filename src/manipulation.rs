@@ -1,0 +1,1 @@
+//! Manipulation (000 Part V): force estimation, object characterisation, distributed-parameter beam observers.

@@ -1,0 +1,1 @@
+//! The per-sample control pipeline: ADC code in, DAC code out.
