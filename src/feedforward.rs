@@ -1,1 +1,53 @@
-//! Feedforward hysteresis compensation: IMS, MBW without inversion, direct WPMBW inverse, PI inverses, multivariable IMS.
+//! Feedforward hysteresis compensation: IMS, MBW without inversion, direct WPMBW inverse,
+//! PI inverses, multivariable IMS. One enum selects the compensator at run time; each variant
+//! holds its own configuration and state.
+
+use crate::real::Real;
+use crate::signals::Setpoint;
+
+/// Linear scaling only: `u = (y_ref - offset) / d`, no hysteresis model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearFf<T> {
+    /// Static gain of the stage (um/V).
+    pub um_per_volt: T,
+    /// Position at 0 V (um).
+    pub offset_um: T,
+}
+
+impl<T: Real> LinearFf<T> {
+    #[inline]
+    pub fn compensate(&self, y_ref_um: T) -> T {
+        (y_ref_um - self.offset_um) / self.um_per_volt
+    }
+}
+
+/// The selectable feedforward compensator.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Feedforward<T: Real> {
+    /// Linear scaling only (open loop without a hysteresis model).
+    Linear(LinearFf<T>),
+}
+
+impl<T: Real> Feedforward<T> {
+    /// Voltage (V) that should bring the stage to the setpoint.
+    #[inline]
+    pub fn compensate(&mut self, sp: &Setpoint<T>) -> T {
+        match self {
+            Feedforward::Linear(l) => l.compensate(sp.y_um),
+        }
+    }
+
+    /// Restart from rest at setpoint `sp` (mode switch, fault recovery).
+    pub fn reset(&mut self, _sp: &Setpoint<T>) {
+        match self {
+            Feedforward::Linear(_) => {}
+        }
+    }
+
+    /// Short name for tables and logs.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Feedforward::Linear(_) => "linear",
+        }
+    }
+}

@@ -13,10 +13,12 @@
 pub mod drivers;
 pub mod feedback;
 pub mod feedforward;
+pub mod fixed;
 pub mod hysteresis;
 pub mod linear;
 pub mod manipulation;
 pub mod pipeline;
 pub mod real;
+pub mod signals;
 
 pub use real::Real;

@@ -3,5 +3,14 @@
 //! A simulated actuator behind mock converters that implement embedded-hal 1.0, driven by
 //! the firmware's own pipeline from `piezo-core`; plus the host tools of the `piezo` CLI.
 
+pub mod beam;
 pub mod cli;
+pub mod faults;
+pub mod ident;
+pub mod mock;
+pub mod object;
 pub mod plot;
+pub mod record;
+pub mod scenario;
+pub mod sim;
+pub mod stage;

@@ -21,6 +21,7 @@
 //! by `alpha -> -alpha`, `gamma -> -gamma`, `delta -> -delta` (k, beta, p, q unchanged).
 
 pub mod cbw;
+pub mod structural;
 
 pub use cbw::Cbw;
 

@@ -16,12 +16,24 @@ struct Cli {
 enum Cmd {
     /// Drive every hysteresis model with a decaying sine; write each loop as CSV and SVG.
     Demo(hal_sim::cli::demo::Args),
+    /// Run control scenarios on the simulated stage and print tracking metrics.
+    Sim(hal_sim::cli::sim::Args),
+    /// Identify a model from a measured CSV record.
+    Fit(hal_sim::cli::fit::Args),
+    /// Find what the base model gets wrong, name the cause, extend the model, measure the gain.
+    Diagnose(hal_sim::cli::diagnose::Args),
+    /// Fault campaign over every controller mode.
+    Faults(hal_sim::cli::faults::Args),
 }
 
 fn main() {
     let cli = Cli::parse();
     let result = match cli.cmd {
         Cmd::Demo(a) => hal_sim::cli::demo::run(a),
+        Cmd::Sim(a) => hal_sim::cli::sim::run(a),
+        Cmd::Fit(a) => hal_sim::cli::fit::run(a),
+        Cmd::Diagnose(a) => hal_sim::cli::diagnose::run(a),
+        Cmd::Faults(a) => hal_sim::cli::faults::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -1,2 +1,6 @@
 //! Subcommands of the `piezo` binary, one module each.
 pub mod demo;
+pub mod diagnose;
+pub mod faults;
+pub mod fit;
+pub mod sim;

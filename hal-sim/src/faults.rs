@@ -1,0 +1,1 @@
+//! Fault campaign over every controller mode (`piezo faults`).

@@ -1,0 +1,1 @@
+//! Identification and model discovery (`piezo fit`, `piezo diagnose`).

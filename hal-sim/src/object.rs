@@ -1,0 +1,1 @@
+//! Deformable object (nonlinear viscoelastic, contact beyond a gap).

@@ -1,0 +1,1 @@
+//! Scenario files (TOML): which stage effects are on, and their parameters.

@@ -1,0 +1,1 @@
+//! The simulated actuator: amplifier, hysteresis, creep, structural dynamics, drift, noise, delay, coupling.

@@ -1,0 +1,1 @@
+//! Structural Bouc-Wen oscillator (003 eq. 1; the Bouc-Wen benchmark form).
