@@ -51,3 +51,40 @@ impl<T: Real> Feedforward<T> {
         }
     }
 }
+
+/// Feedforward for an `N`-axis stage: one compensator per axis, or a multivariable one
+/// (003 eq. 14-20) that maps all references to all voltages at once.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MultiFeedforward<T: Real, const N: usize> {
+    /// Independent axes.
+    PerAxis([Feedforward<T>; N]),
+}
+
+impl<T: Real, const N: usize> MultiFeedforward<T, N> {
+    /// Voltages (V) that should bring every axis to its setpoint.
+    #[inline]
+    pub fn compensate(&mut self, sp: &[Setpoint<T>; N]) -> [T; N] {
+        match self {
+            MultiFeedforward::PerAxis(ff) => {
+                let mut u = [T::ZERO; N];
+                for ((u, f), s) in u.iter_mut().zip(ff.iter_mut()).zip(sp) {
+                    *u = f.compensate(s);
+                }
+                u
+            }
+        }
+    }
+
+    /// Restart from rest at the given setpoints.
+    pub fn reset(&mut self, sp: &[Setpoint<T>; N]) {
+        match self {
+            MultiFeedforward::PerAxis(ff) => ff.iter_mut().zip(sp).for_each(|(f, s)| f.reset(s)),
+        }
+    }
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            MultiFeedforward::PerAxis(ff) => ff.first().map_or("none", |f| f.name()),
+        }
+    }
+}

@@ -10,6 +10,7 @@
 // `!(x < y)` is how NaN is kept out of limits here; it is intended.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod command;
 pub mod drivers;
 pub mod feedback;
 pub mod feedforward;
@@ -19,6 +20,7 @@ pub mod linear;
 pub mod manipulation;
 pub mod pipeline;
 pub mod real;
+pub mod recorder;
 pub mod signals;
 
 pub use real::Real;

@@ -1,0 +1,1 @@
+//! Data recorder: fixed-size ring buffer of selected signals with a trigger.
