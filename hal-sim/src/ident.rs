@@ -1,1 +1,4 @@
 //! Identification and model discovery (`piezo fit`, `piezo diagnose`).
+pub mod diagnose;
+pub mod fit;
+pub mod optim;

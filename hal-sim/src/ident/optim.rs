@@ -1,0 +1,1 @@
+//! Global (differential evolution) and local (Levenberg-Marquardt) optimisers for identification.
