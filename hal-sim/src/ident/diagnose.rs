@@ -133,23 +133,47 @@ RECORD */
 /// Search effort.
 #[derive(Debug, Clone, Copy)]
 pub struct Options {
-    /// Rate the global stage decimates to (Hz), at least.
-    pub global_rate_hz: f64,
-    /// At most this many samples in the global stage.
-    pub global_samples: usize,
-    /// Nelder-Mead evaluations in the global stage: `base + per_dim * dim`.
+    /// At most this many samples in the global stage (decimated training record).
+    pub coarse_samples: usize,
+    /// The polish runs on the training record decimated to at most this many samples, but
+    /// never below [`Options::medium_rate_hz`] (unless the record is slower).
+    pub medium_samples: usize,
+    pub medium_rate_hz: f64,
+    /// Nelder-Mead evaluations in the global stage: `base + per_dim * dim`, per start.
     pub global_evals: (usize, usize),
-    /// Nelder-Mead evaluations of the polish on all samples: `base + per_dim * dim`.
+    /// Nelder-Mead evaluations of the polish: `base + per_dim * dim`.
     pub local_evals: (usize, usize),
 }
 
 impl Default for Options {
     fn default() -> Self {
         Self {
-            global_rate_hz: 2000.0,
-            global_samples: 20_000,
-            global_evals: (60, 30),
-            local_evals: (12, 6),
+            coarse_samples: 5_000,
+            medium_samples: 25_000,
+            medium_rate_hz: 2_000.0,
+            global_evals: (30, 20),
+            local_evals: (8, 4),
+        }
+    }
+}
+
+/// The training record at three resolutions: global search, polish, final least squares.
+struct Tiers<'a> {
+    full: &'a Signals,
+    medium: Signals,
+    coarse: Signals,
+}
+
+impl<'a> Tiers<'a> {
+    fn new(full: &'a Signals, opt: &Options) -> Self {
+        let n = full.len();
+        let coarse = n.div_ceil(opt.coarse_samples.max(100)).max(1);
+        let by_rate = (1.0 / (full.dt() * opt.medium_rate_hz)).floor().max(1.0) as usize;
+        let medium = n.div_ceil(opt.medium_samples.max(100)).clamp(1, by_rate);
+        Self {
+            full,
+            medium: full.decimate(medium),
+            coarse: full.decimate(coarse),
         }
     }
 }
@@ -319,12 +343,16 @@ impl Diagnosis {
     }
 }
 
-/// Decimation factor for the global stage.
-fn decimation(data: &Signals, opt: &Options) -> usize {
-    let by_rate = (1.0 / (data.dt() * opt.global_rate_hz)).floor().max(1.0) as usize;
-    let by_len = data.len().div_ceil(opt.global_samples.max(100));
-    by_rate.max(by_len).max(1)
-}
+/// CBW shapes every fit also starts from: `ln((beta + gamma) * span)`, `ln((beta - gamma) /
+/// (beta + gamma))`.
+const SHAPE_GRID: [(f64, f64); 6] = [
+    (0.5, -1.0),
+    (0.5, 0.0),
+    (2.0, -1.0),
+    (2.0, 0.0),
+    (3.5, -1.0),
+    (3.5, 0.0),
+];
 
 /// Starting shapes for adding `cause` to a model whose output has `shape`.
 fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
@@ -386,9 +414,9 @@ fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
 }
 
 /// Fits output `i` with `causes`, from the best of `starts`.
+#[allow(clippy::too_many_arguments)]
 fn fit_output(
-    full: &Signals,
-    coarse: &Signals,
+    tiers: &Tiers,
     i: usize,
     causes: Causes,
     starts: &[Shape],
@@ -402,10 +430,11 @@ fn fit_output(
     };
     let dim = coords.dim();
     let cost_on = |data: &Signals, x: &[f64]| {
-        let shape = coords.shape(x);
-        fit_linear(data, i, causes, &shape, scales, taus).1
+        let (shape, excess) = coords.shape_and_excess(x);
+        fit_linear(data, i, causes, &shape, scales, taus).1 * (1.0 + excess)
     };
-    // Rank the starts on the coarse data, keep the best two.
+    let (coarse, medium) = (&tiers.coarse, &tiers.medium);
+    // Rank the starts, keep two (one when only the CBW shape is searched).
     let mut ranked: Vec<(Vec<f64>, f64)> = starts
         .iter()
         .map(|s| {
@@ -415,12 +444,32 @@ fn fit_output(
         })
         .collect();
     ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
-    ranked.truncate(2);
+    // The best extension setting again with fresh CBW shapes: the current shape may sit in
+    // a corner the missing cause pushed it into.
+    if let Some((x, _)) = ranked.first().cloned() {
+        for (a, r) in SHAPE_GRID {
+            let mut x = x.clone();
+            x[0] = a;
+            x[1] = r;
+            let c = cost_on(coarse, &x);
+            ranked.push((x, c));
+        }
+        ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
+    }
+    ranked.truncate(if dim > 2 { 2 } else { 1 });
     let steps = coords.steps();
-    let global = opt.global_evals.0 + opt.global_evals.1 * dim;
+    // Only the CBW shape to search (the extension is linear): a short search suffices.
+    let global = if dim > 2 {
+        opt.global_evals.0 + opt.global_evals.1 * dim
+    } else {
+        opt.global_evals.0
+    };
     let mut best: Option<(Vec<f64>, f64)> = None;
     for (x0, _) in &ranked {
-        let (x, c) = search::nelder_mead(&mut |x| cost_on(coarse, x), x0, &steps, global, 1e-7);
+        let (x, _) = search::nelder_mead(&mut |x| cost_on(coarse, x), x0, &steps, global, 1e-7);
+        // A restart with fresh steps: a collapsed simplex is the usual Nelder-Mead failure.
+        let (x, c) =
+            search::nelder_mead(&mut |x| cost_on(coarse, x), &x, &steps, global / 3, 1e-7);
         if best.as_ref().is_none_or(|b| c < b.1) {
             best = Some((x, c));
         }
@@ -428,12 +477,13 @@ fn fit_output(
     let x = best.map_or_else(|| coords.coords(&starts[0]), |b| b.0);
     let fine_steps: Vec<f64> = steps.iter().map(|s| 0.1 * s).collect();
     let local = opt.local_evals.0 + opt.local_evals.1 * dim;
-    let (x, _) = search::nelder_mead(&mut |x| cost_on(full, x), &x, &fine_steps, local, 1e-9);
-    fit_linear(full, i, causes, &coords.shape(&x), scales, taus)
+    let (x, _) = search::nelder_mead(&mut |x| cost_on(medium, x), &x, &fine_steps, local, 1e-9);
+    fit_linear(tiers.full, i, causes, &coords.shape(&x), scales, taus)
 }
 
 /// The base fit: a grid over the CBW shape, then the same search as the extensions.
-fn fit_base(full: &Signals, coarse: &Signals, opt: &Options) -> Fitted {
+fn fit_base(tiers: &Tiers, opt: &Options) -> Fitted {
+    let full = tiers.full;
     let taus = creep_taus(full.dt() * full.len() as f64, full.dt());
     let n_out = full.y.len();
     let scales: Vec<Scales> = (0..n_out)
@@ -453,8 +503,7 @@ fn fit_base(full: &Signals, coarse: &Signals, opt: &Options) -> Fitted {
                 }
             }
             fit_output(
-                full,
-                coarse,
+                tiers,
                 i,
                 Causes::default(),
                 &grid,
@@ -492,19 +541,17 @@ fn assemble(
 /// Extends `current` by `cause` and refits every output from its current shape.
 fn extend(
     current: &Fitted,
-    cause: Cause,
-    full: &Signals,
-    coarse: &Signals,
+    cause: Option<Cause>,
+    tiers: &Tiers,
     opt: &Options,
 ) -> Fitted {
-    let causes = current.causes.with(cause);
+    let causes = cause.map_or(current.causes, |c| current.causes.with(c));
     let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
         .into_par_iter()
         .map(|i| {
-            let st = starts(Some(cause), &current.outputs[i].shape, &current.scales[i]);
+            let st = starts(cause, &current.outputs[i].shape, &current.scales[i]);
             fit_output(
-                full,
-                coarse,
+                tiers,
                 i,
                 causes,
                 &st,
@@ -519,7 +566,7 @@ fn extend(
         outputs,
         current.scales.clone(),
         current.taus.clone(),
-        full,
+        tiers.full,
     )
 }
 
@@ -575,10 +622,10 @@ fn check_pair(train: &Signals, valid: &Signals) -> anyhow::Result<()> {
 /// Runs the discovery on a training and a validation record.
 pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Result<Diagnosis> {
     check_pair(train, valid)?;
-    let coarse = train.decimate(decimation(train, opt));
-    let base = fit_base(train, &coarse, opt);
+    let tiers = Tiers::new(train, opt);
+    let mut base = fit_base(&tiers, opt);
     let base_pred = base.predict(valid);
-    let base_valid = rmse_all(&valid.y, &base_pred);
+    let mut base_valid = rmse_all(&valid.y, &base_pred);
     anyhow::ensure!(
         base_valid.is_finite(),
         "base model diverged on the validation record"
@@ -608,14 +655,35 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
         if todo.is_empty() {
             break;
         }
-        let tried: Vec<(Fitted, Vec<Vec<f64>>, f64, Evidence)> = todo
+        // The current causes refitted by the same search are the control: a cause must gain
+        // more than what a longer search alone gives.
+        let runs: Vec<Option<Cause>> = std::iter::once(None)
+            .chain(todo.iter().copied().map(Some))
+            .collect();
+        let mut tried: Vec<(Fitted, Vec<Vec<f64>>, f64)> = runs
             .par_iter()
             .map(|&c| {
-                let f = extend(&current, c, train, &coarse, opt);
+                let f = extend(&current, c, &tiers, opt);
                 let pred = f.predict(valid);
                 let e = rmse_all(&valid.y, &pred);
+                (f, pred, e)
+            })
+            .collect();
+        let control = tried.remove(0);
+        if control.2 < current_valid {
+            (current, current_pred, current_valid) = control;
+            if findings.is_empty() {
+                // Still the base model, only better converged.
+                base = current.clone();
+                base_valid = current_valid;
+            }
+        }
+        let tried: Vec<(Fitted, Vec<Vec<f64>>, f64, Evidence)> = tried
+            .into_iter()
+            .zip(&todo)
+            .map(|((f, p, e), &c)| {
                 let ev = evidence_for(valid, c, &current_pred);
-                (f, pred, e, ev)
+                (f, p, e, ev)
             })
             .collect();
         let mut best: Option<usize> = None;

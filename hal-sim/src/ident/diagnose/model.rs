@@ -177,12 +177,26 @@ impl Coords {
 
     /// Shape from coordinates; every coordinate is clamped into its valid range.
     pub fn shape(&self, x: &[f64]) -> Shape {
+        self.shape_and_excess(x).0
+    }
+
+    /// Shape, and how far (squared, in coordinate units) `x` lies outside the valid ranges:
+    /// the search adds it as a penalty so a clamped coordinate is never a flat plateau.
+    pub fn shape_and_excess(&self, x: &[f64]) -> (Shape, f64) {
         let s = &self.scales;
         let span = s.span();
         let mut it = x.iter().copied();
-        let mut next = || it.next().unwrap_or(0.0);
-        let a = next().clamp(-6.0, 8.0).exp() / span;
-        let r = next().clamp(-12.0, 5.0).exp();
+        let mut excess = 0.0;
+        let mut next = |lo: f64, hi: f64| {
+            let v = it.next().unwrap_or(0.0);
+            let c = v.clamp(lo, hi);
+            excess += (v - c) * (v - c);
+            c
+        };
+        // Below e^-2.5 the loop never saturates within the input span: CBW degenerates into a
+        // quadratic in u that fits trends it should not.
+        let a = next(-2.5, 8.0).exp() / span;
+        let r = next(-12.0, 5.0).exp();
         let mut shape = Shape {
             beta: 0.5 * a * (1.0 + r),
             gamma: 0.5 * a * (1.0 - r),
@@ -195,20 +209,27 @@ impl Coords {
         };
         let c = self.causes;
         if c.has(Cause::Delay) {
-            shape.delay_s = (next() * s.dt).clamp(0.0, s.max_delay_s());
+            shape.delay_s = next(0.0, s.max_delay_s() / s.dt) * s.dt;
         }
         if c.has(Cause::Saturation) {
-            shape.rail_lo_v = s.u_lo + span * next().clamp(0.0, 0.45);
-            shape.rail_hi_v = s.u_hi - span * next().clamp(0.0, 0.45);
+            // A rail at the extreme of the training input was never hit: no rail on that
+            // side, or the validation input beyond that extreme would be clipped on no evidence.
+            let (lo, hi) = (next(0.0, 0.45), next(0.0, 0.45));
+            if lo > RAIL_UNSEEN {
+                shape.rail_lo_v = s.u_lo + span * lo;
+            }
+            if hi > RAIL_UNSEEN {
+                shape.rail_hi_v = s.u_hi - span * hi;
+            }
         }
         if c.has(Cause::SlewLimit) {
-            shape.slew_v_per_s = s.rate_max * next().clamp(-8.0, 0.3).exp();
+            shape.slew_v_per_s = s.rate_max * next(-8.0, 0.3).exp();
         }
         if c.has(Cause::Dynamics) {
-            shape.wn_hz = next().exp().clamp(0.2, s.max_wn_hz());
-            shape.zeta = next().clamp(-3.0, 1.6).exp();
+            shape.wn_hz = next(0.2f64.ln(), s.max_wn_hz().ln()).exp();
+            shape.zeta = next(-3.0, 1.6).exp();
         }
-        shape
+        (shape, excess)
     }
 
     /// Coordinates of a shape (inverse of [`Coords::shape`] inside the ranges).
@@ -223,8 +244,9 @@ impl Coords {
             x.push(shape.delay_s / s.dt);
         }
         if c.has(Cause::Saturation) {
-            x.push(((shape.rail_lo_v - s.u_lo) / span).clamp(0.0, 0.45));
-            x.push(((s.u_hi - shape.rail_hi_v) / span).clamp(0.0, 0.45));
+            let frac = |v: f64| if v.is_finite() { v.clamp(0.0, 0.45) } else { 0.0 };
+            x.push(frac((shape.rail_lo_v - s.u_lo) / span));
+            x.push(frac((s.u_hi - shape.rail_hi_v) / span));
         }
         if c.has(Cause::SlewLimit) {
             x.push((shape.slew_v_per_s / s.rate_max).min(1.35).ln());
@@ -255,6 +277,10 @@ impl Coords {
         v
     }
 }
+
+/// Rails closer than this (fraction of the span) to the training input's extremes count as
+/// never hit.
+const RAIL_UNSEEN: f64 = 2e-3;
 
 /// Fixed creep time constants for a record of `duration_s` sampled at `dt`.
 pub fn creep_taus(duration_s: f64, dt: f64) -> Vec<f64> {
