@@ -8,12 +8,14 @@
 
 pub mod ims;
 pub mod mbw;
+pub mod multi;
 pub mod pi;
 pub mod solve;
 pub mod wpmbw;
 
 pub use ims::{Ims, ImsLoop, ImsModel};
 pub use mbw::MbwFf;
+pub use multi::{pseudo_inverse, MultiIms};
 pub use pi::{ppi_inverse, DpiInverse, PiInverse, PpiInverse, MAX_OPS};
 pub use wpmbw::{LinearPart, WpmbwInverse};
 
@@ -155,10 +157,15 @@ impl<T: Real> Feedforward<T> {
 
 /// Feedforward for an `N`-axis stage: one compensator per axis, or a multivariable one
 /// (003 eq. 14-20) that maps all references to all voltages at once.
+// The multivariable variant holds its matrices inline (no heap).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum MultiFeedforward<T: Real, const N: usize> {
     /// Independent axes.
     PerAxis([Feedforward<T>; N]),
+    /// Multivariable IMS `U = D^-1 (y_ref + h)` (003 eq. 16), `N` actuators for `N` axes.
+    /// Under- and over-actuated systems use [`MultiIms`] with `N != K` directly.
+    Ims(MultiIms<T, N, N>),
 }
 
 impl<T: Real, const N: usize> MultiFeedforward<T, N> {
@@ -173,6 +180,13 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
                 }
                 u
             }
+            MultiFeedforward::Ims(m) => {
+                let mut y = [T::ZERO; N];
+                for (y, s) in y.iter_mut().zip(sp) {
+                    *y = s.y_um;
+                }
+                m.compensate(&y)
+            }
         }
     }
 
@@ -180,12 +194,20 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
     pub fn reset(&mut self, sp: &[Setpoint<T>; N]) {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.iter_mut().zip(sp).for_each(|(f, s)| f.reset(s)),
+            MultiFeedforward::Ims(m) => {
+                let mut y = [T::ZERO; N];
+                for (y, s) in y.iter_mut().zip(sp) {
+                    *y = s.y_um;
+                }
+                m.reset(&y);
+            }
         }
     }
 
     pub fn name(&self) -> &'static str {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.first().map_or("none", |f| f.name()),
+            MultiFeedforward::Ims(m) => ims_name(m.closure(), "multi-ims", "multi-ims-delayed"),
         }
     }
 }
