@@ -98,15 +98,13 @@ impl<T: Real, const M: usize> Hgo<T, M> {
         let mut b_du = [T::ZERO; M];
         let mut c_tip = [T::ZERO; M];
         let mut c_out = [T::ZERO; M];
-        for i in 0..N {
-            for j in 0..N {
-                phi[i][j] = model.a[i][j];
-            }
-            phi[i][N] = -model.b[i];
-            b_du[i] = model.b[i] * d;
-            c_tip[i] = model.c_tip[i];
-            c_out[i] = model.c_out[i];
+        for (i, (row, bi)) in model.a.iter().zip(&model.b).enumerate() {
+            phi[i][..N].copy_from_slice(row);
+            phi[i][N] = -*bi;
+            b_du[i] = *bi * d;
         }
+        c_tip[..N].copy_from_slice(&model.c_tip);
+        c_out[..N].copy_from_slice(&model.c_out);
         let l = ackermann(&phi, &c_tip, &repeated_pole(T::ONE / eps))
             .ok_or(ParamError("HGO: (Phi, C) must be observable (000 eq. 5)"))?;
         Ok(Self {
