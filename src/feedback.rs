@@ -15,14 +15,16 @@ pub mod adrc;
 pub mod biquad;
 pub mod guard;
 pub mod hgo;
+pub mod nmpc;
 pub mod pid;
 pub mod robust;
 
 pub use adrc::{Adrc, AdrcConfig};
 pub use biquad::Biquad;
 pub use hgo::{Hgo, HgoState, ObserverModel};
+pub use nmpc::{Nmpc, NmpcConfig};
 pub use pid::{Pid, PidConfig};
-pub use robust::{Robust, RobustConfig};
+pub use robust::{Convergence, Robust, RobustConfig};
 
 use crate::real::Real;
 use crate::signals::LoopSignals;
@@ -39,6 +41,8 @@ pub enum Feedback<T: Real> {
     Robust(Robust<T>),
     /// Extended-state observer + ADRC (000 eq. 10-11).
     Adrc(Adrc<T>),
+    /// HGO + nonlinear MPC with the hysteresis model as prediction model (000 Part IV).
+    Nmpc(Nmpc<T>),
 }
 
 impl<T: Real> Feedback<T> {
@@ -58,6 +62,7 @@ impl<T: Real> Feedback<T> {
             Feedback::Pid(l) => l.update(io),
             Feedback::Robust(l) => l.update(io),
             Feedback::Adrc(l) => l.update(io),
+            Feedback::Nmpc(l) => l.update(io),
         }
     }
 
@@ -68,6 +73,7 @@ impl<T: Real> Feedback<T> {
             Feedback::Pid(l) => l.reset(io),
             Feedback::Robust(l) => l.reset(io),
             Feedback::Adrc(l) => l.reset(io),
+            Feedback::Nmpc(l) => l.reset(io),
         }
     }
 
@@ -78,6 +84,7 @@ impl<T: Real> Feedback<T> {
             Feedback::Pid(l) => &mut l.guard,
             Feedback::Robust(l) => &mut l.guard,
             Feedback::Adrc(l) => &mut l.guard,
+            Feedback::Nmpc(l) => &mut l.guard,
         };
         g.notch = notch;
         g.restart();
@@ -89,10 +96,16 @@ impl<T: Real> Feedback<T> {
             Feedback::OpenLoop => "open-loop",
             Feedback::Pid(l) if l.config().feedforward => "ff+pid",
             Feedback::Pid(_) => "pid",
-            Feedback::Robust(l) if l.config().feedforward => "ff+hgo-robust",
-            Feedback::Robust(_) => "hgo-robust",
+            Feedback::Robust(l) => match (l.config().convergence, l.config().feedforward) {
+                (Convergence::Exponential, false) => "hgo-robust",
+                (Convergence::Exponential, true) => "ff+hgo-robust",
+                (Convergence::FiniteTime { .. }, false) => "fts",
+                (Convergence::FiniteTime { .. }, true) => "ff+fts",
+            },
             Feedback::Adrc(l) if l.config().feedforward => "ff+adrc",
             Feedback::Adrc(_) => "adrc",
+            Feedback::Nmpc(l) if l.config().feedforward => "ff+nmpc",
+            Feedback::Nmpc(_) => "nmpc",
         }
     }
 }

@@ -26,7 +26,7 @@
 //! As `eps -> 0` the poles go to 0 (dead-beat) and the noise gain grows, which is what
 //! [`Hgo::epsilon_for`] trades off.
 
-use crate::hysteresis::{ensure, ensure_finite, Cbw, ParamError};
+use crate::hysteresis::{ensure, ensure_finite, Cbw, Dahl, Gbw, ParamError};
 use crate::real::Real;
 
 /// Hysteresis model the observer predicts `h` with (the `f(h, u')` of 000 eq. 5).
@@ -34,6 +34,10 @@ use crate::real::Real;
 pub enum ObserverModel<T> {
     /// Classical Bouc-Wen (000 eq. 1).
     Cbw(Cbw<T>),
+    /// Generalized Bouc-Wen (000 eq. 3), for asymmetric loops (finite-time law, NMPC).
+    Gbw(Gbw<T>),
+    /// Dahl (000 eq. 4).
+    Dahl(Dahl<T>),
 }
 
 impl<T: Real> ObserverModel<T> {
@@ -42,6 +46,8 @@ impl<T: Real> ObserverModel<T> {
     pub fn d(&self) -> T {
         match self {
             ObserverModel::Cbw(m) => m.d(),
+            ObserverModel::Gbw(m) => m.d(),
+            ObserverModel::Dahl(m) => m.d(),
         }
     }
     /// `dh/du` at `h` moving in direction `s`.
@@ -49,6 +55,8 @@ impl<T: Real> ObserverModel<T> {
     pub fn slope(&self, h: T, s: T) -> T {
         match self {
             ObserverModel::Cbw(m) => m.slope(h, s),
+            ObserverModel::Gbw(m) => m.slope(h, s),
+            ObserverModel::Dahl(m) => m.slope(h, s),
         }
     }
     /// Input-domain update of `h` over `du` from `u0`.
@@ -56,6 +64,8 @@ impl<T: Real> ObserverModel<T> {
     pub fn advance_h(&self, h: T, u0: T, du: T) -> T {
         match self {
             ObserverModel::Cbw(m) => m.advance_h(h, u0, du),
+            ObserverModel::Gbw(m) => m.advance_h(h, u0, du),
+            ObserverModel::Dahl(m) => m.advance_h(h, du),
         }
     }
     /// Bound of `|h|` on the major loop.
@@ -63,6 +73,8 @@ impl<T: Real> ObserverModel<T> {
     pub fn h_bound(&self) -> T {
         match self {
             ObserverModel::Cbw(m) => m.h_bound(),
+            ObserverModel::Gbw(m) => m.h_bound(),
+            ObserverModel::Dahl(m) => m.hc(),
         }
     }
 }

@@ -16,6 +16,38 @@ pub struct RobustConfig<T> {
     /// Combine with feedforward: the increment of `io.u_ff` replaces the law's own
     /// `h_d'` term, the `lambda_2` correction stays.
     pub feedforward: bool,
+    /// How the two errors converge.
+    pub convergence: Convergence<T>,
+}
+
+/// Convergence of the tracking error `e = x_hat - y_d` and of `e_h = h_hat - h_d`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Convergence<T> {
+    /// `e' = -lambda1 e`, `e_h' = -lambda2 e_h` (000 eq. 7-8).
+    Exponential,
+    /// Finite time (000 Part IV, GBW + FTS): `e' = -lambda1 sig(e)^alpha1`,
+    /// `e_h' = -lambda2 sig(e_h)^alpha2` with `sig(e)^a = |e|^a sgn(e)`, `0 < a < 1`,
+    /// and the virtual control saturated: `|e'| <= sat_um_per_s` (the `sigma_1` of the
+    /// lecture). Each sample advances the errors by the *exact* solution of these ODEs
+    /// over `dt` (`|e|^(1-a)` falls linearly to 0), so the discrete law reaches zero in
+    /// finite time without chattering.
+    FiniteTime {
+        alpha1: T,
+        alpha2: T,
+        sat_um_per_s: T,
+    },
+}
+
+/// Exact solution over `dt` of `e' = -k sig(e)^alpha`, `0 < alpha < 1`.
+#[inline]
+pub fn finite_time_decay<T: Real>(e: T, k: T, alpha: T, dt: T) -> T {
+    let p = T::ONE - alpha;
+    let r = e.abs_pow(p) - p * k * dt;
+    if r > T::ZERO {
+        e.sgn() * r.powf(T::ONE / p)
+    } else {
+        T::ZERO
+    }
 }
 
 /// HGO + robust law.
@@ -57,6 +89,22 @@ pub struct RobustState<T> {
 impl<T: Real> Robust<T> {
     pub fn new(hgo: Hgo<T>, cfg: RobustConfig<T>) -> Result<Self, ParamError> {
         ensure_finite(&[cfg.lambda1, cfg.lambda2], "robust law: finite lambdas")?;
+        if let Convergence::FiniteTime {
+            alpha1,
+            alpha2,
+            sat_um_per_s,
+        } = cfg.convergence
+        {
+            ensure_finite(
+                &[alpha1, alpha2, sat_um_per_s],
+                "finite-time law: finite parameters",
+            )?;
+            ensure(
+                alpha1 > T::ZERO && alpha1 < T::ONE && alpha2 > T::ZERO && alpha2 < T::ONE,
+                "finite-time law: 0 < alpha1, alpha2 < 1",
+            )?;
+            ensure(sat_um_per_s > T::ZERO, "finite-time law: sat_um_per_s > 0")?;
+        }
         ensure(
             cfg.lambda1 > T::ZERO && cfg.lambda2 > T::ZERO,
             "robust law: lambda1 > 0 and lambda2 > 0",
@@ -97,7 +145,31 @@ impl<T: Real> Robust<T> {
     fn v_d(&self, io: &LoopSignals<T>, x_hat: T) -> T {
         let a = self.hgo.a_per_s();
         let sp = &io.setpoint;
-        x_hat + (sp.dy - self.cfg.lambda1 * (x_hat - sp.y_um)) / a
+        let e = x_hat - sp.y_um;
+        let rate = match self.cfg.convergence {
+            Convergence::Exponential => -self.cfg.lambda1 * e,
+            Convergence::FiniteTime {
+                alpha1,
+                sat_um_per_s,
+                ..
+            } => {
+                let dt = self.hgo.dt_s();
+                let e1 = finite_time_decay(e, self.cfg.lambda1, alpha1, dt);
+                ((e1 - e) / dt).clamp_to(-sat_um_per_s, sat_um_per_s)
+            }
+        };
+        x_hat + (sp.dy + rate) / a
+    }
+
+    /// What is left of the error `e_h` after one sample.
+    #[inline]
+    fn h_error_left(&self, e: T) -> T {
+        match self.cfg.convergence {
+            Convergence::Exponential => (T::ONE - self.c2) * e,
+            Convergence::FiniteTime { alpha2, .. } => {
+                finite_time_decay(e, self.cfg.lambda2, alpha2, self.hgo.dt_s())
+            }
+        }
     }
 
     #[inline]
@@ -113,14 +185,15 @@ impl<T: Real> Robust<T> {
         let h_hat = self.state.obs.h.clamp_to(-self.h_lim, self.h_lim);
         let v_hat = m.d() * u0 - h_hat;
         let v_d = self.v_d(&io, self.state.obs.x);
-        let c = self.c2;
-        let s = &mut self.state;
-        // Target effective input for this sample: the error to v_d shrinks by (1 - c).
+        // Target effective input for this sample: what is left of the error to v_d.
         let (dv, du_ff) = if self.cfg.feedforward {
-            (c * (v_d - v_hat), io.u_ff - s.u_ff_prev)
+            let e = v_hat - v_d;
+            (self.h_error_left(e) - e, io.u_ff - self.state.u_ff_prev)
         } else {
-            (v_d - v_hat + (T::ONE - c) * (v_hat - s.v_d_prev), T::ZERO)
+            let left = self.h_error_left(v_hat - self.state.v_d_prev);
+            (v_d - v_hat + left, T::ZERO)
         };
+        let s = &mut self.state;
         s.v_d_prev = v_d;
         s.u_ff_prev = io.u_ff;
         let den = (m.d() - m.slope(h_hat, dv.sgn())).clamp_to(self.den_lo, self.den_hi);
