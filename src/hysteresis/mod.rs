@@ -21,9 +21,15 @@
 //! by `alpha -> -alpha`, `gamma -> -gamma`, `delta -> -delta` (k, beta, p, q unchanged).
 
 pub mod cbw;
+pub mod dahl;
+pub mod gbw;
+pub mod pi;
 pub mod structural;
 
 pub use cbw::Cbw;
+pub use dahl::Dahl;
+pub use gbw::Gbw;
+pub use pi::{backlash, dead_zone, Dpi, Pi, PiState, Ppi};
 
 use crate::real::Real;
 
