@@ -22,7 +22,10 @@ pub enum Error<S, P> {
     Spi(S),
     Pin(P),
     /// A register read back differently from what was written (chip missing or miswired).
-    Verify { wrote: u32, read: u32 },
+    Verify {
+        wrote: u32,
+        read: u32,
+    },
     /// The driver configuration is not supported; the text names the field.
     Config(&'static str),
 }

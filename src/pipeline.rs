@@ -174,7 +174,9 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         for (i, a) in config.axes.iter().enumerate() {
             a.sensor.validate().map_err(|e| e.on_axis(i))?;
             let ol = a.open_loop;
-            if !(ol.um_per_volt.is_finite() && ol.um_per_volt != T::ZERO && ol.offset_um.is_finite())
+            if !(ol.um_per_volt.is_finite()
+                && ol.um_per_volt != T::ZERO
+                && ol.offset_um.is_finite())
             {
                 return Err(ConfigError::new(
                     "open_loop: um_per_volt must be finite and non-zero, offset_um finite",
@@ -369,7 +371,6 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         st.code
     }
 }
-
 
 #[cfg(test)]
 mod tests {

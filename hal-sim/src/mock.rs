@@ -492,7 +492,9 @@ impl SpiDevice for MockDacSpi {
                         }
                     }
                 }
-                Operation::TransferInPlace(b) => b.iter_mut().for_each(|x| *x = shift(*x, &mut word)),
+                Operation::TransferInPlace(b) => {
+                    b.iter_mut().for_each(|x| *x = shift(*x, &mut word))
+                }
                 Operation::Read(r) => r.iter_mut().for_each(|x| *x = shift(0, &mut word)),
                 Operation::DelayNs(_) => {}
             }

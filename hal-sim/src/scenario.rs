@@ -41,6 +41,28 @@ pub struct Scenario {
     pub reference: Reference,
     pub stage: StageConfig,
     pub converters: Converters,
+    pub pipeline: PipelineLimits,
+}
+
+/// The firmware pipeline's output limits (piezo volts).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PipelineLimits {
+    pub volts_min: f64,
+    pub volts_max: f64,
+    pub slew_volts_per_s: f64,
+    pub safe_volts: f64,
+}
+
+impl Default for PipelineLimits {
+    fn default() -> Self {
+        Self {
+            volts_min: 0.0,
+            volts_max: 150.0,
+            slew_volts_per_s: 30_000.0,
+            safe_volts: 0.0,
+        }
+    }
 }
 
 impl Default for Scenario {
@@ -51,6 +73,7 @@ impl Default for Scenario {
             reference: Reference::default(),
             stage: StageConfig::default(),
             converters: Converters::default(),
+            pipeline: PipelineLimits::default(),
         }
     }
 }
@@ -472,10 +495,16 @@ impl Scenario {
         }
         let f = &self.reference;
         if !(f.freq_hz.is_finite() && f.freq_hz >= 0.0 && f.freq_hz < r.loop_hz / 2.0) {
-            bail!("reference.freq_hz must be in [0, loop_hz/2), got {}", f.freq_hz);
+            bail!(
+                "reference.freq_hz must be in [0, loop_hz/2), got {}",
+                f.freq_hz
+            );
         }
         if !(f.freq2_hz.is_finite() && f.freq2_hz >= 0.0 && f.freq2_hz < r.loop_hz / 2.0) {
-            bail!("reference.freq2_hz must be in [0, loop_hz/2), got {}", f.freq2_hz);
+            bail!(
+                "reference.freq2_hz must be in [0, loop_hz/2), got {}",
+                f.freq2_hz
+            );
         }
         finite(f.amplitude_um, "reference.amplitude_um")?;
         finite(f.offset_um, "reference.offset_um")?;
@@ -540,7 +569,10 @@ impl Scenario {
             bail!("stage.noise.sigma_um must be finite and >= 0");
         }
         finite(st.force.newtons, "stage.force.newtons")?;
-        positive(st.force.stiffness_n_per_um, "stage.force.stiffness_n_per_um")?;
+        positive(
+            st.force.stiffness_n_per_um,
+            "stage.force.stiffness_n_per_um",
+        )?;
         finite(st.force.at_s, "stage.force.at_s")?;
         if !(st.force.freq_hz.is_finite() && st.force.freq_hz >= 0.0) {
             bail!("stage.force.freq_hz must be finite and >= 0");
@@ -567,7 +599,10 @@ impl Scenario {
         }
         finite(cv.sensor_center_um, "converters.sensor_center_um")?;
         if ![16, 18, 20].contains(&cv.adc_bits) {
-            bail!("converters.adc_bits must be 16, 18 or 20, got {}", cv.adc_bits);
+            bail!(
+                "converters.adc_bits must be 16, 18 or 20, got {}",
+                cv.adc_bits
+            );
         }
         positive(cv.adc_vref, "converters.adc_vref")?;
         finite(cv.adc_offset_lsb, "converters.adc_offset_lsb")?;
@@ -581,6 +616,16 @@ impl Scenario {
             bail!("converters.dac_vrefn must be below converters.dac_vrefp");
         }
         finite(cv.dac_offset_lsb, "converters.dac_offset_lsb")?;
+        let p = &self.pipeline;
+        finite(p.volts_min, "pipeline.volts_min")?;
+        finite(p.volts_max, "pipeline.volts_max")?;
+        if p.volts_min >= p.volts_max {
+            bail!("pipeline.volts_min must be below pipeline.volts_max");
+        }
+        positive(p.slew_volts_per_s, "pipeline.slew_volts_per_s")?;
+        if !(p.safe_volts >= p.volts_min && p.safe_volts <= p.volts_max) {
+            bail!("pipeline.safe_volts must lie in [volts_min, volts_max]");
+        }
         finite(cv.dac_gain_error, "converters.dac_gain_error")?;
         Ok(())
     }
@@ -607,8 +652,8 @@ mod tests {
         assert!(format!("{e:#}").contains("gians"), "{e:#}");
         let e = Scenario::from_toml("[run]\nloop_hz = \"fast\"").unwrap_err();
         assert!(format!("{e:#}").contains("loop_hz"), "{e:#}");
-        let e = Scenario::from_toml("[stage]\naxes = 1\n[reference]\nwave = \"raster\"")
-            .unwrap_err();
+        let e =
+            Scenario::from_toml("[stage]\naxes = 1\n[reference]\nwave = \"raster\"").unwrap_err();
         assert!(format!("{e:#}").contains("stage.axes"), "{e:#}");
     }
 }

@@ -242,13 +242,17 @@ impl Stage {
             substeps,
             ad,
             coupling: cfg.coupling.enabled.then(|| cfg.coupling.matrix.clone()),
-            force: f
-                .enabled
-                .then_some((f.newtons / f.stiffness_n_per_um, f.at_s, f.freq_hz, f.stiffness_n_per_um)),
-            drift: cfg
-                .drift
-                .enabled
-                .then_some((cfg.drift.um, cfg.drift.tau_s, cfg.drift.rate_um_per_s)),
+            force: f.enabled.then_some((
+                f.newtons / f.stiffness_n_per_um,
+                f.at_s,
+                f.freq_hz,
+                f.stiffness_n_per_um,
+            )),
+            drift: cfg.drift.enabled.then_some((
+                cfg.drift.um,
+                cfg.drift.tau_s,
+                cfg.drift.rate_um_per_s,
+            )),
             noise_sigma_um: if cfg.noise.enabled {
                 cfg.noise.sigma_um
             } else {
@@ -269,7 +273,10 @@ impl Stage {
         for (ax, &u) in self.axes.iter_mut().zip(dac_volts) {
             ax.amp.v = (ax.amp.gain * u + ax.amp.offset).clamp(ax.amp.rail_min, ax.amp.rail_max);
             let y = ax.stat.step(ax.amp.v, self.h) + ax.asym * ax.amp.v * ax.amp.v;
-            ax.creep.iter_mut().zip(&ax.creep_gain).for_each(|(c, g)| *c = g * y);
+            ax.creep
+                .iter_mut()
+                .zip(&ax.creep_gain)
+                .for_each(|(c, g)| *c = g * y);
             ax.y_hc = y + ax.creep.iter().sum::<f64>();
             ax.x = ax.y_hc;
             ax.v = 0.0;
@@ -364,10 +371,10 @@ impl Stage {
         let n = self.axes.len();
         for i in 0..n {
             let mut input = self.axes[i].y_hc + f_um;
-            if let Some(m) = &self.coupling {
-                for j in 0..n {
+            if let Some(row) = self.coupling.as_ref().and_then(|m| m.get(i)) {
+                for (j, (c, ax)) in row.iter().zip(&self.axes).enumerate() {
                     if j != i {
-                        input += m[i][j] * self.axes[j].y_hc;
+                        input += c * ax.y_hc;
                     }
                 }
             }

@@ -144,7 +144,10 @@ impl<SPI: SpiDevice, CNV: OutputPin> Ad4000<SPI, CNV> {
 
     /// Start, wait the conversion time, read.
     #[inline]
-    pub fn convert(&mut self, delay: &mut impl DelayNs) -> Result<i32, Error<SPI::Error, CNV::Error>> {
+    pub fn convert(
+        &mut self,
+        delay: &mut impl DelayNs,
+    ) -> Result<i32, Error<SPI::Error, CNV::Error>> {
         self.start_conversion()?;
         delay.delay_ns(T_CONV_NS);
         self.read()
@@ -206,11 +209,18 @@ mod tests {
                 };
                 let (lo, hi) = c.code_range();
                 for code in [lo, lo + 1, (-1).max(lo), 0, 1, hi / 3, hi - 1, hi] {
-                    assert_eq!(decode(&c, encode(&c, code)), code, "{bits} {format:?} {code}");
+                    assert_eq!(
+                        decode(&c, encode(&c, code)),
+                        code,
+                        "{bits} {format:?} {code}"
+                    );
                 }
             }
         }
         // AD4020 full scale negative: 0x80000 left aligned.
-        assert_eq!(encode(&Ad4000Config::AD4020, -(1 << 19)), [0x80, 0x00, 0x00]);
+        assert_eq!(
+            encode(&Ad4000Config::AD4020, -(1 << 19)),
+            [0x80, 0x00, 0x00]
+        );
     }
 }

@@ -119,7 +119,11 @@ impl<SPI: SpiDevice, LDAC: OutputPin> Ad5791<SPI, LDAC> {
 
     /// One 24-bit write frame.
     #[inline]
-    pub fn write_register(&mut self, reg: u32, data: u32) -> Result<(), Error<SPI::Error, LDAC::Error>> {
+    pub fn write_register(
+        &mut self,
+        reg: u32,
+        data: u32,
+    ) -> Result<(), Error<SPI::Error, LDAC::Error>> {
         let word = ((reg & 0b111) << 20) | (data & DATA_MASK);
         let b = word.to_be_bytes();
         self.spi.write(&[b[1], b[2], b[3]]).map_err(Error::Spi)

@@ -62,9 +62,15 @@ pub struct Limited {
 }
 
 impl<T: Real> Output<T> {
-    pub fn new(limits: &OutputLimits<T>, dac: &DacScale<T>, sample_hz: T) -> Result<Self, ConfigError> {
+    pub fn new(
+        limits: &OutputLimits<T>,
+        dac: &DacScale<T>,
+        sample_hz: T,
+    ) -> Result<Self, ConfigError> {
         if !(dac.volts_per_code.is_finite() && dac.volts_per_code > T::ZERO) {
-            return Err(ConfigError::new("dac.volts_per_code must be finite and > 0"));
+            return Err(ConfigError::new(
+                "dac.volts_per_code must be finite and > 0",
+            ));
         }
         if !dac.volts_at_zero.is_finite() {
             return Err(ConfigError::new("dac.volts_at_zero must be finite"));

@@ -301,7 +301,11 @@ mod tests {
         let dt = 1.0 / fs;
         let sps: Vec<_> = (0..4000).map(|_| g.next_setpoint()).collect();
         let scale_dy = sps.iter().map(|s| s.dy.abs()).fold(0.0, f64::max).max(1e-9);
-        let scale_ddy = sps.iter().map(|s| s.ddy.abs()).fold(0.0, f64::max).max(1e-9);
+        let scale_ddy = sps
+            .iter()
+            .map(|s| s.ddy.abs())
+            .fold(0.0, f64::max)
+            .max(1e-9);
         let mut checked = 0;
         for w in sps.windows(3) {
             let fd = (w[2].y_um - w[0].y_um) / (2.0 * dt);
@@ -310,7 +314,11 @@ mod tests {
             if (w[2].dy - w[0].dy).abs() > 0.05 * scale_dy {
                 continue;
             }
-            assert!((fd - w[1].dy).abs() < 2e-3 * scale_dy, "{fd} vs {}", w[1].dy);
+            assert!(
+                (fd - w[1].dy).abs() < 2e-3 * scale_dy,
+                "{fd} vs {}",
+                w[1].dy
+            );
             if (w[2].ddy - w[0].ddy).abs() < 0.05 * scale_ddy {
                 assert!(
                     (fdd - w[1].ddy).abs() < 2e-2 * scale_ddy,

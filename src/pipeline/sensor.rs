@@ -33,8 +33,7 @@ impl<T: Real> Sensor<T> {
         if code_a == code_b {
             return Err(ConfigError::new("sensor: calibration codes must differ"));
         }
-        let um_per_code =
-            (um_b - um_a) / T::from_f64(code_b as f64 - code_a as f64);
+        let um_per_code = (um_b - um_a) / T::from_f64(code_b as f64 - code_a as f64);
         let s = Self {
             um_per_code,
             offset_um: um_a - um_per_code * T::from_f64(code_a as f64),
@@ -47,13 +46,17 @@ impl<T: Real> Sensor<T> {
 
     pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.um_per_code.is_finite() && self.um_per_code != T::ZERO) {
-            return Err(ConfigError::new("sensor.um_per_code must be finite and non-zero"));
+            return Err(ConfigError::new(
+                "sensor.um_per_code must be finite and non-zero",
+            ));
         }
         if !self.offset_um.is_finite() {
             return Err(ConfigError::new("sensor.offset_um must be finite"));
         }
         if self.code_min >= self.code_max {
-            return Err(ConfigError::new("sensor.code_min must be below sensor.code_max"));
+            return Err(ConfigError::new(
+                "sensor.code_min must be below sensor.code_max",
+            ));
         }
         Ok(())
     }
