@@ -240,7 +240,11 @@ fn atan_small_q30(u: i32) -> i32 {
 fn reduce_2pi_q30(x: Q16) -> i64 {
     const TWO_PI_Q32: i64 = 26_986_075_409;
     let v = (x.0 as i64) << 16;
-    let k = (v + if v >= 0 { TWO_PI_Q32 / 2 } else { -TWO_PI_Q32 / 2 }) / TWO_PI_Q32;
+    let k = (v + if v >= 0 {
+        TWO_PI_Q32 / 2
+    } else {
+        -TWO_PI_Q32 / 2
+    }) / TWO_PI_Q32;
     (v - k * TWO_PI_Q32) >> 2
 }
 
@@ -489,7 +493,9 @@ mod tests {
     }
 
     fn grid(lo: f64, hi: f64, n: usize) -> Vec<f64> {
-        (0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect()
+        (0..=n)
+            .map(|i| lo + (hi - lo) * i as f64 / n as f64)
+            .collect()
     }
 
     #[test]
@@ -514,7 +520,13 @@ mod tests {
 
     #[test]
     fn transcendentals_meet_the_documented_accuracy() {
-        check("sqrt", |x| x.sqrt(), f64::sqrt, &grid(0.0, 30000.0, 997), 1.0);
+        check(
+            "sqrt",
+            |x| x.sqrt(),
+            f64::sqrt,
+            &grid(0.0, 30000.0, 997),
+            1.0,
+        );
         check("sqrt", |x| x.sqrt(), f64::sqrt, &grid(0.0, 2.0, 997), 1.0);
         // exp: relative 2 ulp.
         for x in grid(-11.0, 10.39, 1999) {
@@ -526,19 +538,52 @@ mod tests {
                 "exp({x}) = {got}, want {want}"
             );
         }
-        check("exp_m1", |x| x.exp_m1(), f64::exp_m1, &grid(-3.0, 3.0, 1999), 3.0);
+        check(
+            "exp_m1",
+            |x| x.exp_m1(),
+            f64::exp_m1,
+            &grid(-3.0, 3.0, 1999),
+            3.0,
+        );
         check("ln", |x| x.ln(), f64::ln, &grid(0.001, 30000.0, 1999), 2.0);
         check("ln", |x| x.ln(), f64::ln, &grid(0.01, 3.0, 1999), 2.0);
-        check("ln_1p", |x| x.ln_1p(), f64::ln_1p, &grid(-0.9, 5.0, 1999), 2.0);
-        check("sin", |x| x.sin(), f64::sin, &grid(-100.0, 100.0, 4999), 3.0);
-        check("cos", |x| x.cos(), f64::cos, &grid(-100.0, 100.0, 4999), 3.0);
-        check("tanh", |x| x.tanh(), f64::tanh, &grid(-10.0, 10.0, 1999), 3.0);
+        check(
+            "ln_1p",
+            |x| x.ln_1p(),
+            f64::ln_1p,
+            &grid(-0.9, 5.0, 1999),
+            2.0,
+        );
+        check(
+            "sin",
+            |x| x.sin(),
+            f64::sin,
+            &grid(-100.0, 100.0, 4999),
+            3.0,
+        );
+        check(
+            "cos",
+            |x| x.cos(),
+            f64::cos,
+            &grid(-100.0, 100.0, 4999),
+            3.0,
+        );
+        check(
+            "tanh",
+            |x| x.tanh(),
+            f64::tanh,
+            &grid(-10.0, 10.0, 1999),
+            3.0,
+        );
         for y in grid(-50.0, 50.0, 41) {
             for x in grid(-50.0, 50.0, 41) {
                 let (qy, qx) = (q(y), q(x));
                 let want = qy.to_f64().atan2(qx.to_f64());
                 let got = qy.atan2(qx).to_f64();
-                assert!((got - want).abs() <= 3.0 * ULP, "atan2({y}, {x}) = {got}, want {want}");
+                assert!(
+                    (got - want).abs() <= 3.0 * ULP,
+                    "atan2({y}, {x}) = {got}, want {want}"
+                );
             }
         }
         // powf: relative error grows with |e ln x|.
@@ -546,7 +591,10 @@ mod tests {
             let want = f64::powf(x, e);
             let got = q(x).powf(q(e)).to_f64();
             let bound = (1.0 + (e * f64::ln(x)).abs()) * 4.0 * ULP * want.max(1.0);
-            assert!((got - want).abs() <= bound, "powf({x}, {e}) = {got}, want {want}");
+            assert!(
+                (got - want).abs() <= bound,
+                "powf({x}, {e}) = {got}, want {want}"
+            );
         }
     }
 
