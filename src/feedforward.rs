@@ -1,9 +1,45 @@
 //! Feedforward hysteresis compensation: IMS, MBW without inversion, direct WPMBW inverse,
 //! PI inverses, multivariable IMS. One enum selects the compensator at run time; each variant
 //! holds its own configuration and state.
+//!
+//! Every compensator: parameters validated at construction ([`FfError`] names the violated
+//! condition), no allocation, bounded work per sample, a finite output for any input (a
+//! non-finite reference holds the previous output), voltages inside the configured range.
 
+pub mod ims;
+pub mod solve;
+
+pub use ims::{Ims, ImsLoop, ImsModel};
+
+use crate::hysteresis::{Cbw, ParamError};
 use crate::real::Real;
 use crate::signals::Setpoint;
+
+/// A compensator parameter broke a condition; the text names it.
+pub type FfError = ParamError;
+
+#[inline]
+pub(crate) fn ensure(cond: bool, msg: &'static str) -> Result<(), FfError> {
+    if cond {
+        Ok(())
+    } else {
+        Err(ParamError(msg))
+    }
+}
+
+pub(crate) fn check_range<T: Real>(lo: T, hi: T) -> Result<(), FfError> {
+    ensure(
+        lo.is_finite() && hi.is_finite() && lo < hi,
+        "feedforward: voltage range must be finite with volts_min < volts_max",
+    )
+}
+
+pub(crate) fn check_dt<T: Real>(dt_s: T) -> Result<(), FfError> {
+    ensure(
+        dt_s.is_finite() && dt_s > T::ZERO,
+        "feedforward: sample period dt_s must be finite and > 0",
+    )
+}
 
 /// Linear scaling only: `u = (y_ref - offset) / d`, no hysteresis model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,10 +58,14 @@ impl<T: Real> LinearFf<T> {
 }
 
 /// The selectable feedforward compensator.
+// Variants hold fixed-size parameter and state arrays (no heap); the size spread is intended.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Feedforward<T: Real> {
     /// Linear scaling only (open loop without a hysteresis model).
     Linear(LinearFf<T>),
+    /// IMS around a classical Bouc-Wen model (003 eq. 16, 004 eq. 25).
+    ImsCbw(Ims<T, Cbw<T>>),
 }
 
 impl<T: Real> Feedforward<T> {
@@ -34,13 +74,15 @@ impl<T: Real> Feedforward<T> {
     pub fn compensate(&mut self, sp: &Setpoint<T>) -> T {
         match self {
             Feedforward::Linear(l) => l.compensate(sp.y_um),
+            Feedforward::ImsCbw(c) => c.compensate(sp.y_um),
         }
     }
 
     /// Restart from rest at setpoint `sp` (mode switch, fault recovery).
-    pub fn reset(&mut self, _sp: &Setpoint<T>) {
+    pub fn reset(&mut self, sp: &Setpoint<T>) {
         match self {
             Feedforward::Linear(_) => {}
+            Feedforward::ImsCbw(c) => c.reset(sp.y_um),
         }
     }
 
@@ -48,6 +90,10 @@ impl<T: Real> Feedforward<T> {
     pub fn name(&self) -> &'static str {
         match self {
             Feedforward::Linear(_) => "linear",
+            Feedforward::ImsCbw(c) => match c.closure() {
+                ImsLoop::Solved => "ims-cbw",
+                ImsLoop::Delayed => "ims-cbw-delayed",
+            },
         }
     }
 }

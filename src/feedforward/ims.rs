@@ -1,0 +1,242 @@
+//! Inverse multiplicative structure (IMS) for the Bouc-Wen family in piezo form:
+//! `u = (y_ref + h(u)) / d` (003 eq. 14-17, 004 eq. 25-26).
+//!
+//! The loop is algebraic: `h(u)` depends on the `u` being computed. [`ImsLoop::Solved`]
+//! solves it exactly each sample: with the model advanced over the increment
+//! (`Hysteresis::step` on a copy of the state) the residual
+//! `f(u) = d*u - h(u) - y_ref = y_model(u) - y_ref` is strictly increasing with slope at
+//! least `d - max dh/du > 0`, which brackets the root; a bounded Illinois solve finishes it
+//! ([`super::solve::solve_increasing`]). [`ImsLoop::Delayed`] is the usual one-sample-delay
+//! workaround of 004 §4.4 (`h` from the previous sample), kept for comparison.
+
+use super::solve::solve_increasing;
+use super::FfError;
+use crate::hysteresis::{Cbw, Hysteresis};
+use crate::real::Real;
+
+/// A model in piezo form `y = d*u - h` that the IMS can invert.
+pub trait ImsModel<T: Real>: Hysteresis<T> {
+    /// Piezo coefficient `d` (um/V).
+    fn d(&self) -> T;
+    /// An upper bound of `dh/du` over every state the model can reach from rest.
+    /// `d` must exceed it: then `y` is strictly increasing in `u` and the IMS well defined.
+    fn max_h_slope(&self) -> T;
+}
+
+impl<T: Real> ImsModel<T> for Cbw<T> {
+    fn d(&self) -> T {
+        self.d()
+    }
+    /// `dh/du = alpha - (beta*s*sgn(h) + gamma)*|h|^n` is largest at `h = -h_max`, `s = +1`:
+    /// `alpha + (beta - gamma) * alpha / (beta + gamma) = 2*alpha*beta / (beta + gamma)`.
+    fn max_h_slope(&self) -> T {
+        T::TWO * self.alpha() * self.beta() / (self.beta() + self.gamma())
+    }
+}
+
+/// How the algebraic loop of the IMS is closed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImsLoop {
+    /// Solve `y_model(u) = y_ref` each sample (bounded bracketed solve).
+    Solved,
+    /// Use `h` of the previous sample (004 §4.4 "constant time delay").
+    Delayed,
+}
+
+/// IMS feedforward around a model `M` (config: model, loop closure, voltage range, sample
+/// period; state: the model's state, last voltage and model output).
+#[derive(Debug, Clone)]
+pub struct Ims<T: Real, M: ImsModel<T>> {
+    model: M,
+    closure: ImsLoop,
+    volts_min: T,
+    volts_max: T,
+    dt_s: T,
+    min_slope: T,
+    state: M::State,
+    u: T,
+    y: T,
+    evals: usize,
+}
+
+impl<T: Real, M: ImsModel<T> + PartialEq> PartialEq for Ims<T, M>
+where
+    M::State: PartialEq,
+{
+    fn eq(&self, o: &Self) -> bool {
+        self.model == o.model
+            && self.closure == o.closure
+            && self.volts_min == o.volts_min
+            && self.volts_max == o.volts_max
+            && self.dt_s == o.dt_s
+            && self.state == o.state
+            && self.u == o.u
+            && self.y == o.y
+    }
+}
+
+impl<T: Real, M: ImsModel<T>> Ims<T, M> {
+    /// `volts_min..volts_max` the range the stage accepts (the model follows the clamped
+    /// voltage), `dt_s` the sample period. Starts relaxed at 0 V (or the nearest limit).
+    pub fn new(
+        model: M,
+        closure: ImsLoop,
+        volts_min: T,
+        volts_max: T,
+        dt_s: T,
+    ) -> Result<Self, FfError> {
+        super::check_range(volts_min, volts_max)?;
+        super::check_dt(dt_s)?;
+        let min_slope = model.d() - model.max_h_slope();
+        super::ensure(
+            min_slope.is_finite() && min_slope > T::ZERO,
+            "IMS: d must exceed the largest hysteresis slope dh/du (y must increase with u)",
+        )?;
+        let u0 = T::ZERO.clamp_to(volts_min, volts_max);
+        let mut state = model.init(u0);
+        let y = model.step(&mut state, u0, dt_s);
+        Ok(Self {
+            model,
+            closure,
+            volts_min,
+            volts_max,
+            dt_s,
+            min_slope,
+            state,
+            u: u0,
+            y,
+            evals: 0,
+        })
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+    pub fn closure(&self) -> ImsLoop {
+        self.closure
+    }
+    /// Model evaluations used by the last solve (0 for [`ImsLoop::Delayed`]).
+    pub fn last_evals(&self) -> usize {
+        self.evals
+    }
+    /// Output the internal model predicts for the last voltage (um).
+    pub fn predicted_um(&self) -> T {
+        self.y
+    }
+
+    /// Voltage (V) for the reference `y_ref_um`. A non-finite reference holds the output.
+    #[inline]
+    pub fn compensate(&mut self, y_ref_um: T) -> T {
+        if !y_ref_um.is_finite() {
+            return self.u;
+        }
+        let u = match self.closure {
+            ImsLoop::Solved => {
+                let (model, state, dt) = (&self.model, self.state, self.dt_s);
+                let f = |u: T| {
+                    let mut s = state;
+                    model.step(&mut s, u, dt) - y_ref_um
+                };
+                let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
+                let tol = T::from_f64(8.0) * T::EPSILON * scale;
+                let root = solve_increasing(f, self.u, self.y - y_ref_um, self.min_slope, tol);
+                self.evals = root.evals;
+                root.x
+            }
+            ImsLoop::Delayed => {
+                self.evals = 0;
+                let d = self.model.d();
+                let h_prev = d * self.u - self.y;
+                (y_ref_um + h_prev) / d
+            }
+        };
+        // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
+        let u = if u.is_finite() { u } else { self.u };
+        let u = u.clamp_to(self.volts_min, self.volts_max);
+        self.y = self.model.step(&mut self.state, u, self.dt_s);
+        self.u = u;
+        u
+    }
+
+    /// Restart relaxed (hysteresis state zero) at the voltage that gives `y_um`.
+    pub fn reset(&mut self, y_um: T) {
+        let u0 = if y_um.is_finite() {
+            y_um / self.model.d()
+        } else {
+            T::ZERO
+        };
+        let u0 = u0.clamp_to(self.volts_min, self.volts_max);
+        self.state = self.model.init(u0);
+        self.y = self.model.step(&mut self.state, u0, self.dt_s);
+        self.u = u0;
+        self.evals = 0;
+    }
+
+    /// Restart relaxed at voltage `u0` (e.g. 0 V at power-up).
+    pub fn reset_volts(&mut self, u0: T) {
+        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
+        let u0 = u0.clamp_to(self.volts_min, self.volts_max);
+        self.state = self.model.init(u0);
+        self.y = self.model.step(&mut self.state, u0, self.dt_s);
+        self.u = u0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set1() -> Cbw<f64> {
+        Cbw::with_n1(0.16, 0.07, 0.02, 0.01).unwrap()
+    }
+
+    /// Drive the exact model with the compensator; RMSE of y - y_ref over the last period.
+    fn rmse(closure: ImsLoop, f_hz: f64, fs: f64) -> (f64, f64) {
+        let m = set1();
+        let mut ff = Ims::new(m, closure, -100.0, 200.0, 1.0 / fs).unwrap();
+        let mut s = m.init(0.0);
+        let n = (2.0 * fs / f_hz) as usize;
+        let (mut se, mut cnt, mut max_evals) = (0.0, 0, 0usize);
+        for k in 0..n {
+            let t = k as f64 / fs;
+            let y_ref = 8.0 * (1.0 - (2.0 * core::f64::consts::PI * f_hz * t).cos());
+            let u = ff.compensate(y_ref);
+            max_evals = max_evals.max(ff.last_evals());
+            let y = m.step(&mut s, u, 1.0 / fs);
+            if k >= n / 2 {
+                se += (y - y_ref).powi(2);
+                cnt += 1;
+            }
+        }
+        ((se / cnt as f64).sqrt(), max_evals as f64)
+    }
+
+    #[test]
+    fn solved_ims_tracks_exact_model_and_beats_delayed() {
+        for &f in &[1.0, 10.0, 50.0] {
+            let (solved, evals) = rmse(ImsLoop::Solved, f, 10_000.0);
+            let (delayed, _) = rmse(ImsLoop::Delayed, f, 10_000.0);
+            assert!(solved < 1e-9, "{f} Hz: solved RMSE {solved}");
+            assert!(delayed > 100.0 * solved, "{f} Hz: {delayed} vs {solved}");
+            assert!(evals <= 12.0, "{f} Hz: {evals} evaluations");
+        }
+    }
+
+    #[test]
+    fn rejects_model_with_non_increasing_output() {
+        // 2*alpha*beta/(beta+gamma) = 0.093 > d = 0.05
+        let m = Cbw::with_n1(0.05, 0.07, 0.02, 0.01).unwrap();
+        let e = Ims::new(m, ImsLoop::Solved, 0.0, 100.0, 1e-4).unwrap_err();
+        assert!(e.0.contains("d must exceed"));
+    }
+
+    #[test]
+    fn nan_reference_holds_output_and_range_is_respected() {
+        let mut ff = Ims::new(set1(), ImsLoop::Solved, 0.0, 100.0, 1e-4).unwrap();
+        let u = ff.compensate(5.0);
+        assert_eq!(ff.compensate(f64::NAN), u);
+        assert_eq!(ff.compensate(f64::INFINITY), u);
+        assert_eq!(ff.compensate(1e9), 100.0);
+        assert_eq!(ff.compensate(-1e9), 0.0);
+    }
+}
