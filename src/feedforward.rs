@@ -7,11 +7,19 @@
 //! non-finite reference holds the previous output), voltages inside the configured range.
 
 pub mod ims;
+pub mod mbw;
+pub mod multi;
+pub mod pi;
 pub mod solve;
+pub mod wpmbw;
 
 pub use ims::{Ims, ImsLoop, ImsModel};
+pub use mbw::MbwFf;
+pub use multi::{pseudo_inverse, MultiIms};
+pub use pi::{ppi_inverse, DpiInverse, PiInverse, PpiInverse, MAX_OPS};
+pub use wpmbw::{LinearPart, WpmbwInverse};
 
-use crate::hysteresis::{Cbw, ParamError};
+use crate::hysteresis::{AbwAbs, Cbw, Dahl, Gbw, Mbw002, ParamError};
 use crate::real::Real;
 use crate::signals::Setpoint;
 
@@ -66,6 +74,31 @@ pub enum Feedforward<T: Real> {
     Linear(LinearFf<T>),
     /// IMS around a classical Bouc-Wen model (003 eq. 16, 004 eq. 25).
     ImsCbw(Ims<T, Cbw<T>>),
+    /// IMS around a generalized Bouc-Wen model (000 eq. 3).
+    ImsGbw(Ims<T, Gbw<T>>),
+    /// IMS around a Dahl model (000 eq. 4).
+    ImsDahl(Ims<T, Dahl<T>>),
+    /// IMS around the asymmetric Bouc-Wen with `delta*|u'|` (002 eq. 3).
+    ImsAbw(Ims<T, AbwAbs<T>>),
+    /// IMS around the modified Bouc-Wen of 002 (eq. 4-5), solved exactly.
+    ImsMbw(Ims<T, Mbw002<T>>),
+    /// 002's feedforward without inversion (eq. 8-12).
+    Mbw(MbwFf<T>),
+    /// Direct WPMBW inverse with inverse linear dynamics and prefilter (004 eq. 17-18, 27-28).
+    Wpmbw(WpmbwInverse<T>),
+    /// Exact PI inverse (a PI with computed thresholds and weights).
+    PiInverse(PiInverse<T>),
+    /// PPI inverse by a bounded monotone solve.
+    PpiInverse(PpiInverse<T>),
+    /// Exact DPI inverse (dead zones, then PI).
+    DpiInverse(DpiInverse<T>),
+}
+
+fn ims_name(closure: ImsLoop, solved: &'static str, delayed: &'static str) -> &'static str {
+    match closure {
+        ImsLoop::Solved => solved,
+        ImsLoop::Delayed => delayed,
+    }
 }
 
 impl<T: Real> Feedforward<T> {
@@ -75,6 +108,15 @@ impl<T: Real> Feedforward<T> {
         match self {
             Feedforward::Linear(l) => l.compensate(sp.y_um),
             Feedforward::ImsCbw(c) => c.compensate(sp.y_um),
+            Feedforward::ImsGbw(c) => c.compensate(sp.y_um),
+            Feedforward::ImsDahl(c) => c.compensate(sp.y_um),
+            Feedforward::ImsAbw(c) => c.compensate(sp.y_um),
+            Feedforward::ImsMbw(c) => c.compensate(sp.y_um),
+            Feedforward::Mbw(c) => c.compensate(sp.y_um),
+            Feedforward::Wpmbw(c) => c.compensate(sp),
+            Feedforward::PiInverse(c) => c.compensate(sp.y_um),
+            Feedforward::PpiInverse(c) => c.compensate(sp.y_um),
+            Feedforward::DpiInverse(c) => c.compensate(sp.y_um),
         }
     }
 
@@ -83,6 +125,15 @@ impl<T: Real> Feedforward<T> {
         match self {
             Feedforward::Linear(_) => {}
             Feedforward::ImsCbw(c) => c.reset(sp.y_um),
+            Feedforward::ImsGbw(c) => c.reset(sp.y_um),
+            Feedforward::ImsDahl(c) => c.reset(sp.y_um),
+            Feedforward::ImsAbw(c) => c.reset(sp.y_um),
+            Feedforward::ImsMbw(c) => c.reset(sp.y_um),
+            Feedforward::Mbw(c) => c.reset(sp.y_um),
+            Feedforward::Wpmbw(c) => c.reset(sp.y_um),
+            Feedforward::PiInverse(c) => c.reset(sp.y_um),
+            Feedforward::PpiInverse(c) => c.reset(sp.y_um),
+            Feedforward::DpiInverse(c) => c.reset(sp.y_um),
         }
     }
 
@@ -90,20 +141,31 @@ impl<T: Real> Feedforward<T> {
     pub fn name(&self) -> &'static str {
         match self {
             Feedforward::Linear(_) => "linear",
-            Feedforward::ImsCbw(c) => match c.closure() {
-                ImsLoop::Solved => "ims-cbw",
-                ImsLoop::Delayed => "ims-cbw-delayed",
-            },
+            Feedforward::ImsCbw(c) => ims_name(c.closure(), "ims-cbw", "ims-cbw-delayed"),
+            Feedforward::ImsGbw(c) => ims_name(c.closure(), "ims-gbw", "ims-gbw-delayed"),
+            Feedforward::ImsDahl(c) => ims_name(c.closure(), "ims-dahl", "ims-dahl-delayed"),
+            Feedforward::ImsAbw(c) => ims_name(c.closure(), "ims-abw", "ims-abw-delayed"),
+            Feedforward::ImsMbw(c) => ims_name(c.closure(), "ims-mbw", "ims-mbw-delayed"),
+            Feedforward::Mbw(_) => "mbw-no-inverse",
+            Feedforward::Wpmbw(_) => "wpmbw-inverse",
+            Feedforward::PiInverse(_) => "pi-inverse",
+            Feedforward::PpiInverse(_) => "ppi-inverse",
+            Feedforward::DpiInverse(_) => "dpi-inverse",
         }
     }
 }
 
 /// Feedforward for an `N`-axis stage: one compensator per axis, or a multivariable one
 /// (003 eq. 14-20) that maps all references to all voltages at once.
+// The multivariable variant holds its matrices inline (no heap).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum MultiFeedforward<T: Real, const N: usize> {
     /// Independent axes.
     PerAxis([Feedforward<T>; N]),
+    /// Multivariable IMS `U = D^-1 (y_ref + h)` (003 eq. 16), `N` actuators for `N` axes.
+    /// Under- and over-actuated systems use [`MultiIms`] with `N != K` directly.
+    Ims(MultiIms<T, N, N>),
 }
 
 impl<T: Real, const N: usize> MultiFeedforward<T, N> {
@@ -118,6 +180,13 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
                 }
                 u
             }
+            MultiFeedforward::Ims(m) => {
+                let mut y = [T::ZERO; N];
+                for (y, s) in y.iter_mut().zip(sp) {
+                    *y = s.y_um;
+                }
+                m.compensate(&y)
+            }
         }
     }
 
@@ -125,12 +194,20 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
     pub fn reset(&mut self, sp: &[Setpoint<T>; N]) {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.iter_mut().zip(sp).for_each(|(f, s)| f.reset(s)),
+            MultiFeedforward::Ims(m) => {
+                let mut y = [T::ZERO; N];
+                for (y, s) in y.iter_mut().zip(sp) {
+                    *y = s.y_um;
+                }
+                m.reset(&y);
+            }
         }
     }
 
     pub fn name(&self) -> &'static str {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.first().map_or("none", |f| f.name()),
+            MultiFeedforward::Ims(m) => ims_name(m.closure(), "multi-ims", "multi-ims-delayed"),
         }
     }
 }

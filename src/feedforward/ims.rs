@@ -9,7 +9,7 @@
 //! ([`super::solve::solve_increasing`]). [`ImsLoop::Delayed`] is the usual one-sample-delay
 //! workaround of 004 §4.4 (`h` from the previous sample), kept for comparison.
 
-use super::solve::solve_increasing;
+use super::solve::solve_increasing_hinted;
 use super::FfError;
 use crate::hysteresis::{Cbw, Hysteresis};
 use crate::real::Real;
@@ -53,6 +53,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     volts_max: T,
     dt_s: T,
     min_slope: T,
+    /// Secant slope of the last solved step (first trial of the next solve).
+    slope_hint: T,
     state: M::State,
     u: T,
     y: T,
@@ -95,6 +97,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u0 = T::ZERO.clamp_to(volts_min, volts_max);
         let mut state = model.init(u0);
         let y = model.step(&mut state, u0, dt_s);
+        let slope_hint = model.d();
         Ok(Self {
             model,
             closure,
@@ -102,6 +105,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             volts_max,
             dt_s,
             min_slope,
+            slope_hint,
             state,
             u: u0,
             y,
@@ -139,8 +143,15 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
                 };
                 let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
                 let tol = T::from_f64(8.0) * T::EPSILON * scale;
-                let root = solve_increasing(f, self.u, self.y - y_ref_um, self.min_slope, tol);
-                self.evals = root.evals;
+                // f at the held voltage: not `self.y - y_ref` for models with rate terms.
+                let f0 = f(self.u);
+                let root =
+                    solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
+                self.evals = root.evals + 1;
+                let secant = (root.fx - f0) / (root.x - self.u);
+                if secant.is_finite() && secant > self.min_slope {
+                    self.slope_hint = secant;
+                }
                 root.x
             }
             ImsLoop::Delayed => {

@@ -25,10 +25,24 @@ pub struct Root<T> {
 /// allows, after at most [`MAX_SOLVE_EVALS`] evaluations. No panics, no unbounded loops;
 /// a non-finite `f` value counts as "too far" and halves the step.
 pub fn solve_increasing<T: Real>(
+    f: impl FnMut(T) -> T,
+    x0: T,
+    f0: T,
+    min_slope: T,
+    tol: T,
+) -> Root<T> {
+    solve_increasing_hinted(f, x0, f0, min_slope, min_slope, tol)
+}
+
+/// As [`solve_increasing`], with a guess `slope_hint` of the typical slope (e.g. the last
+/// sample's): the first trial `x0 - f0/slope_hint` usually brackets the root tightly; when
+/// it falls short, the guaranteed far end `x0 - f0/min_slope` closes the bracket.
+pub fn solve_increasing_hinted<T: Real>(
     mut f: impl FnMut(T) -> T,
     x0: T,
     f0: T,
     min_slope: T,
+    slope_hint: T,
     tol: T,
 ) -> Root<T> {
     let mut best = Root {
@@ -39,13 +53,39 @@ pub fn solve_increasing<T: Real>(
     if !(f0.abs() > tol) || !(min_slope > T::ZERO) {
         return best; // also NaN f0: keep x0
     }
+    let mut x0 = x0;
+    let mut f0 = f0;
+    // Trial point from the hint, inside the guaranteed bracket.
+    if slope_hint > min_slope && slope_hint.is_finite() {
+        let xt = x0 - f0 / slope_hint;
+        if xt.is_finite() {
+            let ft = f(xt);
+            best.evals += 1;
+            if ft.is_finite() {
+                if ft.abs() < best.fx.abs() {
+                    best.x = xt;
+                    best.fx = ft;
+                }
+                if !(ft.abs() > tol) {
+                    return best;
+                }
+                if ft.sgn() != f0.sgn() {
+                    // Root between x0 and xt: Illinois on that bracket.
+                    return illinois(&mut f, x0, f0, xt, ft, tol, best);
+                }
+                // Short of the root: continue from the trial point.
+                x0 = xt;
+                f0 = ft;
+            }
+        }
+    }
     // Far end of the bracket; guarded so a non-finite value never comes out.
     let mut x1 = x0 - f0 / min_slope;
     if !x1.is_finite() {
         return best;
     }
     let mut f1 = f(x1);
-    best.evals = 1;
+    best.evals += 1;
     // A non-finite or wrong-signed far end (slope bound violated numerically): pull it in.
     while !(f1.is_finite() && f1.sgn() != f0.sgn()) && best.evals < MAX_SOLVE_EVALS {
         if f1.is_finite() && f1.abs() < best.fx.abs() {
@@ -64,9 +104,6 @@ pub fn solve_increasing<T: Real>(
     if !(f1.is_finite() && f1.sgn() != f0.sgn()) {
         return best;
     }
-    // Illinois: (a, fa) and (b, fb) bracket the root with opposite signs.
-    let (mut a, mut fa, mut b, mut fb) = (x0, f0, x1, f1);
-    let mut side = 0i8;
     if f1.abs() < best.fx.abs() {
         best.x = x1;
         best.fx = f1;
@@ -74,6 +111,21 @@ pub fn solve_increasing<T: Real>(
     if f1 == T::ZERO {
         return best;
     }
+    illinois(&mut f, x0, f0, x1, f1, tol, best)
+}
+
+/// Illinois regula falsi on a bracket `(a, fa)`, `(b, fb)` of opposite signs.
+fn illinois<T: Real>(
+    f: &mut impl FnMut(T) -> T,
+    a: T,
+    fa: T,
+    b: T,
+    fb: T,
+    tol: T,
+    mut best: Root<T>,
+) -> Root<T> {
+    let (mut a, mut fa, mut b, mut fb) = (a, fa, b, fb);
+    let mut side = 0i8;
     while best.evals < MAX_SOLVE_EVALS {
         let mut x = (a * fb - b * fa) / (fb - fa);
         let (lo, hi) = if a < b { (a, b) } else { (b, a) };
@@ -82,6 +134,9 @@ pub fn solve_increasing<T: Real>(
             if !(x > lo && x < hi) {
                 break; // bracket is two adjacent numbers
             }
+        }
+        if !(hi - lo > T::from_f64(4.0) * T::EPSILON * (lo.abs().max(hi.abs()) + T::ONE)) {
+            break; // as narrow as the number type resolves
         }
         let fx = f(x);
         best.evals += 1;

@@ -282,10 +282,12 @@ impl<T: Real> AbwAbs<T> {
             })
         } else {
             let n = substeps(du, self.max_du);
+            let b = self.h_bound();
             rk4_kinked(h, n, |h, _, sigma| {
                 du * (cbw_slope(self.alpha, self.beta, self.gamma, self.n, h, s, sigma)
                     + self.delta * s)
             })
+            .clamp_to(-b, b) // invariant; only matters when a huge step hits the cap
         }
     }
 }

@@ -18,7 +18,7 @@ use crate::real::Real;
 /// (and symmetrically for `B < 0`). The model therefore keeps `dh/du >= 0` (`h`
 /// never moves against the input, as in CBW inside its bounds): in the run-away region
 /// `h` holds. This changes nothing for sweeps that stay out of that region and bounds
-/// `|h| <= max(h_up, h_down)` ([`Gbw::h_bound`]).
+/// `-h_down <= h <= h_up` ([`Gbw::h_bound`]).
 ///
 /// Accepted when `alpha > 0`, `A > 0`, `G > |B|` (both equilibria exist), `n >= 1`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,6 +31,9 @@ pub struct Gbw<T> {
     n: T,
     /// RK4 sub-step bound in the input domain (V), used only for `n != 1`.
     max_du: T,
+    /// `[-h_down, h_up]` is invariant; clamps RK4 when a huge step hits the sub-step cap.
+    h_lo: T,
+    h_hi: T,
 }
 
 impl<T: Real> Gbw<T> {
@@ -60,6 +63,8 @@ impl<T: Real> Gbw<T> {
             g,
             n,
             max_du,
+            h_lo: -(a / (g - b)).powf(T::ONE / n),
+            h_hi: (a / (g + b)).powf(T::ONE / n),
         })
     }
 
@@ -132,6 +137,7 @@ impl<T: Real> Gbw<T> {
             })
         } else {
             rk4_input(h, u0, du, self.max_du, |h, _| self.slope(h, s))
+                .clamp_to(self.h_lo, self.h_hi)
         }
     }
 }

@@ -24,6 +24,7 @@ pub mod abw;
 pub mod cbw;
 pub mod dahl;
 pub mod gbw;
+pub mod multi;
 pub mod pi;
 pub mod rlm;
 pub mod structural;
@@ -32,6 +33,7 @@ pub use abw::{AbwAbs, AbwU, Mbw002, MbwState};
 pub use cbw::Cbw;
 pub use dahl::Dahl;
 pub use gbw::Gbw;
+pub use multi::{MultiBw, MultiBwState};
 pub use pi::{backlash, dead_zone, Dpi, Pi, PiState, Ppi};
 pub use rlm::{MbwRlm, RlmState, Wpmbw};
 

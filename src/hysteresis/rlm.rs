@@ -103,17 +103,29 @@ impl<T: Real> MbwRlm<T> {
         if s == T::ZERO {
             return w;
         }
-        rk4_input(w, u0, du, self.max_du, |w, u| self.slope(u, w, s))
+        let w1 = rk4_input(w, u0, du, self.max_du, |w, u| self.slope(u, w, s));
+        // The band |mu*w - lambda*u| <= |lambda - rho*mu|/(rho*lambda) (004 eq. 16) is
+        // invariant; clamping only matters when a huge step hits the sub-step cap.
+        let u1 = u0 + du;
+        let zb = ((self.lambda - self.rho * self.mu) / (self.rho * self.lambda)).abs();
+        let z = (self.mu * w1 - self.lambda * u1).clamp_to(-zb, zb);
+        if (self.mu * w - self.lambda * u0).abs() <= zb {
+            (z + self.lambda * u1) / self.mu
+        } else {
+            w1 // started outside the band (state set from outside): no clamp
+        }
     }
 }
 
 impl<T: Real> Hysteresis<T> for MbwRlm<T> {
     type State = RlmState<T>;
 
+    /// `w` on the centre line `lambda/mu*u0` of the band of 004 eq. (16) (0 at `u0 = 0`).
     fn init(&self, u0: T) -> RlmState<T> {
+        let u = sane_input(u0, T::ZERO);
         RlmState {
-            u: sane_input(u0, T::ZERO),
-            w: T::ZERO,
+            u,
+            w: self.k_w() * u,
         }
     }
 
