@@ -399,8 +399,26 @@ impl core::fmt::Debug for ModelDef {
     }
 }
 
+fn gain_specs(s: &Scales) -> Vec<ParamSpec> {
+    vec![ParamSpec::lin("gain", 0.0, 3.0 * s.slope)]
+}
+
+fn sim_gain(p: &[f64], u: &[f64], _dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+    for (yi, ui) in y.iter_mut().zip(u) {
+        *yi = p[0] * ui;
+    }
+    Ok(())
+}
+
 /// Every model `piezo fit --model` knows.
 pub static MODELS: &[ModelDef] = &[
+    ModelDef {
+        name: "gain",
+        about: "static gain (with --linear: the linear part alone, step 1 of 004 sec. 4.2)",
+        params: gain_specs,
+        simulate: sim_gain,
+        dynamic: false,
+    },
     ModelDef {
         name: "cbw",
         about: "classical Bouc-Wen, n = 1 (000 eq. 1-2)",

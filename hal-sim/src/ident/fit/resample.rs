@@ -58,8 +58,8 @@ pub fn upsample(u: &[f64], factor: usize, edge: Edge) -> Vec<f64> {
         }
     };
     let mut out = Vec::with_capacity((n - 1) * factor + 1);
-    for i in 0..n - 1 {
-        out.push(u[i]);
+    for (i, &ui) in u.iter().enumerate().take(n - 1) {
+        out.push(ui);
         let base = i as isize - (HALF_WIDTH as isize - 1);
         for tap in taps.iter().skip(1) {
             let mut s = 0.0;
