@@ -1,9 +1,55 @@
 //! Feedforward hysteresis compensation: IMS, MBW without inversion, direct WPMBW inverse,
 //! PI inverses, multivariable IMS. One enum selects the compensator at run time; each variant
 //! holds its own configuration and state.
+//!
+//! Every compensator: parameters validated at construction ([`FfError`] names the violated
+//! condition), no allocation, bounded work per sample, a finite output for any input (a
+//! non-finite reference holds the previous output), voltages inside the configured range.
 
+pub mod creep;
+pub mod ims;
+pub mod mbw;
+pub mod multi;
+pub mod pi;
+pub mod solve;
+pub mod wpmbw;
+
+pub use creep::CreepInverse;
+pub use ims::{Ims, ImsLoop, ImsModel};
+pub use mbw::MbwFf;
+pub use multi::{pseudo_inverse, MultiIms};
+pub use pi::{ppi_inverse, DpiInverse, PiInverse, PpiInverse, MAX_OPS};
+pub use wpmbw::{LinearPart, WpmbwInverse};
+
+use crate::hysteresis::{AbwAbs, Cbw, Dahl, Gbw, Mbw002, ParamError};
 use crate::real::Real;
 use crate::signals::Setpoint;
+
+/// A compensator parameter broke a condition; the text names it.
+pub type FfError = ParamError;
+
+#[inline]
+pub(crate) fn ensure(cond: bool, msg: &'static str) -> Result<(), FfError> {
+    if cond {
+        Ok(())
+    } else {
+        Err(ParamError(msg))
+    }
+}
+
+pub(crate) fn check_range<T: Real>(lo: T, hi: T) -> Result<(), FfError> {
+    ensure(
+        lo.is_finite() && hi.is_finite() && lo < hi,
+        "feedforward: voltage range must be finite with volts_min < volts_max",
+    )
+}
+
+pub(crate) fn check_dt<T: Real>(dt_s: T) -> Result<(), FfError> {
+    ensure(
+        dt_s.is_finite() && dt_s > T::ZERO,
+        "feedforward: sample period dt_s must be finite and > 0",
+    )
+}
 
 /// Linear scaling only: `u = (y_ref - offset) / d`, no hysteresis model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,10 +68,39 @@ impl<T: Real> LinearFf<T> {
 }
 
 /// The selectable feedforward compensator.
+// Variants hold fixed-size parameter and state arrays (no heap); the size spread is intended.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Feedforward<T: Real> {
     /// Linear scaling only (open loop without a hysteresis model).
     Linear(LinearFf<T>),
+    /// IMS around a classical Bouc-Wen model (003 eq. 16, 004 eq. 25).
+    ImsCbw(Ims<T, Cbw<T>>),
+    /// IMS around a generalized Bouc-Wen model (000 eq. 3).
+    ImsGbw(Ims<T, Gbw<T>>),
+    /// IMS around a Dahl model (000 eq. 4).
+    ImsDahl(Ims<T, Dahl<T>>),
+    /// IMS around the asymmetric Bouc-Wen with `delta*|u'|` (002 eq. 3).
+    ImsAbw(Ims<T, AbwAbs<T>>),
+    /// IMS around the modified Bouc-Wen of 002 (eq. 4-5), solved exactly.
+    ImsMbw(Ims<T, Mbw002<T>>),
+    /// 002's feedforward without inversion (eq. 8-12).
+    Mbw(MbwFf<T>),
+    /// Direct WPMBW inverse with inverse linear dynamics and prefilter (004 eq. 17-18, 27-28).
+    Wpmbw(WpmbwInverse<T>),
+    /// Exact PI inverse (a PI with computed thresholds and weights).
+    PiInverse(PiInverse<T>),
+    /// PPI inverse by a bounded monotone solve.
+    PpiInverse(PpiInverse<T>),
+    /// Exact DPI inverse (dead zones, then PI).
+    DpiInverse(DpiInverse<T>),
+}
+
+fn ims_name(closure: ImsLoop, solved: &'static str, delayed: &'static str) -> &'static str {
+    match closure {
+        ImsLoop::Solved => solved,
+        ImsLoop::Delayed => delayed,
+    }
 }
 
 impl<T: Real> Feedforward<T> {
@@ -34,13 +109,33 @@ impl<T: Real> Feedforward<T> {
     pub fn compensate(&mut self, sp: &Setpoint<T>) -> T {
         match self {
             Feedforward::Linear(l) => l.compensate(sp.y_um),
+            Feedforward::ImsCbw(c) => c.compensate(sp.y_um),
+            Feedforward::ImsGbw(c) => c.compensate(sp.y_um),
+            Feedforward::ImsDahl(c) => c.compensate(sp.y_um),
+            Feedforward::ImsAbw(c) => c.compensate(sp.y_um),
+            Feedforward::ImsMbw(c) => c.compensate(sp.y_um),
+            Feedforward::Mbw(c) => c.compensate(sp.y_um),
+            Feedforward::Wpmbw(c) => c.compensate(sp),
+            Feedforward::PiInverse(c) => c.compensate(sp.y_um),
+            Feedforward::PpiInverse(c) => c.compensate(sp.y_um),
+            Feedforward::DpiInverse(c) => c.compensate(sp.y_um),
         }
     }
 
     /// Restart from rest at setpoint `sp` (mode switch, fault recovery).
-    pub fn reset(&mut self, _sp: &Setpoint<T>) {
+    pub fn reset(&mut self, sp: &Setpoint<T>) {
         match self {
             Feedforward::Linear(_) => {}
+            Feedforward::ImsCbw(c) => c.reset(sp.y_um),
+            Feedforward::ImsGbw(c) => c.reset(sp.y_um),
+            Feedforward::ImsDahl(c) => c.reset(sp.y_um),
+            Feedforward::ImsAbw(c) => c.reset(sp.y_um),
+            Feedforward::ImsMbw(c) => c.reset(sp.y_um),
+            Feedforward::Mbw(c) => c.reset(sp.y_um),
+            Feedforward::Wpmbw(c) => c.reset(sp.y_um),
+            Feedforward::PiInverse(c) => c.reset(sp.y_um),
+            Feedforward::PpiInverse(c) => c.reset(sp.y_um),
+            Feedforward::DpiInverse(c) => c.reset(sp.y_um),
         }
     }
 
@@ -48,19 +143,53 @@ impl<T: Real> Feedforward<T> {
     pub fn name(&self) -> &'static str {
         match self {
             Feedforward::Linear(_) => "linear",
+            Feedforward::ImsCbw(c) => ims_name(c.closure(), "ims-cbw", "ims-cbw-delayed"),
+            Feedforward::ImsGbw(c) => ims_name(c.closure(), "ims-gbw", "ims-gbw-delayed"),
+            Feedforward::ImsDahl(c) => ims_name(c.closure(), "ims-dahl", "ims-dahl-delayed"),
+            Feedforward::ImsAbw(c) => ims_name(c.closure(), "ims-abw", "ims-abw-delayed"),
+            Feedforward::ImsMbw(c) => ims_name(c.closure(), "ims-mbw", "ims-mbw-delayed"),
+            Feedforward::Mbw(_) => "mbw-no-inverse",
+            Feedforward::Wpmbw(_) => "wpmbw-inverse",
+            Feedforward::PiInverse(_) => "pi-inverse",
+            Feedforward::PpiInverse(_) => "ppi-inverse",
+            Feedforward::DpiInverse(_) => "dpi-inverse",
         }
     }
 }
 
 /// Feedforward for an `N`-axis stage: one compensator per axis, or a multivariable one
 /// (003 eq. 14-20) that maps all references to all voltages at once.
+// The multivariable variant holds its matrices inline (no heap).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum MultiFeedforward<T: Real, const N: usize> {
     /// Independent axes.
     PerAxis([Feedforward<T>; N]),
+    /// Multivariable IMS `U = D^-1 (y_ref + h)` (003 eq. 16), `N` actuators for `N` axes.
+    /// Under- and over-actuated systems use [`MultiIms`] with `N != K` directly.
+    Ims(MultiIms<T, N, N>),
+    /// Per-axis compensators behind a linear decoupler: for a stage whose axis outputs mix
+    /// as `y = C * y_axis` (cross-talk after each axis' own hysteresis), the axes get
+    /// `C^-1 * y_ref`. Build with [`MultiFeedforward::decoupled`].
+    Decoupled {
+        c_inv: [[T; N]; N],
+        axes: [Feedforward<T>; N],
+    },
 }
 
 impl<T: Real, const N: usize> MultiFeedforward<T, N> {
+    /// Per-axis compensators behind the inverse of the output mixing matrix `c`
+    /// (`c[i][j]`: share of axis `j`'s own output in output `i`; identity = no coupling).
+    pub fn decoupled(c: [[T; N]; N], axes: [Feedforward<T>; N]) -> Result<Self, FfError> {
+        ensure(
+            c.iter().flatten().all(|x| x.is_finite()),
+            "decoupler: coupling matrix must be finite",
+        )?;
+        let c_inv = multi::invert(&c, T::from_f64(1e-6))
+            .ok_or(ParamError("decoupler: coupling matrix must be invertible"))?;
+        Ok(MultiFeedforward::Decoupled { c_inv, axes })
+    }
+
     /// Voltages (V) that should bring every axis to its setpoint.
     #[inline]
     pub fn compensate(&mut self, sp: &[Setpoint<T>; N]) -> [T; N] {
@@ -72,6 +201,34 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
                 }
                 u
             }
+            MultiFeedforward::Ims(m) => {
+                let mut y = [T::ZERO; N];
+                for (y, s) in y.iter_mut().zip(sp) {
+                    *y = s.y_um;
+                }
+                m.compensate(&y)
+            }
+            MultiFeedforward::Decoupled { c_inv, axes } => {
+                let mut u = [T::ZERO; N];
+                for ((u, f), row) in u.iter_mut().zip(axes.iter_mut()).zip(c_inv.iter()) {
+                    let mut y = T::ZERO;
+                    let mut dy = T::ZERO;
+                    let mut ddy = T::ZERO;
+                    for (&c, s) in row.iter().zip(sp.iter()) {
+                        y += c * s.y_um;
+                        dy += c * s.dy;
+                        ddy += c * s.ddy;
+                    }
+                    // A non-finite reference on any axis holds every axis.
+                    let y = if sp.iter().all(|s| s.y_um.is_finite()) {
+                        y
+                    } else {
+                        T::from_f64(f64::NAN)
+                    };
+                    *u = f.compensate(&Setpoint { y_um: y, dy, ddy });
+                }
+                u
+            }
         }
     }
 
@@ -79,12 +236,30 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
     pub fn reset(&mut self, sp: &[Setpoint<T>; N]) {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.iter_mut().zip(sp).for_each(|(f, s)| f.reset(s)),
+            MultiFeedforward::Ims(m) => {
+                let mut y = [T::ZERO; N];
+                for (y, s) in y.iter_mut().zip(sp) {
+                    *y = s.y_um;
+                }
+                m.reset(&y);
+            }
+            MultiFeedforward::Decoupled { c_inv, axes } => {
+                for (f, row) in axes.iter_mut().zip(c_inv.iter()) {
+                    let y = row
+                        .iter()
+                        .zip(sp.iter())
+                        .fold(T::ZERO, |a, (&c, s)| a + c * s.y_um);
+                    f.reset(&Setpoint::hold(y));
+                }
+            }
         }
     }
 
     pub fn name(&self) -> &'static str {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.first().map_or("none", |f| f.name()),
+            MultiFeedforward::Ims(m) => ims_name(m.closure(), "multi-ims", "multi-ims-delayed"),
+            MultiFeedforward::Decoupled { axes, .. } => axes.first().map_or("none", |f| f.name()),
         }
     }
 }

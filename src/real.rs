@@ -214,10 +214,18 @@ impl SqrtImpl for f32 {
         {
             let y: f32;
             // SAFETY: `vsqrt.f32` is a pure single-precision FPU instruction on every
-            // eabihf Cortex-M; it touches no memory and no flags used by Rust.
+            // eabihf Cortex-M; it touches no memory and no flags used by Rust. Rust does not
+            // see the FPU as a target feature here (the `sreg` class needs `vfp2`), so the
+            // operands go through core registers and s0 is saved and restored by hand.
             #[allow(unsafe_code)]
             unsafe {
-                core::arch::asm!("vsqrt.f32 {y}, {x}", x = in(sreg) self, y = lateout(sreg) y,
+                core::arch::asm!(
+                    "vmov {t}, s0",
+                    "vmov s0, {x}",
+                    "vsqrt.f32 s0, s0",
+                    "vmov {y}, s0",
+                    "vmov s0, {t}",
+                    x = in(reg) self, y = lateout(reg) y, t = out(reg) _,
                     options(pure, nomem, nostack, preserves_flags));
             }
             y

@@ -22,6 +22,9 @@ pub struct Cbw<T> {
     n: T,
     /// RK4 sub-step bound in the input domain (V), used only for `n != 1`.
     max_du: T,
+    /// `h_bound()`, the invariant `|h|` bound; clamps RK4 when a huge input step hits the
+    /// sub-step cap.
+    h_max: T,
 }
 
 impl<T: Real> Cbw<T> {
@@ -52,6 +55,7 @@ impl<T: Real> Cbw<T> {
             gamma,
             n,
             max_du,
+            h_max,
         })
     }
 
@@ -97,6 +101,7 @@ impl<T: Real> Cbw<T> {
             })
         } else {
             rk4_input(h, u0, du, self.max_du, |h, _| self.slope(h, s))
+                .clamp_to(-self.h_max, self.h_max)
         }
     }
 }

@@ -20,10 +20,22 @@
 //! 003 eq. (2) and 004 eq. (1). Seeds 001 and 002 write `y = k*v + h`; their parameters map
 //! by `alpha -> -alpha`, `gamma -> -gamma`, `delta -> -delta` (k, beta, p, q unchanged).
 
+pub mod abw;
 pub mod cbw;
+pub mod dahl;
+pub mod gbw;
+pub mod multi;
+pub mod pi;
+pub mod rlm;
 pub mod structural;
 
+pub use abw::{AbwAbs, AbwU, Mbw002, MbwState};
 pub use cbw::Cbw;
+pub use dahl::Dahl;
+pub use gbw::Gbw;
+pub use multi::{MultiBw, MultiBwState};
+pub use pi::{backlash, dead_zone, Dpi, Pi, PiState, Ppi};
+pub use rlm::{MbwRlm, RlmState, Wpmbw};
 
 use crate::real::Real;
 
@@ -160,6 +172,47 @@ pub(crate) fn rk4_input<T: Real>(h0: T, u0: T, du: T, max_du: T, f: impl Fn(T, T
         let k4 = f(h + d * k3, u + d);
         h += d / T::from_f64(6.0) * (k1 + T::TWO * (k2 + k3) + k4);
         u += d;
+    }
+    h
+}
+
+/// RK4 along the sample's path `theta in [0, 1]` for `dh/dtheta = f(h, theta, sigma)`,
+/// where `f` is smooth for a fixed piece `sigma = sgn(h)` but kinks at `h = 0` (the `|h|` of
+/// the Bouc-Wen family). `n` sub-steps (callers bound it by [`substeps`]). A sub-step that
+/// crosses zero is split at the crossing (located by linear interpolation, error of third
+/// order), so the kink costs no accuracy.
+#[inline]
+pub(crate) fn rk4_kinked<T: Real>(h0: T, n: usize, f: impl Fn(T, T, T) -> T) -> T {
+    let n = n.clamp(1, MAX_SUBSTEPS);
+    let d = T::ONE / T::from_usize(n);
+    let rk4 = |h: T, th: T, d: T, sigma: T| {
+        let half = d * T::HALF;
+        let k1 = f(h, th, sigma);
+        let k2 = f(h + half * k1, th + half, sigma);
+        let k3 = f(h + half * k2, th + half, sigma);
+        let k4 = f(h + d * k3, th + d, sigma);
+        h + d / T::from_f64(6.0) * (k1 + T::TWO * (k2 + k3) + k4)
+    };
+    let mut h = h0;
+    let mut th = T::ZERO;
+    for _ in 0..n {
+        // At h = 0 the piece is the side h moves to (|h| = 0 there, f does not depend on sigma).
+        let sigma = if h != T::ZERO {
+            h.sgn()
+        } else if f(T::ZERO, th, T::ONE) >= T::ZERO {
+            T::ONE
+        } else {
+            -T::ONE
+        };
+        let h1 = rk4(h, th, d, sigma);
+        h = if h != T::ZERO && h1.sgn() == -sigma {
+            let frac = (h / (h - h1)).clamp_to(T::ZERO, T::ONE);
+            let hm = rk4(h, th, d * frac, sigma);
+            rk4(hm, th + d * frac, d * (T::ONE - frac), -sigma)
+        } else {
+            h1
+        };
+        th += d;
     }
     h
 }

@@ -1,0 +1,75 @@
+//! Input sanitising shared by every law: a non-finite input holds its last finite value, and
+//! magnitudes are bounded so no product in a law can overflow to infinity. The optional
+//! measurement filter (e.g. a notch on the stage resonance) sits here too, so it serves every
+//! law the same way.
+
+use super::biquad::Biquad;
+use crate::real::Real;
+use crate::signals::{LoopSignals, Setpoint};
+
+/// Largest magnitude a law accepts for any input (um, um/s, um/s^2 or V). Far outside any
+/// physical stage, small enough that the laws' products stay finite in `f32`.
+pub const INPUT_BOUND: f64 = 1.0e6;
+
+/// Last finite value of every input, and the measurement filter.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct InputGuard<T> {
+    last: LoopSignals<T>,
+    /// Filter on the measured position (unity DC gain expected).
+    pub notch: Option<Biquad<T>>,
+    /// The filter state matches the measurement (false: settle it on the next sample).
+    settled: bool,
+}
+
+#[inline(always)]
+fn hold<T: Real>(x: T, prev: T) -> T {
+    let b = T::from_f64(INPUT_BOUND);
+    if x.is_finite() {
+        x.clamp_to(-b, b)
+    } else {
+        prev
+    }
+}
+
+impl<T: Real> InputGuard<T> {
+    /// Finite, bounded copy of `io`; remembers it for the next sample.
+    #[inline]
+    pub fn clean(&mut self, io: &LoopSignals<T>) -> LoopSignals<T> {
+        let l = &self.last;
+        let c = LoopSignals {
+            setpoint: Setpoint {
+                y_um: hold(io.setpoint.y_um, l.setpoint.y_um),
+                dy: hold(io.setpoint.dy, l.setpoint.dy),
+                ddy: hold(io.setpoint.ddy, l.setpoint.ddy),
+            },
+            y_um: hold(io.y_um, l.y_um),
+            u_ff: hold(io.u_ff, l.u_ff),
+            u_applied: hold(io.u_applied, l.u_applied),
+        };
+        self.last = c;
+        let mut out = c;
+        if let Some(n) = self.notch.as_mut() {
+            if !self.settled {
+                n.settle(c.y_um);
+            }
+            out.y_um = n.update(c.y_um);
+        }
+        self.settled = true;
+        out
+    }
+
+    /// The filter restarts at the next measurement (bumpless reset).
+    pub fn restart(&mut self) {
+        self.settled = false;
+    }
+}
+
+/// `x` if finite, else `fallback`.
+#[inline(always)]
+pub fn finite_or<T: Real>(x: T, fallback: T) -> T {
+    if x.is_finite() {
+        x
+    } else {
+        fallback
+    }
+}

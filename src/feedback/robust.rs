@@ -1,0 +1,225 @@
+//! Robust output-feedback law with virtual hysteresis control, 000 eq. (7)-(8), on the HGO.
+
+use super::guard::InputGuard;
+use super::hgo::{Hgo, HgoState};
+use crate::hysteresis::{ensure, ensure_finite, ParamError};
+use crate::real::Real;
+use crate::signals::LoopSignals;
+
+/// Configuration of the law (the observer carries the model and sample period).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobustConfig<T> {
+    /// Tracking-error decay rate `lambda_1` of eq. (7) (1/s).
+    pub lambda1: T,
+    /// Hysteresis-error decay rate `lambda_2` of eq. (8) (1/s).
+    pub lambda2: T,
+    /// Combine with feedforward: the increment of `io.u_ff` replaces the law's own
+    /// `h_d'` term, the `lambda_2` correction stays.
+    pub feedforward: bool,
+    /// How the two errors converge.
+    pub convergence: Convergence<T>,
+}
+
+/// Convergence of the tracking error `e = x_hat - y_d` and of `e_h = h_hat - h_d`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Convergence<T> {
+    /// `e' = -lambda1 e`, `e_h' = -lambda2 e_h` (000 eq. 7-8).
+    Exponential,
+    /// Finite time (000 Part IV, GBW + FTS): `e' = -lambda1 sig(e)^alpha1`,
+    /// `e_h' = -lambda2 sig(e_h)^alpha2` with `sig(e)^a = |e|^a sgn(e)`, `0 < a < 1`,
+    /// and the virtual control saturated: `|e'| <= sat_um_per_s` (the `sigma_1` of the
+    /// lecture). Each sample advances the errors by the *exact* solution of these ODEs
+    /// over `dt` (`|e|^(1-a)` falls linearly to 0), so the discrete law reaches zero in
+    /// finite time without chattering.
+    FiniteTime {
+        alpha1: T,
+        alpha2: T,
+        sat_um_per_s: T,
+    },
+}
+
+/// Exact solution over `dt` of `e' = -k sig(e)^alpha`, `0 < alpha < 1`.
+#[inline]
+pub fn finite_time_decay<T: Real>(e: T, k: T, alpha: T, dt: T) -> T {
+    let p = T::ONE - alpha;
+    let r = e.abs_pow(p) - p * k * dt;
+    if r > T::ZERO {
+        e.sgn() * r.powf(T::ONE / p)
+    } else {
+        T::ZERO
+    }
+}
+
+/// HGO + robust law.
+///
+/// Eq. (7): `h_d = d_p u - v_d`, `v_d = (y_d' - A x_hat - lambda1 (x_hat - y_d)) / B`
+/// (normalised: `B = -A = a`), the effective input that makes `x - y_d` decay at
+/// `lambda1`. Eq. (8) integrates `u` so that `e_h = h_hat - h_d` decays at `lambda2`.
+/// Because `h_d` contains `d_p u`, `e_h' = (slope - d_p) u' + v_d'` with
+/// `slope = A_bw - (B_bw sgn(u') sgn(h) + G_bw)|h|`; solving for `u'` gives
+/// `u' = (v_d' + lambda2 (h_hat - h_d)) / (d_p - slope)`. Its denominator is `dv/du`, positive
+/// for a monotone actuator (`d_p > A_bw`); it is guarded into `[d_p/20, 2 d_p + A_bw]`
+/// (and `h_hat` bounded) so a bad estimate cannot blow the step up. Eq. (8) as printed has
+/// `A_bw - ...` alone in the denominator and `+lambda2`; with `h_d` depending on `u` that
+/// sign makes `e_h` grow, so the implicit form above is used (see the report).
+///
+/// Discretely: the integral of eq. (8) runs from `io.u_applied` (saturation never winds it
+/// up), `lambda2` enters as the exact decay `c = 1 - exp(-lambda2 dt)` per sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Robust<T> {
+    hgo: Hgo<T>,
+    cfg: RobustConfig<T>,
+    c2: T,
+    den_lo: T,
+    den_hi: T,
+    h_lim: T,
+    state: RobustState<T>,
+    pub(crate) guard: InputGuard<T>,
+}
+
+/// Observer state and the values of the previous sample.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RobustState<T> {
+    pub obs: HgoState<T>,
+    pub v_d_prev: T,
+    pub u_ff_prev: T,
+    pub fresh: bool,
+}
+
+impl<T: Real> Robust<T> {
+    pub fn new(hgo: Hgo<T>, cfg: RobustConfig<T>) -> Result<Self, ParamError> {
+        ensure_finite(&[cfg.lambda1, cfg.lambda2], "robust law: finite lambdas")?;
+        if let Convergence::FiniteTime {
+            alpha1,
+            alpha2,
+            sat_um_per_s,
+        } = cfg.convergence
+        {
+            ensure_finite(
+                &[alpha1, alpha2, sat_um_per_s],
+                "finite-time law: finite parameters",
+            )?;
+            ensure(
+                alpha1 > T::ZERO && alpha1 < T::ONE && alpha2 > T::ZERO && alpha2 < T::ONE,
+                "finite-time law: 0 < alpha1, alpha2 < 1",
+            )?;
+            ensure(sat_um_per_s > T::ZERO, "finite-time law: sat_um_per_s > 0")?;
+        }
+        ensure(
+            cfg.lambda1 > T::ZERO && cfg.lambda2 > T::ZERO,
+            "robust law: lambda1 > 0 and lambda2 > 0",
+        )?;
+        let m = hgo.model();
+        ensure(
+            m.d() > T::ZERO,
+            "robust law: d_p > 0 (the voltage must move the stage)",
+        )?;
+        let c2 = -(-cfg.lambda2 * hgo.dt_s()).exp_m1();
+        Ok(Self {
+            hgo,
+            cfg,
+            c2,
+            den_lo: m.d() / T::from_f64(20.0),
+            den_hi: T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs(),
+            h_lim: T::TWO * m.h_bound(),
+            state: RobustState {
+                fresh: true,
+                ..Default::default()
+            },
+            guard: InputGuard::default(),
+        })
+    }
+
+    pub fn observer(&self) -> &Hgo<T> {
+        &self.hgo
+    }
+    pub fn state(&self) -> &RobustState<T> {
+        &self.state
+    }
+    pub fn config(&self) -> &RobustConfig<T> {
+        &self.cfg
+    }
+
+    /// The effective input `v_d` of eq. (7) (um).
+    #[inline]
+    fn v_d(&self, io: &LoopSignals<T>, x_hat: T) -> T {
+        let a = self.hgo.a_per_s();
+        let sp = &io.setpoint;
+        let e = x_hat - sp.y_um;
+        let rate = match self.cfg.convergence {
+            Convergence::Exponential => -self.cfg.lambda1 * e,
+            Convergence::FiniteTime {
+                alpha1,
+                sat_um_per_s,
+                ..
+            } => {
+                let dt = self.hgo.dt_s();
+                let e1 = finite_time_decay(e, self.cfg.lambda1, alpha1, dt);
+                ((e1 - e) / dt).clamp_to(-sat_um_per_s, sat_um_per_s)
+            }
+        };
+        x_hat + (sp.dy + rate) / a
+    }
+
+    /// What is left of the error `e_h` after one sample.
+    #[inline]
+    fn h_error_left(&self, e: T) -> T {
+        match self.cfg.convergence {
+            Convergence::Exponential => (T::ONE - self.c2) * e,
+            Convergence::FiniteTime { alpha2, .. } => {
+                finite_time_decay(e, self.cfg.lambda2, alpha2, self.hgo.dt_s())
+            }
+        }
+    }
+
+    #[inline]
+    pub fn update(&mut self, io: &LoopSignals<T>) -> T {
+        let io = self.guard.clean(io);
+        if self.state.fresh {
+            self.prime(&io);
+            return io.u_applied;
+        }
+        let u0 = io.u_applied;
+        self.hgo.step(&mut self.state.obs, io.y_um, u0);
+        let m = *self.hgo.model();
+        let h_hat = self.state.obs.h.clamp_to(-self.h_lim, self.h_lim);
+        let v_hat = m.d() * u0 - h_hat;
+        let v_d = self.v_d(&io, self.state.obs.x);
+        // Target effective input for this sample: what is left of the error to v_d.
+        let (dv, du_ff) = if self.cfg.feedforward {
+            let e = v_hat - v_d;
+            (self.h_error_left(e) - e, io.u_ff - self.state.u_ff_prev)
+        } else {
+            let left = self.h_error_left(v_hat - self.state.v_d_prev);
+            (v_d - v_hat + left, T::ZERO)
+        };
+        let s = &mut self.state;
+        s.v_d_prev = v_d;
+        s.u_ff_prev = io.u_ff;
+        let den = (m.d() - m.slope(h_hat, dv.sgn())).clamp_to(self.den_lo, self.den_hi);
+        let u = u0 + du_ff + dv / den;
+        if u.is_finite() {
+            u
+        } else {
+            self.prime(&io);
+            u0
+        }
+    }
+
+    fn prime(&mut self, io: &LoopSignals<T>) {
+        let obs = self.hgo.init(io.y_um, io.u_applied);
+        self.state = RobustState {
+            obs,
+            v_d_prev: self.v_d(io, obs.x),
+            u_ff_prev: io.u_ff,
+            fresh: false,
+        };
+    }
+
+    /// Bumpless restart: the observer starts at the steady state that explains `y` at
+    /// `u_applied`; the first command after is `u_applied`, then the law integrates from it.
+    pub fn reset(&mut self, _io: &LoopSignals<T>) {
+        self.state.fresh = true;
+        self.guard.restart();
+    }
+}

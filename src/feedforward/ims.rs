@@ -1,0 +1,342 @@
+//! Inverse multiplicative structure (IMS) for the Bouc-Wen family in piezo form:
+//! `u = (y_ref + h(u)) / d` (003 eq. 14-17, 004 eq. 25-26).
+//!
+//! The loop is algebraic: `h(u)` depends on the `u` being computed. [`ImsLoop::Solved`]
+//! solves it exactly each sample: with the model advanced over the increment
+//! (`Hysteresis::step` on a copy of the state) the residual
+//! `f(u) = d*u - h(u) - y_ref = y_model(u) - y_ref` is strictly increasing with slope at
+//! least `d - max dh/du > 0`, which brackets the root; a bounded Illinois solve finishes it
+//! ([`super::solve::solve_increasing`]). [`ImsLoop::Delayed`] is the usual one-sample-delay
+//! workaround of 004 §4.4 (`h` from the previous sample), kept for comparison.
+
+use super::creep::CreepInverse;
+use super::solve::solve_increasing_hinted;
+use super::FfError;
+use crate::hysteresis::{Cbw, Hysteresis};
+use crate::real::Real;
+
+/// A model in piezo form `y = d*u - h` that the IMS can invert.
+pub trait ImsModel<T: Real>: Hysteresis<T> {
+    /// Piezo coefficient `d` (um/V).
+    fn d(&self) -> T;
+    /// An upper bound of `dh/du` over every state the model can reach from rest.
+    /// `d` must exceed it: then `y` is strictly increasing in `u` and the IMS well defined.
+    fn max_h_slope(&self) -> T;
+}
+
+impl<T: Real> ImsModel<T> for Cbw<T> {
+    fn d(&self) -> T {
+        self.d()
+    }
+    /// `dh/du = alpha - (beta*s*sgn(h) + gamma)*|h|^n` is largest at `h = -h_max`, `s = +1`:
+    /// `alpha + (beta - gamma) * alpha / (beta + gamma) = 2*alpha*beta / (beta + gamma)`.
+    fn max_h_slope(&self) -> T {
+        T::TWO * self.alpha() * self.beta() / (self.beta() + self.gamma())
+    }
+}
+
+/// How the algebraic loop of the IMS is closed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImsLoop {
+    /// Solve `y_model(u) = y_ref` each sample (bounded bracketed solve).
+    Solved,
+    /// Use `h` of the previous sample (004 §4.4 "constant time delay").
+    Delayed,
+}
+
+/// IMS feedforward around a model `M` (config: model, loop closure, voltage range, sample
+/// period; state: the model's state, last voltage and model output).
+#[derive(Debug, Clone)]
+pub struct Ims<T: Real, M: ImsModel<T>> {
+    model: M,
+    closure: ImsLoop,
+    volts_min: T,
+    volts_max: T,
+    dt_s: T,
+    min_slope: T,
+    /// Static quadratic term added to the model output (um/V^2), e.g. a stage's asymmetry.
+    quad: T,
+    /// Inverse creep applied to the reference (None: no creep).
+    creep: Option<CreepInverse<T>>,
+    /// Secant slope of the last solved step (first trial of the next solve).
+    slope_hint: T,
+    state: M::State,
+    u: T,
+    y: T,
+    evals: usize,
+}
+
+impl<T: Real, M: ImsModel<T> + PartialEq> PartialEq for Ims<T, M>
+where
+    M::State: PartialEq,
+{
+    fn eq(&self, o: &Self) -> bool {
+        self.model == o.model
+            && self.closure == o.closure
+            && self.volts_min == o.volts_min
+            && self.volts_max == o.volts_max
+            && self.dt_s == o.dt_s
+            && self.state == o.state
+            && self.u == o.u
+            && self.y == o.y
+    }
+}
+
+impl<T: Real, M: ImsModel<T>> Ims<T, M> {
+    /// `volts_min..volts_max` the range the stage accepts (the model follows the clamped
+    /// voltage), `dt_s` the sample period. Starts relaxed at 0 V (or the nearest limit).
+    pub fn new(
+        model: M,
+        closure: ImsLoop,
+        volts_min: T,
+        volts_max: T,
+        dt_s: T,
+    ) -> Result<Self, FfError> {
+        super::check_range(volts_min, volts_max)?;
+        super::check_dt(dt_s)?;
+        let min_slope = model.d() - model.max_h_slope();
+        super::ensure(
+            min_slope.is_finite() && min_slope > T::ZERO,
+            "IMS: d must exceed the largest hysteresis slope dh/du (y must increase with u)",
+        )?;
+        let u0 = T::ZERO.clamp_to(volts_min, volts_max);
+        let mut state = model.init(u0);
+        let y = model.step(&mut state, u0, dt_s);
+        let slope_hint = model.d();
+        Ok(Self {
+            model,
+            closure,
+            volts_min,
+            volts_max,
+            dt_s,
+            min_slope,
+            quad: T::ZERO,
+            creep: None,
+            slope_hint,
+            state,
+            u: u0,
+            y,
+            evals: 0,
+        })
+    }
+
+    /// Adds a static term `quad*u^2` to the model output (`y = model(u) + quad*u^2`).
+    /// Refused when it would let `y` decrease with `u` inside the voltage range.
+    pub fn with_quadratic(mut self, quad_um_per_v2: T) -> Result<Self, FfError> {
+        let u_max = self.volts_min.abs().max(self.volts_max.abs());
+        let min_slope =
+            self.model.d() - self.model.max_h_slope() - T::TWO * quad_um_per_v2.abs() * u_max;
+        super::ensure(
+            quad_um_per_v2.is_finite() && min_slope > T::ZERO,
+            "IMS: quadratic term too large (y must increase with u over the voltage range)",
+        )?;
+        self.min_slope = min_slope;
+        self.quad = quad_um_per_v2;
+        let u = self.u;
+        self.reset_volts(u);
+        Ok(self)
+    }
+
+    /// Inverts linear creep of the stage before the hysteresis (see [`CreepInverse`]).
+    pub fn with_creep(mut self, creep: CreepInverse<T>) -> Self {
+        self.creep = Some(creep);
+        let u = self.u;
+        self.reset_volts(u);
+        self
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+    pub fn closure(&self) -> ImsLoop {
+        self.closure
+    }
+    /// Model evaluations used by the last solve (0 for [`ImsLoop::Delayed`]).
+    pub fn last_evals(&self) -> usize {
+        self.evals
+    }
+    /// Output the internal model predicts for the last voltage (um).
+    pub fn predicted_um(&self) -> T {
+        self.y
+    }
+
+    /// Voltage (V) for the reference `y_ref_um`. A non-finite reference holds the output.
+    #[inline]
+    pub fn compensate(&mut self, y_ref_um: T) -> T {
+        if !y_ref_um.is_finite() {
+            return self.u;
+        }
+        let y_ref_um = match &self.creep {
+            Some(c) => c.static_target(y_ref_um),
+            None => y_ref_um,
+        };
+        let u = match self.closure {
+            ImsLoop::Solved => {
+                let (model, state, dt, quad) = (&self.model, self.state, self.dt_s, self.quad);
+                let f = |u: T| {
+                    let mut s = state;
+                    model.step(&mut s, u, dt) + quad * u * u - y_ref_um
+                };
+                let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
+                let tol = T::from_f64(8.0) * T::EPSILON * scale;
+                // f at the held voltage: not `self.y - y_ref` for models with rate terms.
+                let f0 = f(self.u);
+                let root =
+                    solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
+                self.evals = root.evals + 1;
+                let secant = (root.fx - f0) / (root.x - self.u);
+                if secant.is_finite() && secant > self.min_slope {
+                    self.slope_hint = secant;
+                }
+                root.x
+            }
+            ImsLoop::Delayed => {
+                self.evals = 0;
+                let d = self.model.d();
+                let h_prev = d * self.u - self.y;
+                (y_ref_um + h_prev) / d
+            }
+        };
+        // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
+        let u = if u.is_finite() { u } else { self.u };
+        let u = u.clamp_to(self.volts_min, self.volts_max);
+        self.y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
+        self.u = u;
+        if let Some(c) = &mut self.creep {
+            c.commit(self.y);
+        }
+        u
+    }
+
+    /// Restart relaxed (hysteresis state zero) at the voltage that gives `y_um`.
+    pub fn reset(&mut self, y_um: T) {
+        let dc = self.creep.as_ref().map_or(T::ONE, |c| c.dc_gain());
+        let u0 = if y_um.is_finite() {
+            y_um / (dc * self.model.d())
+        } else {
+            T::ZERO
+        };
+        let u0 = u0.clamp_to(self.volts_min, self.volts_max);
+        self.state = self.model.init(u0);
+        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
+        self.u = u0;
+        self.evals = 0;
+        if let Some(c) = &mut self.creep {
+            c.settle(self.y);
+        }
+    }
+
+    /// Restart relaxed at voltage `u0` (e.g. 0 V at power-up).
+    pub fn reset_volts(&mut self, u0: T) {
+        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
+        let u0 = u0.clamp_to(self.volts_min, self.volts_max);
+        self.state = self.model.init(u0);
+        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
+        self.u = u0;
+        if let Some(c) = &mut self.creep {
+            c.settle(self.y);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set1() -> Cbw<f64> {
+        Cbw::with_n1(0.16, 0.07, 0.02, 0.01).unwrap()
+    }
+
+    /// Drive the exact model with the compensator; RMSE of y - y_ref over the last period.
+    fn rmse(closure: ImsLoop, f_hz: f64, fs: f64) -> (f64, f64) {
+        let m = set1();
+        let mut ff = Ims::new(m, closure, -100.0, 200.0, 1.0 / fs).unwrap();
+        let mut s = m.init(0.0);
+        let n = (2.0 * fs / f_hz) as usize;
+        let (mut se, mut cnt, mut max_evals) = (0.0, 0, 0usize);
+        for k in 0..n {
+            let t = k as f64 / fs;
+            let y_ref = 8.0 * (1.0 - (2.0 * core::f64::consts::PI * f_hz * t).cos());
+            let u = ff.compensate(y_ref);
+            max_evals = max_evals.max(ff.last_evals());
+            let y = m.step(&mut s, u, 1.0 / fs);
+            if k >= n / 2 {
+                se += (y - y_ref).powi(2);
+                cnt += 1;
+            }
+        }
+        ((se / cnt as f64).sqrt(), max_evals as f64)
+    }
+
+    #[test]
+    fn solved_ims_tracks_exact_model_and_beats_delayed() {
+        for &f in &[1.0, 10.0, 50.0] {
+            let (solved, evals) = rmse(ImsLoop::Solved, f, 10_000.0);
+            let (delayed, _) = rmse(ImsLoop::Delayed, f, 10_000.0);
+            assert!(solved < 1e-9, "{f} Hz: solved RMSE {solved}");
+            assert!(delayed > 100.0 * solved, "{f} Hz: {delayed} vs {solved}");
+            assert!(evals <= 12.0, "{f} Hz: {evals} evaluations");
+        }
+    }
+
+    #[test]
+    fn rejects_model_with_non_increasing_output() {
+        // 2*alpha*beta/(beta+gamma) = 0.093 > d = 0.05
+        let m = Cbw::with_n1(0.05, 0.07, 0.02, 0.01).unwrap();
+        let e = Ims::new(m, ImsLoop::Solved, 0.0, 100.0, 1e-4).unwrap_err();
+        assert!(e.0.contains("d must exceed"));
+    }
+
+    #[test]
+    fn nan_reference_holds_output_and_range_is_respected() {
+        let mut ff = Ims::new(set1(), ImsLoop::Solved, 0.0, 100.0, 1e-4).unwrap();
+        let u = ff.compensate(5.0);
+        assert_eq!(ff.compensate(f64::NAN), u);
+        assert_eq!(ff.compensate(f64::INFINITY), u);
+        assert_eq!(ff.compensate(1e9), 100.0);
+        assert_eq!(ff.compensate(-1e9), 0.0);
+    }
+}
+
+#[cfg(test)]
+mod stage_terms {
+    use super::*;
+
+    /// CBW + quadratic + creep, as the simulated stage composes them.
+    #[test]
+    fn quadratic_and_creep_are_inverted_exactly() {
+        let m = Cbw::with_n1(0.9f64, 0.3, 0.012, 0.004).unwrap();
+        let (g, tau, dt) = ([0.01, 0.015, 0.02], [0.02, 0.3, 5.0], 1e-4);
+        let q = -2e-4;
+        let creep = CreepInverse::new(&g, &tau, dt).unwrap();
+        let mut ff = Ims::new(m, ImsLoop::Solved, 0.0, 150.0, dt)
+            .unwrap()
+            .with_quadratic(q)
+            .unwrap()
+            .with_creep(creep);
+        let mut s = m.init(0.0);
+        let mut c = [0.0f64; 3];
+        let mut max_err: f64 = 0.0;
+        for k in 0..20_000 {
+            let t = k as f64 * dt;
+            let y_ref =
+                50.0 - 20.0 * (2.0 * core::f64::consts::PI * t).cos() * (1.0 - (-10.0 * t).exp());
+            let u = ff.compensate(y_ref);
+            let ys = m.step(&mut s, u, dt) + q * u * u;
+            let mut y = ys;
+            for i in 0..3 {
+                let e = (-dt / tau[i]).exp();
+                c[i] = e * c[i] + (1.0 - e) * g[i] * ys;
+                y += c[i];
+            }
+            if k > 0 {
+                max_err = max_err.max((y - y_ref).abs());
+            }
+        }
+        assert!(max_err < 1e-8, "{max_err}");
+        assert!(Ims::new(m, ImsLoop::Solved, 0.0, 150.0, dt)
+            .unwrap()
+            .with_quadratic(-0.01)
+            .is_err());
+    }
+}

@@ -1,0 +1,498 @@
+//! Asymmetric Bouc-Wen models (001 eq. 3, 002 eq. 3) and the MBW of 002 (eq. 4-5), all in
+//! piezo form `y = d*u - h`.
+//!
+//! Mapping from the `y = k*v + h` form of 001/002: `d = k`, `alpha -> -alpha`,
+//! `gamma -> -gamma`, `delta -> -delta`, `beta, n, p, q` unchanged. E.g. the MBW of
+//! 002 table 1 (`alpha = -0.0656, beta = 0.3922, gamma = -0.15, delta = -0.011`) is
+//! `alpha = 0.0656, beta = 0.3922, gamma = 0.15, delta = 0.011` here.
+
+use super::{
+    ensure, ensure_finite, rk4_kinked, sane_input, step_piecewise_affine, substeps, BwState,
+    Hysteresis, ParamError,
+};
+use crate::real::Real;
+
+/// The CBW part `g(h, s) = alpha - (beta*s*sigma + gamma)*|h|^n` of `dh/du` on piece
+/// `sigma` (`|h|` taken as `sigma*h`, the smooth extension of the piece).
+#[inline(always)]
+fn cbw_slope<T: Real>(alpha: T, beta: T, gamma: T, n: T, h: T, s: T, sigma: T) -> T {
+    let m = sigma * h;
+    let mag = if n == T::ONE {
+        m
+    } else {
+        m.max(T::ZERO).powf(n)
+    };
+    alpha - (beta * s * sigma + gamma) * mag
+}
+
+fn check_cbw_part<T: Real>(
+    alpha: T,
+    beta: T,
+    gamma: T,
+    n: T,
+    msgs: [&'static str; 4],
+) -> Result<(), ParamError> {
+    ensure(alpha > T::ZERO, msgs[0])?;
+    ensure(beta + gamma > T::ZERO, msgs[1])?;
+    ensure(beta - gamma >= T::ZERO, msgs[2])?;
+    ensure(n >= T::ONE, msgs[3])
+}
+
+/// Asymmetric Bouc-Wen with the term `delta*u*sgn(du/dt)` (001 eq. 3; piezo form as in
+/// 004 eq. 21): `y = d*u - h`,
+/// `dh/dt = alpha*u' - beta*|u'|*|h|^(n-1)*h - gamma*u'*|h|^n - delta*u*sgn(u')`.
+///
+/// The `delta` term is rate dependent: per unit input it is `delta*u/|u'|`. Over one
+/// sample with first-order-hold input (`u' = du/dt`), along `u = u0 + theta*du`:
+/// `dh/dtheta = du*g(h, s) - delta*s*dt*(u0 + theta*du)`, integrated by RK4 in `theta`
+/// with sub-steps no larger than `0.1/L` of input (split at `h = 0`). Exact for FOH input
+/// up to the RK4 error, at any sample rate.
+///
+/// For a fixed input rate the loop is bounded (the CBW part pulls `h` back with rate
+/// `(beta+gamma)*|u'|`, the drift is `delta*|u|`); as `u' -> 0` at a non-zero `u` the drift
+/// wins, as in the seed's equation. The CBW part is checked against 004 eq. (3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AbwU<T> {
+    d: T,
+    alpha: T,
+    beta: T,
+    gamma: T,
+    n: T,
+    delta: T,
+    /// RK4 sub-step bound (V).
+    max_du: T,
+}
+
+impl<T: Real> AbwU<T> {
+    /// `d` (um/V), CBW part `alpha, beta, gamma, n`, asymmetry `delta` (um/(V s)).
+    pub fn new(d: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
+        ensure_finite(
+            &[d, alpha, beta, gamma, n, delta],
+            "ABW-u: all parameters must be finite",
+        )?;
+        check_cbw_part(
+            alpha,
+            beta,
+            gamma,
+            n,
+            [
+                "ABW-u: alpha > 0 (004 eq. 3)",
+                "ABW-u: beta + gamma > 0 (004 eq. 3)",
+                "ABW-u: beta - gamma >= 0 (004 eq. 3)",
+                "ABW-u: n >= 1",
+            ],
+        )?;
+        let h_max = (alpha / (beta + gamma)).powf(T::ONE / n);
+        let lipschitz = n * (beta + gamma.abs()) * h_max.abs_pow(n - T::ONE);
+        let max_du = T::from_f64(0.1) / lipschitz;
+        ensure(
+            max_du.is_finite() && max_du > T::ZERO,
+            "ABW-u: parameters out of range",
+        )?;
+        Ok(Self {
+            d,
+            alpha,
+            beta,
+            gamma,
+            n,
+            delta,
+            max_du,
+        })
+    }
+
+    pub fn d(&self) -> T {
+        self.d
+    }
+    pub fn alpha(&self) -> T {
+        self.alpha
+    }
+    pub fn beta(&self) -> T {
+        self.beta
+    }
+    pub fn gamma(&self) -> T {
+        self.gamma
+    }
+    pub fn n(&self) -> T {
+        self.n
+    }
+    pub fn delta(&self) -> T {
+        self.delta
+    }
+
+    /// `dh/du` at state `h`, input `u` and input rate `du_dt` (V/s): the CBW part minus
+    /// `delta*u/|u'|`. Zero rate gives the CBW part only (the term then has no meaning).
+    #[inline]
+    pub fn slope(&self, h: T, u: T, du_dt: T) -> T {
+        let s = du_dt.sgn();
+        let g = cbw_slope(self.alpha, self.beta, self.gamma, self.n, h, s, h.sgn());
+        let rate = du_dt.abs();
+        if rate > T::ZERO && rate.is_finite() {
+            g - self.delta * u / rate
+        } else {
+            g
+        }
+    }
+
+    /// Update of `h` over one sample: input from `u0` by `du` in `dt` seconds (FOH).
+    #[inline]
+    pub fn advance_h(&self, h: T, u0: T, du: T, dt: T) -> T {
+        let s = du.sgn();
+        if s == T::ZERO {
+            return h; // every term of eq. (3) carries u' or sgn(u')
+        }
+        let dt = if dt.is_finite() && dt > T::ZERO {
+            dt
+        } else {
+            T::ZERO
+        };
+        let n = substeps(du, self.max_du);
+        let drift = self.delta * s * dt;
+        rk4_kinked(h, n, |h, th, sigma| {
+            du * cbw_slope(self.alpha, self.beta, self.gamma, self.n, h, s, sigma)
+                - drift * (u0 + th * du)
+        })
+    }
+}
+
+impl<T: Real> Hysteresis<T> for AbwU<T> {
+    type State = BwState<T>;
+
+    fn init(&self, u0: T) -> BwState<T> {
+        BwState {
+            u: sane_input(u0, T::ZERO),
+            h: T::ZERO,
+        }
+    }
+
+    #[inline]
+    fn step(&self, s: &mut BwState<T>, u: T, dt: T) -> T {
+        let u = sane_input(u, s.u);
+        let h = self.advance_h(s.h, s.u, u - s.u, dt);
+        // Only a non-finite result (impossible for validated parameters and finite dt) is refused.
+        if h.is_finite() {
+            s.h = h;
+        }
+        s.u = u;
+        self.d * u - s.h
+    }
+}
+
+/// Asymmetric Bouc-Wen with the term `delta*|du/dt|` (002 eq. 3), piezo form
+/// `y = d*u - h`, `dh/dt = alpha*u' - beta*|u'|*|h|^(n-1)*h - gamma*u'*|h|^n + delta*|u'|`.
+///
+/// Rate independent: `dh/du = g(h, s) + delta*s`; exact for `n = 1` (the constant term is
+/// `alpha + delta*s` on each direction), RK4 otherwise.
+///
+/// Accepted when the CBW part meets 004 eq. (3) and `alpha > |delta|` (`h` moves with the
+/// input in both directions); then `|h| <= ((alpha + |delta|)/(beta + gamma))^(1/n)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AbwAbs<T> {
+    d: T,
+    alpha: T,
+    beta: T,
+    gamma: T,
+    n: T,
+    delta: T,
+    max_du: T,
+}
+
+impl<T: Real> AbwAbs<T> {
+    /// `d` (um/V), CBW part `alpha, beta, gamma, n`, asymmetry `delta` (um/V).
+    pub fn new(d: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
+        ensure_finite(
+            &[d, alpha, beta, gamma, n, delta],
+            "ABW-abs: all parameters must be finite",
+        )?;
+        check_cbw_part(
+            alpha,
+            beta,
+            gamma,
+            n,
+            [
+                "ABW-abs: alpha > 0 (004 eq. 3)",
+                "ABW-abs: beta + gamma > 0 (004 eq. 3)",
+                "ABW-abs: beta - gamma >= 0 (004 eq. 3)",
+                "ABW-abs: n >= 1",
+            ],
+        )?;
+        ensure(alpha > delta.abs(), "ABW-abs: alpha > |delta|")?;
+        let h_max = ((alpha + delta.abs()) / (beta + gamma)).powf(T::ONE / n);
+        let lipschitz = n * (beta + gamma.abs()) * h_max.abs_pow(n - T::ONE);
+        let max_du = T::from_f64(0.1) / lipschitz;
+        ensure(
+            max_du.is_finite() && max_du > T::ZERO,
+            "ABW-abs: parameters out of range",
+        )?;
+        Ok(Self {
+            d,
+            alpha,
+            beta,
+            gamma,
+            n,
+            delta,
+            max_du,
+        })
+    }
+
+    /// 002's `y = k*v + h` parameters (table 1 order) mapped to the piezo form.
+    pub fn from_002(k: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
+        Self::new(k, -alpha, beta, -gamma, n, -delta)
+    }
+
+    pub fn d(&self) -> T {
+        self.d
+    }
+    pub fn alpha(&self) -> T {
+        self.alpha
+    }
+    pub fn beta(&self) -> T {
+        self.beta
+    }
+    pub fn gamma(&self) -> T {
+        self.gamma
+    }
+    pub fn n(&self) -> T {
+        self.n
+    }
+    pub fn delta(&self) -> T {
+        self.delta
+    }
+
+    /// Bound of `|h|`: `((alpha + |delta|)/(beta + gamma))^(1/n)`.
+    pub fn h_bound(&self) -> T {
+        ((self.alpha + self.delta.abs()) / (self.beta + self.gamma)).powf(T::ONE / self.n)
+    }
+
+    /// `dh/du` at state `h` for input direction `s = sgn(du/dt)`.
+    #[inline]
+    pub fn slope(&self, h: T, s: T) -> T {
+        cbw_slope(self.alpha, self.beta, self.gamma, self.n, h, s, h.sgn()) + self.delta * s
+    }
+
+    /// Input-domain update of `h` over `du`: exact for `n = 1`, RK4 otherwise.
+    #[inline]
+    pub fn advance_h(&self, h: T, du: T) -> T {
+        let s = du.sgn();
+        if s == T::ZERO {
+            return h;
+        }
+        if self.n == T::ONE {
+            step_piecewise_affine(h, du, self.alpha + self.delta * s, |sigma| {
+                self.beta * s + self.gamma * sigma
+            })
+        } else {
+            let n = substeps(du, self.max_du);
+            let b = self.h_bound();
+            rk4_kinked(h, n, |h, _, sigma| {
+                du * (cbw_slope(self.alpha, self.beta, self.gamma, self.n, h, s, sigma)
+                    + self.delta * s)
+            })
+            .clamp_to(-b, b) // invariant; only matters when a huge step hits the cap
+        }
+    }
+}
+
+impl<T: Real> Hysteresis<T> for AbwAbs<T> {
+    type State = BwState<T>;
+
+    fn init(&self, u0: T) -> BwState<T> {
+        BwState {
+            u: sane_input(u0, T::ZERO),
+            h: T::ZERO,
+        }
+    }
+
+    #[inline]
+    fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
+        let u = sane_input(u, s.u);
+        s.h = self.advance_h(s.h, u - s.u);
+        s.u = u;
+        self.d * u - s.h
+    }
+}
+
+/// State of [`Mbw002`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct MbwState<T> {
+    /// Last input (V).
+    pub u: T,
+    /// Hysteresis variable of the ABW part.
+    pub h: T,
+    /// Input rate over the last sample (V/s).
+    pub du_dt: T,
+}
+
+/// Modified Bouc-Wen of 002 (eq. 4-5), piezo form:
+/// `y = d*u - h + p*u' + q*u'^3`, `h` the [`AbwAbs`] of 002 eq. (3), `u'` the input rate
+/// over the last sample (first-order hold).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mbw002<T> {
+    abw: AbwAbs<T>,
+    p: T,
+    q: T,
+}
+
+impl<T: Real> Mbw002<T> {
+    /// The ABW part and the rate terms `p` (um s/V), `q` (um s^3/V^3).
+    pub fn new(abw: AbwAbs<T>, p: T, q: T) -> Result<Self, ParamError> {
+        ensure(
+            p.is_finite() && q.is_finite(),
+            "MBW-002: p and q must be finite",
+        )?;
+        Ok(Self { abw, p, q })
+    }
+
+    /// 002 table 1 order in the `y = k*v + h` form (`p, q` keep their sign).
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_002(
+        k: T,
+        alpha: T,
+        beta: T,
+        gamma: T,
+        n: T,
+        delta: T,
+        p: T,
+        q: T,
+    ) -> Result<Self, ParamError> {
+        Self::new(AbwAbs::from_002(k, alpha, beta, gamma, n, delta)?, p, q)
+    }
+
+    pub fn abw(&self) -> &AbwAbs<T> {
+        &self.abw
+    }
+    pub fn p(&self) -> T {
+        self.p
+    }
+    pub fn q(&self) -> T {
+        self.q
+    }
+
+    /// The rate term `p*u' + q*u'^3` (002 eq. 4).
+    #[inline]
+    pub fn rate_term(&self, du_dt: T) -> T {
+        self.p * du_dt + self.q * du_dt * du_dt * du_dt
+    }
+}
+
+impl<T: Real> Hysteresis<T> for Mbw002<T> {
+    type State = MbwState<T>;
+
+    fn init(&self, u0: T) -> MbwState<T> {
+        MbwState {
+            u: sane_input(u0, T::ZERO),
+            h: T::ZERO,
+            du_dt: T::ZERO,
+        }
+    }
+
+    #[inline]
+    fn step(&self, s: &mut MbwState<T>, u: T, dt: T) -> T {
+        let u = sane_input(u, s.u);
+        let du = u - s.u;
+        s.h = self.abw.advance_h(s.h, du);
+        let rate = du / dt;
+        s.du_dt = if rate.is_finite() { rate } else { T::ZERO };
+        s.u = u;
+        self.abw.d * u - s.h + self.rate_term(s.du_dt)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hysteresis::{rk4_input, Cbw};
+
+    #[test]
+    fn rejects_bad_parameters() {
+        assert_eq!(
+            AbwAbs::new(1.0, 0.05, 0.4, 0.15, 1.0, 0.06).unwrap_err().0,
+            "ABW-abs: alpha > |delta|"
+        );
+        assert_eq!(
+            AbwU::new(1.0, 0.05, 0.1, 0.15, 1.0, 0.0).unwrap_err().0,
+            "ABW-u: beta - gamma >= 0 (004 eq. 3)"
+        );
+        assert!(Mbw002::new(
+            AbwAbs::new(1.0, 0.1, 0.4, 0.1, 1.0, 0.0).unwrap(),
+            f64::NAN,
+            0.0
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn zero_delta_reduces_to_cbw() {
+        let cbw = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).unwrap();
+        let a = AbwU::new(0.16, 0.07, 0.02, 0.01, 1.0, 0.0).unwrap();
+        let b = AbwAbs::new(0.16, 0.07, 0.02, 0.01, 1.0, 0.0).unwrap();
+        let (mut sc, mut sa, mut sb) = (cbw.init(0.0), a.init(0.0), b.init(0.0));
+        for k in 1..3000 {
+            let u = 100.0 * (k as f64 * 0.004).sin() * (-(k as f64) * 5e-4).exp();
+            let yc = cbw.step(&mut sc, u, 1e-3);
+            let ya = a.step(&mut sa, u, 1e-3);
+            let yb = b.step(&mut sb, u, 1e-3);
+            assert!((yc - ya).abs() < 1e-7, "{k}: {yc} {ya}");
+            assert!((yc - yb).abs() < 1e-12, "{k}: {yc} {yb}");
+        }
+    }
+
+    #[test]
+    fn abs_closed_form_equals_fine_rk4_and_is_bounded() {
+        let m = AbwAbs::from_002(1.0998, -0.0656, 0.3922, -0.15, 1.0, -0.011).unwrap();
+        let (mut h, mut h_ref, mut u) = (0.0, 0.0, 0.0);
+        for k in 1..3000 {
+            let un = 10.0 * (k as f64 * 0.01).sin();
+            let du = un - u;
+            h = m.advance_h(h, du);
+            h_ref = rk4_input(h_ref, u, du, 1e-4, |h, _| m.slope(h, du.signum()));
+            u = un;
+            assert!(h.abs() <= m.h_bound() * (1.0 + 1e-12));
+        }
+        assert!((h - h_ref).abs() < 1e-7, "{h} vs {h_ref}");
+    }
+
+    #[test]
+    fn u_delta_term_matches_time_domain_rk4() {
+        // Reference: fine RK4 in time of eq. (3) with the FOH input.
+        let m = AbwU::new(1.0, 0.3, 0.6, 0.16, 1.0, 0.04).unwrap();
+        let dt = 1e-2;
+        let (mut s, mut h_ref, mut u) = (m.init(0.0), 0.0, 0.0);
+        for k in 1..400 {
+            let un = 4.0 * (1.0 - (k as f64 * dt * 2.0 * std::f64::consts::PI).cos());
+            m.step(&mut s, un, dt);
+            let rate = (un - u) / dt;
+            let f = |h: f64, t: f64| {
+                let uu = u + rate * t;
+                rate * 0.3
+                    - 0.6 * rate.abs() * h
+                    - 0.16 * rate * h.abs()
+                    - 0.04 * uu * rate.signum()
+            };
+            let n = 2000;
+            let d = dt / n as f64;
+            for j in 0..n {
+                let t = j as f64 * d;
+                let k1 = f(h_ref, t);
+                let k2 = f(h_ref + 0.5 * d * k1, t + 0.5 * d);
+                let k3 = f(h_ref + 0.5 * d * k2, t + 0.5 * d);
+                let k4 = f(h_ref + d * k3, t + d);
+                h_ref += d / 6.0 * (k1 + 2.0 * (k2 + k3) + k4);
+            }
+            u = un;
+        }
+        assert!((s.h - h_ref).abs() < 1e-6, "{} vs {h_ref}", s.h);
+    }
+
+    #[test]
+    fn mbw_adds_the_rate_terms() {
+        let m =
+            Mbw002::from_002(1.0998, -0.0656, 0.3922, -0.15, 1.0, -0.011, 0.0108, 3.68e-5).unwrap();
+        let mut s = m.init(0.0);
+        let y = m.step(&mut s, 0.5, 0.1);
+        let want = 1.0998 * 0.5 - s.h + 0.0108 * 5.0 + 3.68e-5 * 125.0;
+        assert!((y - want).abs() < 1e-12);
+        // dt = 0 never yields a non-finite output.
+        assert!(m.step(&mut s, 0.7, 0.0).is_finite());
+        assert!(m.step(&mut s, f64::NAN, 1e-3).is_finite());
+    }
+}
