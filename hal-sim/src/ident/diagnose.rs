@@ -23,8 +23,8 @@ use serde::Serialize;
 use serde_json::{json, Value};
 
 pub use evidence::Evidence;
-pub use model::{Cause, Causes, OutputModel, Scales, Shape};
 use model::{creep_taus, fit_linear, rmse, Coords};
+pub use model::{Cause, Causes, OutputModel, Scales, Shape};
 
 /// Smallest relative gain on the validation record that counts as real.
 pub const MIN_GAIN: f64 = 0.03;
@@ -42,6 +42,10 @@ pub struct Signals {
     pub t: Vec<f64>,
     pub u: Vec<Vec<f64>>,
     pub y: Vec<Vec<f64>>,
+    /// Leading samples that only bring the model's state up to date and are not scored
+    /// (a validation record that continues the training record: the hysteresis state at
+    /// its start is known only from the input before it).
+    pub warmup: usize,
 }
 
 impl Signals {
@@ -74,7 +78,18 @@ impl Signals {
             t.windows(2).all(|w| w[1] > w[0]) && t.iter().all(|v| v.is_finite()),
             "time column must be finite and strictly increasing"
         );
-        Ok(Self { t, u, y })
+        Ok(Self { t, u, y, warmup: 0 })
+    }
+
+    /// The same record, scored only from sample `k` on.
+    pub fn with_warmup(mut self, k: usize) -> Self {
+        self.warmup = k.min(self.len().saturating_sub(50));
+        self
+    }
+
+    /// The scored samples.
+    pub fn scored(&self) -> Self {
+        self.slice(self.warmup, self.len())
     }
 
     pub fn len(&self) -> usize {
@@ -102,6 +117,7 @@ impl Signals {
             t: pick(&self.t),
             u: self.u.iter().map(pick).collect(),
             y: self.y.iter().map(pick).collect(),
+            warmup: 0,
         }
     }
 
@@ -114,21 +130,21 @@ impl Signals {
             t: cut(&self.t),
             u: self.u.iter().map(cut).collect(),
             y: self.y.iter().map(cut).collect(),
+            warmup: 0,
         }
     }
 }
 
-/* RECORD
 impl From<&crate::record::Record> for Signals {
     fn from(r: &crate::record::Record) -> Self {
         Self {
             t: r.t.clone(),
             u: r.u.clone(),
             y: r.y.clone(),
+            warmup: 0,
         }
     }
 }
-RECORD */
 
 /// Search effort.
 #[derive(Debug, Clone, Copy)]
@@ -189,19 +205,22 @@ pub struct Fitted {
 }
 
 impl Fitted {
-    /// Model outputs on `data`, one vector per output.
+    /// Model outputs on the scored samples of `data` (after its warm-up), one vector per
+    /// output.
     pub fn predict(&self, data: &Signals) -> Vec<Vec<f64>> {
         (0..self.outputs.len())
             .into_par_iter()
             .map(|i| {
-                model::predict(
+                let mut y = model::predict(
                     data,
                     i,
                     self.causes,
                     &self.outputs[i],
                     &self.scales[i],
                     &self.taus,
-                )
+                );
+                y.drain(..data.warmup.min(y.len()));
+                y
             })
             .collect()
     }
@@ -468,8 +487,7 @@ fn fit_output(
     for (x0, _) in &ranked {
         let (x, _) = search::nelder_mead(&mut |x| cost_on(coarse, x), x0, &steps, global, 1e-7);
         // A restart with fresh steps: a collapsed simplex is the usual Nelder-Mead failure.
-        let (x, c) =
-            search::nelder_mead(&mut |x| cost_on(coarse, x), &x, &steps, global / 3, 1e-7);
+        let (x, c) = search::nelder_mead(&mut |x| cost_on(coarse, x), &x, &steps, global / 3, 1e-7);
         if best.as_ref().is_none_or(|b| c < b.1) {
             best = Some((x, c));
         }
@@ -497,20 +515,12 @@ fn fit_base(tiers: &Tiers, opt: &Options) -> Fitted {
                 scales: scales[i],
             };
             let mut grid = Vec::new();
-            for a in [-1.0, 0.5, 2.0, 3.5, 5.0] {
+            for a in [0.0, 1.0, 2.0, 3.5, 5.0] {
                 for r in [-3.0, -1.0, 0.0, 1.0] {
                     grid.push(coords.shape(&[a, r]));
                 }
             }
-            fit_output(
-                tiers,
-                i,
-                Causes::default(),
-                &grid,
-                &scales[i],
-                &taus,
-                opt,
-            )
+            fit_output(tiers, i, Causes::default(), &grid, &scales[i], &taus, opt)
         })
         .collect();
     assemble(Causes::default(), outputs, scales, taus, full)
@@ -539,12 +549,7 @@ fn assemble(
 }
 
 /// Extends `current` by `cause` and refits every output from its current shape.
-fn extend(
-    current: &Fitted,
-    cause: Option<Cause>,
-    tiers: &Tiers,
-    opt: &Options,
-) -> Fitted {
+fn extend(current: &Fitted, cause: Option<Cause>, tiers: &Tiers, opt: &Options) -> Fitted {
     let causes = cause.map_or(current.causes, |c| current.causes.with(c));
     let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
         .into_par_iter()
@@ -620,21 +625,28 @@ fn check_pair(train: &Signals, valid: &Signals) -> anyhow::Result<()> {
 }
 
 /// Runs the discovery on a training and a validation record.
+///
+/// `valid` may start with warm-up samples (see [`Signals::warmup`]); only the rest is scored.
 pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Result<Diagnosis> {
     check_pair(train, valid)?;
+    let scored = valid.scored();
     let tiers = Tiers::new(train, opt);
     let mut base = fit_base(&tiers, opt);
     let base_pred = base.predict(valid);
-    let mut base_valid = rmse_all(&valid.y, &base_pred);
+    let mut base_valid = rmse_all(&scored.y, &base_pred);
     anyhow::ensure!(
         base_valid.is_finite(),
         "base model diverged on the validation record"
     );
     let noise_rms = {
-        let s: f64 = valid.y.iter().map(|y| evidence::noise_rms(y).powi(2)).sum();
-        (s / valid.y.len() as f64).sqrt()
+        let s: f64 = scored
+            .y
+            .iter()
+            .map(|y| evidence::noise_rms(y).powi(2))
+            .sum();
+        (s / scored.y.len() as f64).sqrt()
     };
-    let y_span = valid
+    let y_span = scored
         .y
         .iter()
         .map(|y| {
@@ -665,7 +677,7 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             .map(|&c| {
                 let f = extend(&current, c, &tiers, opt);
                 let pred = f.predict(valid);
-                let e = rmse_all(&valid.y, &pred);
+                let e = rmse_all(&scored.y, &pred);
                 (f, pred, e)
             })
             .collect();
@@ -682,7 +694,7 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             .into_iter()
             .zip(&todo)
             .map(|((f, p, e), &c)| {
-                let ev = evidence_for(valid, c, &current_pred);
+                let ev = evidence_for(&scored, c, &current_pred);
                 (f, p, e, ev)
             })
             .collect();
@@ -758,12 +770,20 @@ mod tests {
     #[test]
     fn clean_cbw_is_none_and_lag_is_dynamics() {
         let opt = Options::default();
-        let d = diagnose(&record(1, 4000, 1e-3, false), &record(2, 4000, 1e-3, false), &opt)
-            .unwrap();
+        let d = diagnose(
+            &record(1, 4000, 1e-3, false),
+            &record(2, 4000, 1e-3, false),
+            &opt,
+        )
+        .unwrap();
         assert!(d.base_valid < 1e-3, "{}", d.base_valid);
         assert_eq!(d.cause(), "none", "{:#}", d.json());
-        let d =
-            diagnose(&record(1, 4000, 1e-3, true), &record(2, 4000, 1e-3, true), &opt).unwrap();
+        let d = diagnose(
+            &record(1, 4000, 1e-3, true),
+            &record(2, 4000, 1e-3, true),
+            &opt,
+        )
+        .unwrap();
         assert_eq!(d.cause(), "dynamics", "{:#}", d.json());
         assert!(d.gain() > 0.5);
     }

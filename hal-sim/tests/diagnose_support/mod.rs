@@ -60,7 +60,11 @@ pub struct Plant {
 impl Plant {
     pub fn draw(seed: u64, effects: &[Cause]) -> Self {
         let mut r = Rng::new(seed.wrapping_mul(7919).wrapping_add(13));
-        let axes = if effects.contains(&Cause::CrossCoupling) { 2 } else { 1 };
+        let axes = if effects.contains(&Cause::CrossCoupling) {
+            2
+        } else {
+            1
+        };
         let d = r.uniform(0.12, 0.2);
         // u spans about 100 V: y about d*100 = 12..20 um.
         Self {
@@ -75,7 +79,7 @@ impl Plant {
             creep_gain: r.uniform(0.06, 0.15),
             creep_tau_s: r.uniform(0.08, 0.6),
             delay_s: r.uniform(2e-3, 8e-3),
-            rail_frac: r.uniform(0.72, 0.82),
+            rail_frac: r.uniform(0.64, 0.72),
             slew_frac: r.uniform(0.2, 0.4),
             coupling: r.uniform(0.05, 0.12) * r.uniform(-1.0, 1.0).signum(),
             drift_per_s: r.uniform(0.4, 0.8) * r.uniform(-1.0, 1.0).signum(),
@@ -93,7 +97,11 @@ impl Plant {
         let shape = Shape {
             beta: self.beta,
             gamma: self.gamma,
-            delay_s: if self.has(Cause::Delay) { self.delay_s } else { 0.0 },
+            delay_s: if self.has(Cause::Delay) {
+                self.delay_s
+            } else {
+                0.0
+            },
             rail_lo_v: f64::NEG_INFINITY,
             rail_hi_v: if self.has(Cause::Saturation) {
                 100.0 * self.rail_frac

@@ -46,7 +46,7 @@ pub fn explained(r: &[f64], sig: &[Vec<f64>]) -> f64 {
     }
     let mean = r.iter().sum::<f64>() / n as f64;
     let var: f64 = r.iter().map(|v| (v - mean) * (v - mean)).sum();
-    if !(var > 0.0) {
+    if var.is_nan() || var <= 0.0 {
         return 0.0;
     }
     let mut cols: Vec<Vec<f64>> = sig.to_vec();
@@ -106,7 +106,12 @@ fn rms_where(r: &[f64], mask: impl Fn(usize) -> bool) -> f64 {
 }
 
 /// The signal a person should plot the residual against for `cause` (x axis label, values).
-pub fn signal(data: &Signals, i: usize, cause: Option<Cause>, y_model: &[f64]) -> (String, Vec<f64>) {
+pub fn signal(
+    data: &Signals,
+    i: usize,
+    cause: Option<Cause>,
+    y_model: &[f64],
+) -> (String, Vec<f64>) {
     let a = own_input(i, data.u.len());
     let u = &data.u[a];
     let dt = data.dt();
@@ -117,7 +122,11 @@ pub fn signal(data: &Signals, i: usize, cause: Option<Cause>, y_model: &[f64]) -
         Some(Cause::Delay) => ("model output rate [um/s]".into(), derivative(y_model, dt)),
         Some(Cause::Creep) => (
             "input low-passed (500 ms) minus input [V]".into(),
-            lowpass(u, 0.5, dt).iter().zip(u).map(|(l, u)| l - u).collect(),
+            lowpass(u, 0.5, dt)
+                .iter()
+                .zip(u)
+                .map(|(l, u)| l - u)
+                .collect(),
         ),
         Some(Cause::Drift) => ("time [s]".into(), data.t.clone()),
         Some(Cause::CrossCoupling) => {
@@ -177,7 +186,13 @@ pub fn evidence(data: &Signals, i: usize, cause: Cause, r: &[f64], y_model: &[f6
         Cause::Creep => {
             let sig: Vec<Vec<f64>> = [0.05, 0.5, 2.5]
                 .iter()
-                .map(|&tau| lowpass(u, tau, dt).iter().zip(u).map(|(l, u)| l - u).collect())
+                .map(|&tau| {
+                    lowpass(u, tau, dt)
+                        .iter()
+                        .zip(u)
+                        .map(|(l, u)| l - u)
+                        .collect()
+                })
                 .collect();
             let r2 = explained(r, &sig);
             Evidence {
@@ -340,7 +355,9 @@ mod tests {
         let mut s = 1u64;
         let noise: Vec<f64> = (0..2000)
             .map(|_| {
-                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
             })
             .collect();
@@ -355,7 +372,9 @@ mod tests {
                 // sum of 12 uniforms: close to Gaussian with unit variance
                 let mut g = -6.0;
                 for _ in 0..12 {
-                    s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    s = s
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
                     g += (s >> 11) as f64 / (1u64 << 53) as f64;
                 }
                 10.0 * (k as f64 * 1e-3).sin() + 0.1 * g

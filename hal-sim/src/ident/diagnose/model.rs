@@ -193,9 +193,9 @@ impl Coords {
             excess += (v - c) * (v - c);
             c
         };
-        // Below e^-2.5 the loop never saturates within the input span: CBW degenerates into a
-        // quadratic in u that fits trends it should not.
-        let a = next(-2.5, 8.0).exp() / span;
+        // Below 1 the loop does not saturate within the input span: CBW degenerates into a
+        // quadratic in u whose unclosed minor loops ratchet from cycle to cycle.
+        let a = next(0.0, 8.0).exp() / span;
         let r = next(-12.0, 5.0).exp();
         let mut shape = Shape {
             beta: 0.5 * a * (1.0 + r),
@@ -244,7 +244,13 @@ impl Coords {
             x.push(shape.delay_s / s.dt);
         }
         if c.has(Cause::Saturation) {
-            let frac = |v: f64| if v.is_finite() { v.clamp(0.0, 0.45) } else { 0.0 };
+            let frac = |v: f64| {
+                if v.is_finite() {
+                    v.clamp(0.0, 0.45)
+                } else {
+                    0.0
+                }
+            };
             x.push(frac((shape.rail_lo_v - s.u_lo) / span));
             x.push(frac((s.u_hi - shape.rail_hi_v) / span));
         }
@@ -541,7 +547,7 @@ fn cholesky_solve(a: &[f64], b: &[f64], p: usize, ridge: f64) -> Option<Vec<f64>
                 s -= l[r * p + k] * l[c * p + k];
             }
             if r == c {
-                if !(s > 0.0) {
+                if s.is_nan() || s <= 0.0 {
                     return None;
                 }
                 l[r * p + r] = s.sqrt();
@@ -628,9 +634,16 @@ mod tests {
     fn least_squares_recovers_coefficients() {
         let x1: Vec<f64> = (0..500).map(|k| (k as f64 * 0.1).sin()).collect();
         let x2: Vec<f64> = (0..500).map(|k| k as f64 * 1e3).collect();
-        let y: Vec<f64> = x1.iter().zip(&x2).map(|(a, b)| 2.0 * a - 3e-4 * b).collect();
+        let y: Vec<f64> = x1
+            .iter()
+            .zip(&x2)
+            .map(|(a, b)| 2.0 * a - 3e-4 * b)
+            .collect();
         let c = least_squares(&[x1, x2], &y);
-        assert!((c[0] - 2.0).abs() < 1e-9 && (c[1] + 3e-4).abs() < 1e-12, "{c:?}");
+        assert!(
+            (c[0] - 2.0).abs() < 1e-9 && (c[1] + 3e-4).abs() < 1e-12,
+            "{c:?}"
+        );
     }
 
     #[test]

@@ -12,6 +12,7 @@ pub fn write(dir: &Path, d: &Diagnosis, valid: &Signals) -> anyhow::Result<Vec<P
         .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
     let base = d.base.predict(valid);
     let ext = d.extended.predict(valid);
+    let valid = &valid.scored();
     let first = d.findings.first().map(|f| f.cause);
     let label = d.extended.causes.label();
     let mut paths = Vec::new();
