@@ -14,7 +14,66 @@ use piezo_core::recorder::{self, Recorder, Signal};
 use piezo_core::signals::{LoopSignals, Setpoint};
 use piezo_core::Real;
 
-/// Recorder size: 4 channels x 1024 frames of f32 (16 KiB).
+/// The number type of the control path: `f32` with an FPU (thumbv7em-none-eabihf), the
+/// Q16.16 fixed point of [`piezo_core::fixed`] without one (thumbv7m-none-eabi, Cortex-M3).
+#[cfg(target_abi = "eabihf")]
+pub type R = f32;
+#[cfg(not(target_abi = "eabihf"))]
+pub type R = piezo_core::fixed::Q16;
+
+/// A constant of the control path (folded at compile time).
+#[inline(always)]
+pub fn c(x: f64) -> R {
+    R::from_f64(x)
+}
+
+/// What the control path needs beyond [`Real`]: converter codes and printing.
+pub trait Sample: Real + core::fmt::Display {
+    /// `code * um_per_code` without leaving the type's range (codes up to 2^16).
+    fn from_code(code: u32, per_code: Self) -> Self;
+    /// Rounded, saturated to `0..=max` (NaN and -inf give 0).
+    fn to_code(self, max: u16) -> u16;
+    /// A code as a signal value (Q16.16 saturates above 32767).
+    fn code_value(code: u32) -> Self;
+}
+
+impl Sample for f32 {
+    #[inline(always)]
+    fn from_code(code: u32, per_code: Self) -> Self {
+        code as f32 * per_code
+    }
+    #[inline(always)]
+    fn to_code(self, max: u16) -> u16 {
+        (self + 0.5).clamp_to(0.0, max as f32) as u16
+    }
+    #[inline(always)]
+    fn code_value(code: u32) -> Self {
+        code as f32
+    }
+}
+
+impl Sample for piezo_core::fixed::Q16 {
+    #[inline(always)]
+    fn from_code(code: u32, per_code: Self) -> Self {
+        // An integer times a Q16.16 value is already Q16.16.
+        let v = code as i64 * per_code.raw() as i64;
+        Self::from_raw(v.clamp(i32::MIN as i64 + 1, i32::MAX as i64 - 1) as i32)
+    }
+    #[inline(always)]
+    fn to_code(self, max: u16) -> u16 {
+        if !self.is_finite() {
+            return if self.raw() > 0 { max } else { 0 };
+        }
+        let v = (self.raw() as i64 + (1 << 15)) >> 16;
+        v.clamp(0, max as i64) as u16
+    }
+    #[inline(always)]
+    fn code_value(code: u32) -> Self {
+        Self::from_usize(code as usize)
+    }
+}
+
+/// Recorder size: 4 channels x 1024 frames of R (16 KiB).
 pub const REC_CH: usize = 4;
 pub const REC_N: usize = 1024;
 
@@ -22,28 +81,28 @@ pub const REC_N: usize = 1024;
 #[derive(Clone, Copy, Debug)]
 pub struct Io {
     /// Position per ADC code (um/LSB) and position at code 0 (um).
-    pub um_per_code: f32,
-    pub offset_um: f32,
+    pub um_per_code: R,
+    pub offset_um: R,
     /// DAC codes per volt of actuator command, and the largest code.
-    pub codes_per_volt: f32,
+    pub codes_per_volt: R,
     pub dac_max: u16,
     /// Actuator range (V) and slew limit (V per sample).
-    pub u_min: f32,
-    pub u_max: f32,
-    pub slew_per_sample: f32,
+    pub u_min: R,
+    pub u_max: R,
+    pub slew_per_sample: R,
 }
 
 impl Io {
-    /// 16-bit ADC over 0..100 um, 12-bit DAC over 0..150 V (amplifier gain 45 V/V at 3.3 V).
-    pub const fn on_chip() -> Self {
+    /// 16-bit ADC over 0..100 um, 12-bit DAC over 0..150 V (amplifier gain 45 V/V at c(3.3) V).
+    pub fn on_chip() -> Self {
         Self {
-            um_per_code: 100.0 / 65535.0,
-            offset_um: 0.0,
-            codes_per_volt: 4095.0 / 150.0,
+            um_per_code: c(100.0 / 65535.0),
+            offset_um: c(0.0),
+            codes_per_volt: c(4095.0 / 150.0),
             dac_max: 4095,
-            u_min: 0.0,
-            u_max: 150.0,
-            slew_per_sample: 1.0,
+            u_min: c(0.0),
+            u_max: c(150.0),
+            slew_per_sample: c(1.0),
         }
     }
 }
@@ -56,86 +115,85 @@ impl Io {
 #[derive(Clone, Copy, Debug)]
 pub struct Wave {
     pub shape: Option<Shape>,
-    pub amp_um: f32,
-    pub offset_um: f32,
+    pub amp_um: R,
+    pub offset_um: R,
     /// Phase in cycles, `[0, 1)`, and its increment per sample.
-    pub phase: f32,
-    pub dphase: f32,
+    pub phase: R,
+    pub dphase: R,
     /// Angular frequency (rad/s).
-    pub w: f32,
+    pub w: R,
     /// Phasor `(cos, sin)` of the phase and its rotation per sample.
-    pub cs: (f32, f32),
-    pub rot: (f32, f32),
+    pub cs: (R, R),
+    pub rot: (R, R),
 }
 
 impl Wave {
-    pub fn hold(y_um: f32) -> Self {
+    pub fn hold(y_um: R) -> Self {
         Self {
             shape: None,
-            amp_um: 0.0,
+            amp_um: c(0.0),
             offset_um: y_um,
-            phase: 0.0,
-            dphase: 0.0,
-            w: 0.0,
-            cs: (1.0, 0.0),
-            rot: (1.0, 0.0),
+            phase: c(0.0),
+            dphase: c(0.0),
+            w: c(0.0),
+            cs: (c(1.0), c(0.0)),
+            rot: (c(1.0), c(0.0)),
         }
     }
 
     /// A periodic waveform starting at phase 0 (init time: uses libm).
-    pub fn periodic(
-        shape: Shape,
-        amp_um: f32,
-        freq_hz: f32,
-        offset_um: f32,
-        sample_hz: f32,
-    ) -> Self {
+    pub fn periodic(shape: Shape, amp_um: R, freq_hz: R, offset_um: R, sample_hz: R) -> Self {
         let dphase = freq_hz / sample_hz;
-        let step = 2.0 * core::f32::consts::PI * dphase;
+        let step = c(2.0) * R::PI * dphase;
         Self {
             shape: Some(shape),
             amp_um,
             offset_um,
-            phase: 0.0,
+            phase: c(0.0),
             dphase,
-            w: 2.0 * core::f32::consts::PI * freq_hz,
-            cs: (1.0, 0.0),
-            rot: (libm::cosf(step), libm::sinf(step)),
+            w: c(2.0) * R::PI * freq_hz,
+            cs: (c(1.0), c(0.0)),
+            rot: (step.cos(), step.sin()),
         }
     }
 
     #[inline]
-    pub fn next(&mut self) -> Setpoint<f32> {
+    pub fn next(&mut self) -> Setpoint<R> {
         let Some(shape) = self.shape else {
             return Setpoint::hold(self.offset_um);
         };
         self.phase += self.dphase;
-        if self.phase >= 1.0 {
-            self.phase -= 1.0;
+        if self.phase >= c(1.0) {
+            self.phase -= c(1.0);
         }
         let (y, dy, ddy) = match shape {
             Shape::Sine => {
-                let (c, s) = self.cs;
+                let (c0, s0) = self.cs;
                 let (rc, rs) = self.rot;
-                let (c, s) = (c * rc - s * rs, s * rc + c * rs);
+                let (co, si) = (c0 * rc - s0 * rs, s0 * rc + c0 * rs);
                 // First-order renormalisation keeps |phasor| = 1 without a sqrt.
-                let k = 1.5 - 0.5 * (c * c + s * s);
-                self.cs = (c * k, s * k);
+                let k = c(1.5) - c(0.5) * (co * co + si * si);
+                let (co, si) = (co * k, si * k);
+                self.cs = (co, si);
                 let w = self.w;
-                (s * k, w * c * k, -w * w * s * k)
+                (si, w * co, -w * w * si)
             }
             Shape::Triangle => {
                 let p = self.phase;
-                let slope = 4.0 * self.w / (2.0 * core::f32::consts::PI);
-                if p < 0.25 {
-                    (4.0 * p, slope, 0.0)
-                } else if p < 0.75 {
-                    (2.0 - 4.0 * p, -slope, 0.0)
+                let slope = c(4.0) * self.w / (c(2.0) * R::PI);
+                if p < c(0.25) {
+                    (c(4.0) * p, slope, c(0.0))
+                } else if p < c(0.75) {
+                    (c(2.0) - c(4.0) * p, -slope, c(0.0))
                 } else {
-                    (4.0 * p - 4.0, slope, 0.0)
+                    (c(4.0) * p - c(4.0), slope, c(0.0))
                 }
             }
-            Shape::Square => (if self.phase < 0.5 { 1.0 } else { -1.0 }, 0.0, 0.0),
+            Shape::Square => (
+                if self.phase < c(0.5) { c(1.0) } else { -c(1.0) },
+                c(0.0),
+                c(0.0),
+            ),
         };
         Setpoint {
             y_um: self.offset_um + self.amp_um * y,
@@ -148,29 +206,29 @@ impl Wave {
 /// One axis: reference, feedforward, feedback, limits, converter scaling.
 pub struct Loop {
     pub io: Io,
-    pub sample_hz: f32,
+    pub sample_hz: R,
     pub wave: Wave,
-    pub ff: Feedforward<f32>,
-    pub fb: Feedback<f32>,
+    pub ff: Feedforward<R>,
+    pub fb: Feedback<R>,
     /// Last applied command (V).
-    pub u_applied: f32,
+    pub u_applied: R,
     /// This period's signals, indexed by [`Signal::index`] (recorder input).
-    pub signals: [f32; Signal::COUNT],
+    pub signals: [R; Signal::COUNT],
 }
 
 impl Loop {
-    pub fn new(io: Io, sample_hz: f32, fb: Feedback<f32>) -> Self {
+    pub fn new(io: Io, sample_hz: R, fb: Feedback<R>) -> Self {
         Self {
             io,
             sample_hz,
-            wave: Wave::hold(0.0),
+            wave: Wave::hold(c(0.0)),
             ff: Feedforward::Linear(LinearFf {
-                um_per_volt: 0.16,
-                offset_um: 0.0,
+                um_per_volt: c(0.16),
+                offset_um: c(0.0),
             }),
             fb,
-            u_applied: 0.0,
-            signals: [0.0; Signal::COUNT],
+            u_applied: c(0.0),
+            signals: [c(0.0); Signal::COUNT],
         }
     }
 
@@ -178,7 +236,7 @@ impl Loop {
     #[inline]
     pub fn step(&mut self, adc_code: u32) -> u16 {
         let io = self.io;
-        let y_um = adc_code as f32 * io.um_per_code + io.offset_um;
+        let y_um = R::from_code(adc_code, io.um_per_code) + io.offset_um;
         let setpoint = self.wave.next();
         let u_ff = self.ff.compensate(&setpoint);
         let u = self.fb.update(&LoopSignals {
@@ -198,14 +256,14 @@ impl Loop {
             setpoint.y_um - y_um,
             u_ff,
             u,
-            adc_code as f32,
-            code as f32,
+            R::code_value(adc_code),
+            R::code_value(code as u32),
         ];
         code
     }
 
     /// Bumpless switch of the feedback law: the new law starts from the applied voltage.
-    pub fn set_feedback(&mut self, mut fb: Feedback<f32>) {
+    pub fn set_feedback(&mut self, mut fb: Feedback<R>) {
         let io = LoopSignals {
             setpoint: Setpoint::hold(self.signals[Signal::RefUm.index()]),
             y_um: self.signals[Signal::YUm.index()],
@@ -219,8 +277,8 @@ impl Loop {
 
 /// Volts to a DAC code, saturating (NaN -> 0).
 #[inline(always)]
-pub fn dac_code(u: f32, codes_per_volt: f32, max: u16) -> u16 {
-    (u * codes_per_volt + 0.5).clamp_to(0.0, max as f32) as u16
+pub fn dac_code(u: R, codes_per_volt: R, max: u16) -> u16 {
+    (u * codes_per_volt).to_code(max)
 }
 
 /// Min/max/last of a cycle count, and how many samples there were.
@@ -274,15 +332,14 @@ impl Timing {
 /// Everything the control task owns: the loop, the recorder and the timing.
 pub struct Ctl {
     pub lp: Loop,
-    pub rec: Recorder<f32, REC_CH, REC_N>,
+    pub rec: Recorder<R, REC_CH, REC_N>,
     pub timing: Timing,
     /// Feedback laws selectable by `mode` (name, constructor).
-    pub laws: fn(&str, f32) -> Option<Feedback<f32>>,
+    pub laws: fn(&str, R) -> Option<Feedback<R>>,
 }
 
 /// Names of the feedback laws `mode` accepts (the bench iterates over them); they are the
 /// laws' own [`Feedback::name`]s.
-#[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
 pub const LAWS: [&str; 11] = [
     "open-loop",
     "pid",
@@ -299,23 +356,23 @@ pub const LAWS: [&str; 11] = [
 
 /// Stage the laws are tuned for: CBW set 1 of the 000 backup slide, first-order linear part
 /// with pole [`STAGE_POLE_PER_S`], range 0..150 V.
-pub const STAGE_POLE_PER_S: f32 = 2.0 * core::f32::consts::PI * 500.0;
+pub const STAGE_POLE_PER_S: f64 = 2.0 * core::f64::consts::PI * 500.0;
 
 /// The feedback laws of the core, by name, with gains for [`STAGE_POLE_PER_S`].
-pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
-    let dt_s = 1.0 / sample_hz;
+pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
+    let dt_s = c(1.0) / sample_hz;
     let (ff, base) = match name.strip_prefix("ff+") {
         Some(b) => (true, b),
         None => (false, name),
     };
-    let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).ok()?;
+    let model = Cbw::with_n1(c(0.16), c(0.07), c(0.02), c(0.01)).ok()?;
     let hgo = || {
         Hgo::new(
             ObserverModel::Cbw(model),
-            STAGE_POLE_PER_S,
-            2e-4,
-            hgo::K1 as f32,
-            hgo::K2 as f32,
+            c(STAGE_POLE_PER_S),
+            c(2e-4),
+            c(hgo::K1),
+            c(hgo::K2),
             dt_s,
         )
         .ok()
@@ -324,8 +381,8 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
         Robust::new(
             hgo()?,
             RobustConfig {
-                lambda1: 2_000.0,
-                lambda2: 2_000.0,
+                lambda1: c(2_000.0),
+                lambda2: c(2_000.0),
                 feedforward: ff,
                 convergence,
             },
@@ -336,11 +393,11 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
     match base {
         "open-loop" if !ff => Some(Feedback::OpenLoop),
         "pid" => Pid::new(PidConfig {
-            kp: 0.5,
-            ki: 2_000.0,
-            kd: 0.0,
-            tf_s: 1e-4,
-            kb: 1.0,
+            kp: c(0.5),
+            ki: c(2_000.0),
+            kd: c(0.0),
+            tf_s: c(1e-4),
+            kb: c(1.0),
             feedforward: ff,
             dt_s,
         })
@@ -348,14 +405,14 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
         .map(Feedback::Pid),
         "hgo-robust" => robust(Convergence::Exponential),
         "fts" => robust(Convergence::FiniteTime {
-            alpha1: 0.8,
-            alpha2: 0.8,
-            sat_um_per_s: 1e4,
+            alpha1: c(0.8),
+            alpha2: c(0.8),
+            sat_um_per_s: c(1e4),
         }),
         "adrc" => Adrc::new(AdrcConfig {
-            b: 0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S,
-            eps_s: 2e-4,
-            omega_c: 2_000.0,
+            b: c(0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S),
+            eps_s: c(2e-4),
+            omega_c: c(2_000.0),
             feedforward: ff,
             dt_s,
         })
@@ -365,10 +422,10 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
             hgo()?,
             NmpcConfig {
                 decimation: 10,
-                r: 1e-3,
+                r: c(1e-3),
                 iterations: 2,
-                u_min: 0.0,
-                u_max: 150.0,
+                u_min: c(0.0),
+                u_max: c(150.0),
                 feedforward: ff,
             },
         )
@@ -384,17 +441,17 @@ pub const FFS: [&str; 3] = ["linear", "ims-cbw", "ims-cbw-delayed"];
 
 /// The feedforward compensators, by name: linear scaling, or IMS around the CBW model of
 /// 000 backup slide set 1 (0..150 V).
-pub fn ff_by_name(name: &str, sample_hz: f32) -> Option<Feedforward<f32>> {
+pub fn ff_by_name(name: &str, sample_hz: R) -> Option<Feedforward<R>> {
     let ims = |closure| {
-        let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).ok()?;
-        Ims::new(model, closure, 0.0, 150.0, 1.0 / sample_hz)
+        let model = Cbw::with_n1(c(0.16), c(0.07), c(0.02), c(0.01)).ok()?;
+        Ims::new(model, closure, c(0.0), c(150.0), c(1.0) / sample_hz)
             .ok()
             .map(Feedforward::ImsCbw)
     };
     match name {
         "linear" => Some(Feedforward::Linear(LinearFf {
-            um_per_volt: 0.16,
-            offset_um: 0.0,
+            um_per_volt: c(0.16),
+            offset_um: c(0.0),
         })),
         "ims-cbw" => ims(ImsLoop::Solved),
         "ims-cbw-delayed" => ims(ImsLoop::Delayed),
@@ -403,7 +460,7 @@ pub fn ff_by_name(name: &str, sample_hz: f32) -> Option<Feedforward<f32>> {
 }
 
 impl Ctl {
-    pub fn new(io: Io, sample_hz: f32) -> Self {
+    pub fn new(io: Io, sample_hz: R) -> Self {
         Self {
             lp: Loop::new(io, sample_hz, Feedback::OpenLoop),
             rec: Recorder::new(),
@@ -447,11 +504,17 @@ impl Ctl {
                 write!(out, "ok {name} {v}").ok();
             }
             Command::Set(name, v) => {
-                set_param(lp, name, v)?;
+                set_param(lp, name, c(v as f64))?;
                 write!(out, "ok {name} {}", get_param(lp, name)?).ok();
             }
             Command::Mode(name) => {
-                let fb = (self.laws)(name, lp.sample_hz).ok_or(Error::UnknownMode)?;
+                // A known law whose configuration this number type cannot hold (ADRC's gain
+                // in Q16.16) is "unsupported", not "unknown".
+                let fb = (self.laws)(name, lp.sample_hz).ok_or(if LAWS.contains(&name) {
+                    Error::Unsupported
+                } else {
+                    Error::UnknownMode
+                })?;
                 lp.set_feedback(fb);
                 write!(out, "ok mode {}", lp.fb.name()).ok();
             }
@@ -466,7 +529,7 @@ impl Ctl {
                 write!(out, "ok wave off").ok();
             }
             Command::WaveHold(y) => {
-                lp.wave = Wave::hold(y);
+                lp.wave = Wave::hold(c(y as f64));
                 write!(out, "ok wave hold {y}").ok();
             }
             Command::Wave {
@@ -475,7 +538,9 @@ impl Ctl {
                 freq_hz,
                 offset_um,
             } => {
-                if !(freq_hz < 0.5 * lp.sample_hz) {
+                let (amp_um, freq_hz, offset_um) =
+                    (c(amp_um as f64), c(freq_hz as f64), c(offset_um as f64));
+                if !(freq_hz < c(0.5) * lp.sample_hz) {
                     return Err(Error::OutOfRange);
                 }
                 lp.wave = Wave::periodic(shape, amp_um, freq_hz, offset_um, lp.sample_hz);
@@ -544,17 +609,35 @@ impl Ctl {
                         channel,
                         level,
                         pre,
-                    } => (recorder::Trigger::Rising { channel, level }, pre),
+                    } => (
+                        recorder::Trigger::Rising {
+                            channel,
+                            level: c(level as f64),
+                        },
+                        pre,
+                    ),
                     TriggerCmd::Falling {
                         channel,
                         level,
                         pre,
-                    } => (recorder::Trigger::Falling { channel, level }, pre),
+                    } => (
+                        recorder::Trigger::Falling {
+                            channel,
+                            level: c(level as f64),
+                        },
+                        pre,
+                    ),
                     TriggerCmd::Level {
                         channel,
                         level,
                         pre,
-                    } => (recorder::Trigger::Level { channel, level }, pre),
+                    } => (
+                        recorder::Trigger::Level {
+                            channel,
+                            level: c(level as f64),
+                        },
+                        pre,
+                    ),
                 };
                 self.rec.set_trigger(trigger, pre).map_err(cfg)?;
                 write!(out, "ok").ok();
@@ -581,7 +664,7 @@ impl Ctl {
 pub fn stream_frames(
     start: usize,
     count: usize,
-    mut frame: impl FnMut(usize) -> Option<[f32; REC_CH]>,
+    mut frame: impl FnMut(usize) -> Option<[R; REC_CH]>,
     mut line: impl FnMut(&str),
 ) {
     let mut sent = 0;
@@ -617,7 +700,7 @@ pub const PARAMS: [&str; 7] = [
     "ff_um_per_volt",
 ];
 
-fn get_param(lp: &Loop, name: &str) -> Result<f32, Error> {
+fn get_param(lp: &Loop, name: &str) -> Result<R, Error> {
     let io = &lp.io;
     Ok(match name {
         "u_min" => io.u_min,
@@ -634,7 +717,7 @@ fn get_param(lp: &Loop, name: &str) -> Result<f32, Error> {
     })
 }
 
-fn set_param(lp: &mut Loop, name: &str, v: f32) -> Result<(), Error> {
+fn set_param(lp: &mut Loop, name: &str, v: R) -> Result<(), Error> {
     let io = &mut lp.io;
     let check = |ok: bool| if ok { Ok(()) } else { Err(Error::OutOfRange) };
     match name {
@@ -647,20 +730,20 @@ fn set_param(lp: &mut Loop, name: &str, v: f32) -> Result<(), Error> {
             io.u_max = v;
         }
         "slew" => {
-            check(v > 0.0)?;
+            check(v > c(0.0))?;
             io.slew_per_sample = v;
         }
         "um_per_code" => {
-            check(v != 0.0)?;
+            check(v != c(0.0))?;
             io.um_per_code = v;
         }
         "offset_um" => io.offset_um = v,
         "codes_per_volt" => {
-            check(v > 0.0)?;
+            check(v > c(0.0))?;
             io.codes_per_volt = v;
         }
         "ff_um_per_volt" => {
-            check(v > 0.0)?;
+            check(v > c(0.0))?;
             match &mut lp.ff {
                 Feedforward::Linear(l) => l.um_per_volt = v,
                 _ => return Err(Error::Busy),
