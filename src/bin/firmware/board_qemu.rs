@@ -13,12 +13,8 @@
 //! * After at least [`PERIODS_MIN`] periods and one answered command the app exits through
 //!   semihosting with status 0 (1 if no command arrived within [`PERIODS_MAX`] periods).
 
-/// Sample rate of the control loop (Hz of virtual time). Without an FPU (Cortex-M3, Q16.16
-/// fixed point) 65 536 Hz, so the sample period is exactly one Q16.16 unit.
-#[cfg(target_abi = "eabihf")]
-pub const SAMPLE_HZ: u32 = 100_000;
-#[cfg(not(target_abi = "eabihf"))]
-pub const SAMPLE_HZ: u32 = 65_536;
+/// Sample rate of the control loop (Hz of virtual time): 100 kHz in f32, 16 384 Hz in Q16.16.
+pub use crate::control::SAMPLE_HZ;
 /// SysTick clock of QEMU's mps2 machines (Hz).
 pub const SYSTICK_HZ: u32 = 25_000_000;
 /// Control periods to run before exiting.
@@ -136,11 +132,12 @@ impl SimStage {
 /// Instruction counts per control step, measured in `init`.
 pub mod bench {
     use super::{uart, SimStage, BENCH_STEPS, SAMPLE_HZ};
-    use crate::control::{c, Ctl, Io, Wave, FFS, LAWS};
+    use crate::control::{c, Ctl, FFS, LAWS};
     use core::fmt::Write;
     use core::hint::black_box;
     use cortex_m::peripheral::{syst::SystClkSource, SYST};
-    use piezo_core::command::{Reply, Shape};
+    use piezo_core::command::Reply;
+    use piezo_core::pipeline::Wave;
 
     pub const ROWS: usize = LAWS.len() * FFS.len();
 
@@ -179,16 +176,29 @@ pub mod bench {
         }
     }
 
+    /// A loop with `ff` and `law` (`open-loop` means the feedforward alone) on a 5 um,
+    /// 100 Hz sine around 10 um.
     fn configured(law: &str, ff: &str) -> Option<Ctl> {
-        let sample_hz = c(SAMPLE_HZ as f64);
-        let mut ctl = Ctl::new(Io::on_chip(), sample_hz);
-        let fb = (ctl.laws)(law, sample_hz)?;
-        ctl.lp.set_feedback(fb);
-        ctl.lp.ff = crate::control::ff_by_name(ff, sample_hz)?;
+        let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        ctl.lp.set_ff(ff).ok()?;
+        let law = if law == "open-loop" {
+            "feedforward"
+        } else {
+            law
+        };
+        ctl.lp.set_law(law, ctl.laws).ok()?;
         ctl.lp
-            .ff
-            .reset(&piezo_core::signals::Setpoint::hold(c(10.0)));
-        ctl.lp.wave = Wave::periodic(Shape::Sine, c(5.0), c(100.0), c(10.0), sample_hz);
+            .p
+            .set_wave(
+                0,
+                Wave::Sine {
+                    offset_um: c(10.0),
+                    amplitude_um: c(5.0),
+                    freq_hz: c(100.0),
+                    phase_turns: c(0.0),
+                },
+            )
+            .ok()?;
         Some(ctl)
     }
 
@@ -314,7 +324,7 @@ pub mod bench {
 #[rtic::app(device = crate::board_qemu::pac, peripherals = false)]
 mod app {
     use super::{bench, uart, SimStage, PERIODS_MAX, PERIODS_MIN, SAMPLE_HZ, SYSTICK_HZ};
-    use crate::control::{c, stream_frames, Ctl, Io};
+    use crate::control::{c, stream_frames, Ctl};
     use core::fmt::Write;
     use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
@@ -348,8 +358,11 @@ mod app {
         syst.enable_counter();
         defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
         uart::line("ready");
-        let mut ctl = Ctl::new(Io::on_chip(), c(SAMPLE_HZ as f64));
-        ctl.lp.wave = crate::control::Wave::hold(c(10.0));
+        let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        ctl.lp
+            .p
+            .set_wave(0, piezo_core::pipeline::Wave::Hold { y_um: c(10.0) })
+            .ok();
         (
             Shared { ctl, periods: 0 },
             Local {
@@ -372,7 +385,7 @@ mod app {
             let t1 = SYST::get_current();
             *dac = ctl.lp.step(code);
             let t2 = SYST::get_current();
-            ctl.rec.push(&ctl.lp.signals);
+            ctl.record(code, *dac);
             let overrun = SCB::is_pendst_pending();
             let t = &mut ctl.timing;
             t.step.record(elapsed(t1, t2));

@@ -8,10 +8,12 @@ use piezo_core::feedback::{
     hgo, Adrc, AdrcConfig, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
     PidConfig, Robust, RobustConfig,
 };
-use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf};
+use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf, MultiFeedforward};
 use piezo_core::hysteresis::Cbw;
+use piezo_core::pipeline::{
+    AxisConfig, Config, DacScale, Mode, OutputLimits, Pipeline, Sensor, Wave,
+};
 use piezo_core::recorder::{self, Recorder, Signal};
-use piezo_core::signals::{LoopSignals, Setpoint};
 use piezo_core::Real;
 
 /// The number type of the control path: `f32` with an FPU (thumbv7em-none-eabihf), the
@@ -27,25 +29,13 @@ pub fn c(x: f64) -> R {
     R::from_f64(x)
 }
 
-/// What the control path needs beyond [`Real`]: converter codes and printing.
+/// What the control path needs beyond [`Real`]: code values and printing.
 pub trait Sample: Real + core::fmt::Display {
-    /// `code * um_per_code` without leaving the type's range (codes up to 2^16).
-    fn from_code(code: u32, per_code: Self) -> Self;
-    /// Rounded, saturated to `0..=max` (NaN and -inf give 0).
-    fn to_code(self, max: u16) -> u16;
-    /// A code as a signal value (Q16.16 saturates above 32767).
+    /// A converter code as a signal value (Q16.16 saturates above 32767).
     fn code_value(code: u32) -> Self;
 }
 
 impl Sample for f32 {
-    #[inline(always)]
-    fn from_code(code: u32, per_code: Self) -> Self {
-        code as f32 * per_code
-    }
-    #[inline(always)]
-    fn to_code(self, max: u16) -> u16 {
-        (self + 0.5).clamp_to(0.0, max as f32) as u16
-    }
     #[inline(always)]
     fn code_value(code: u32) -> Self {
         code as f32
@@ -53,20 +43,6 @@ impl Sample for f32 {
 }
 
 impl Sample for piezo_core::fixed::Q16 {
-    #[inline(always)]
-    fn from_code(code: u32, per_code: Self) -> Self {
-        // An integer times a Q16.16 value is already Q16.16.
-        let v = code as i64 * per_code.raw() as i64;
-        Self::from_raw(v.clamp(i32::MIN as i64 + 1, i32::MAX as i64 - 1) as i32)
-    }
-    #[inline(always)]
-    fn to_code(self, max: u16) -> u16 {
-        if !self.is_finite() {
-            return if self.raw() > 0 { max } else { 0 };
-        }
-        let v = (self.raw() as i64 + (1 << 15)) >> 16;
-        v.clamp(0, max as i64) as u16
-    }
     #[inline(always)]
     fn code_value(code: u32) -> Self {
         Self::from_usize(code as usize)
@@ -77,208 +53,170 @@ impl Sample for piezo_core::fixed::Q16 {
 pub const REC_CH: usize = 4;
 pub const REC_N: usize = 1024;
 
-/// Converter scaling and output limits of one axis.
-#[derive(Clone, Copy, Debug)]
-pub struct Io {
-    /// Position per ADC code (um/LSB) and position at code 0 (um).
-    pub um_per_code: R,
-    pub offset_um: R,
-    /// DAC codes per volt of actuator command, and the largest code.
-    pub codes_per_volt: R,
-    pub dac_max: u16,
-    /// Actuator range (V) and slew limit (V per sample).
-    pub u_min: R,
-    pub u_max: R,
-    pub slew_per_sample: R,
-}
+/// Sample rate of the control loop (Hz). Q16.16 holds values below 32768 only, so the
+/// fixed-point build runs at 16 384 Hz (sample period exactly 4 units of 2^-16 s).
+#[cfg(target_abi = "eabihf")]
+pub const SAMPLE_HZ: u32 = 100_000;
+#[cfg(not(target_abi = "eabihf"))]
+pub const SAMPLE_HZ: u32 = 16_384;
 
-impl Io {
-    /// 16-bit ADC over 0..100 um, 12-bit DAC over 0..150 V (amplifier gain 45 V/V at c(3.3) V).
-    pub fn on_chip() -> Self {
-        Self {
-            um_per_code: c(100.0 / 65535.0),
-            offset_um: c(0.0),
-            codes_per_volt: c(4095.0 / 150.0),
-            dac_max: 4095,
-            u_min: c(0.0),
-            u_max: c(150.0),
-            slew_per_sample: c(1.0),
-        }
+/// ADC codes are shifted right by this before scaling: Q16.16 cannot represent 16-bit codes
+/// (the fixed-point build keeps 15 bits, 3 nm over 100 um).
+#[cfg(target_abi = "eabihf")]
+const ADC_SHIFT: u32 = 0;
+#[cfg(not(target_abi = "eabihf"))]
+const ADC_SHIFT: u32 = 1;
+
+/// Largest DAC code (12-bit on-chip DAC).
+pub const DAC_MAX: i32 = 4095;
+
+/// The on-chip converters: 16-bit ADC over 0..100 um, 12-bit DAC over 0..150 V
+/// (amplifier gain 45 V/V at 3.3 V), slew limit 20 V/ms, safe state 0 V.
+pub fn on_chip_config(sample_hz: R) -> Config<R, 1> {
+    let codes = (65_535 >> ADC_SHIFT) as f64;
+    Config {
+        sample_hz,
+        axes: [AxisConfig {
+            sensor: Sensor {
+                um_per_code: c(100.0 / codes),
+                offset_um: c(0.0),
+                code_min: 0,
+                code_max: codes as i32,
+            },
+            open_loop: LinearFf {
+                um_per_volt: c(0.16),
+                offset_um: c(0.0),
+            },
+            limits: OutputLimits {
+                volts_min: c(0.0),
+                volts_max: c(150.0),
+                slew_volts_per_s: c(20_000.0),
+            },
+            dac: DacScale {
+                volts_per_code: c(150.0 / DAC_MAX as f64),
+                volts_at_zero: c(0.0),
+                code_min: 0,
+                code_max: DAC_MAX,
+            },
+            safe_volts: c(0.0),
+        }],
     }
 }
 
-/// Reference generator (stand-in until the core pipeline's generator is wired).
-///
-/// The sine is a rotating phasor (one complex multiply per sample, renormalised): `sinf` and
-/// `cosf` of libm compute in f64, which the single-precision FPU of the M4F/M7 emulates in
-/// software (thousands of instructions per sample).
-#[derive(Clone, Copy, Debug)]
-pub struct Wave {
-    pub shape: Option<Shape>,
-    pub amp_um: R,
-    pub offset_um: R,
-    /// Phase in cycles, `[0, 1)`, and its increment per sample.
-    pub phase: R,
-    pub dphase: R,
-    /// Angular frequency (rad/s).
-    pub w: R,
-    /// Phasor `(cos, sin)` of the phase and its rotation per sample.
-    pub cs: (R, R),
-    pub rot: (R, R),
-}
-
-impl Wave {
-    pub fn hold(y_um: R) -> Self {
-        Self {
-            shape: None,
-            amp_um: c(0.0),
-            offset_um: y_um,
-            phase: c(0.0),
-            dphase: c(0.0),
-            w: c(0.0),
-            cs: (c(1.0), c(0.0)),
-            rot: (c(1.0), c(0.0)),
-        }
-    }
-
-    /// A periodic waveform starting at phase 0 (init time: uses libm).
-    pub fn periodic(shape: Shape, amp_um: R, freq_hz: R, offset_um: R, sample_hz: R) -> Self {
-        let dphase = freq_hz / sample_hz;
-        let step = c(2.0) * R::PI * dphase;
-        Self {
-            shape: Some(shape),
-            amp_um,
-            offset_um,
-            phase: c(0.0),
-            dphase,
-            w: c(2.0) * R::PI * freq_hz,
-            cs: (c(1.0), c(0.0)),
-            rot: (step.cos(), step.sin()),
-        }
-    }
-
-    #[inline]
-    pub fn next(&mut self) -> Setpoint<R> {
-        let Some(shape) = self.shape else {
-            return Setpoint::hold(self.offset_um);
-        };
-        self.phase += self.dphase;
-        if self.phase >= c(1.0) {
-            self.phase -= c(1.0);
-        }
-        let (y, dy, ddy) = match shape {
-            Shape::Sine => {
-                let (c0, s0) = self.cs;
-                let (rc, rs) = self.rot;
-                let (co, si) = (c0 * rc - s0 * rs, s0 * rc + c0 * rs);
-                // First-order renormalisation keeps |phasor| = 1 without a sqrt.
-                let k = c(1.5) - c(0.5) * (co * co + si * si);
-                let (co, si) = (co * k, si * k);
-                self.cs = (co, si);
-                let w = self.w;
-                (si, w * co, -w * w * si)
-            }
-            Shape::Triangle => {
-                let p = self.phase;
-                let slope = c(4.0) * self.w / (c(2.0) * R::PI);
-                if p < c(0.25) {
-                    (c(4.0) * p, slope, c(0.0))
-                } else if p < c(0.75) {
-                    (c(2.0) - c(4.0) * p, -slope, c(0.0))
-                } else {
-                    (c(4.0) * p - c(4.0), slope, c(0.0))
-                }
-            }
-            Shape::Square => (
-                if self.phase < c(0.5) { c(1.0) } else { -c(1.0) },
-                c(0.0),
-                c(0.0),
-            ),
-        };
-        Setpoint {
-            y_um: self.offset_um + self.amp_um * y,
-            dy: self.amp_um * dy,
-            ddy: self.amp_um * ddy,
-        }
-    }
-}
-
-/// One axis: reference, feedforward, feedback, limits, converter scaling.
+/// One axis: the core pipeline (sensor scaling, reference, feedforward, feedback, limits,
+/// DAC code) plus the names of what is selected.
 pub struct Loop {
-    pub io: Io,
+    pub p: Pipeline<R, 1>,
     pub sample_hz: R,
-    pub wave: Wave,
-    pub ff: Feedforward<R>,
-    pub fb: Feedback<R>,
-    /// Last applied command (V).
-    pub u_applied: R,
-    /// This period's signals, indexed by [`Signal::index`] (recorder input).
-    pub signals: [R; Signal::COUNT],
+    /// Selected law (`open-loop`, `feedforward` or a law of [`LAWS`]) and feedforward.
+    pub law: &'static str,
+    pub ff: &'static str,
 }
 
 impl Loop {
-    pub fn new(io: Io, sample_hz: R, fb: Feedback<R>) -> Self {
+    /// Open loop, holding 0 um, in the safe state's voltage.
+    pub fn new(sample_hz: R) -> Self {
+        let ff = MultiFeedforward::PerAxis([Feedforward::Linear(LinearFf {
+            um_per_volt: c(0.16),
+            offset_um: c(0.0),
+        })]);
+        let p = Pipeline::new(
+            on_chip_config(sample_hz),
+            [Wave::Hold { y_um: c(0.0) }],
+            ff,
+            [Feedback::OpenLoop],
+        )
+        .expect("the on-chip configuration is valid");
         Self {
-            io,
+            p,
             sample_hz,
-            wave: Wave::hold(c(0.0)),
-            ff: Feedforward::Linear(LinearFf {
-                um_per_volt: c(0.16),
-                offset_um: c(0.0),
-            }),
-            fb,
-            u_applied: c(0.0),
-            signals: [c(0.0); Signal::COUNT],
+            law: "open-loop",
+            ff: "linear",
         }
     }
 
     /// One control period: ADC code in, DAC code out. No panic, bounded, NaN-safe.
-    #[inline]
+    #[inline(always)]
     pub fn step(&mut self, adc_code: u32) -> u16 {
-        let io = self.io;
-        let y_um = R::from_code(adc_code, io.um_per_code) + io.offset_um;
-        let setpoint = self.wave.next();
-        let u_ff = self.ff.compensate(&setpoint);
-        let u = self.fb.update(&LoopSignals {
-            setpoint,
-            y_um,
-            u_ff,
-            u_applied: self.u_applied,
-        });
-        let lo = (self.u_applied - io.slew_per_sample).max(io.u_min);
-        let hi = (self.u_applied + io.slew_per_sample).min(io.u_max);
-        let u = u.clamp_to(lo, hi);
-        self.u_applied = u;
-        let code = dac_code(u, io.codes_per_volt, io.dac_max);
-        self.signals = [
-            setpoint.y_um,
-            y_um,
-            setpoint.y_um - y_um,
-            u_ff,
-            u,
+        let [code] = self.p.step([(adc_code >> ADC_SHIFT) as i32]);
+        code.clamp(0, DAC_MAX) as u16
+    }
+
+    /// This period's signals, indexed by [`Signal::index`] (recorder input).
+    #[inline(always)]
+    pub fn signals(&self, adc_code: u32, dac_code: u16) -> [R; Signal::COUNT] {
+        let st = self.p.state();
+        let (r, y) = (st.trace.setpoint[0].y_um, st.trace.y_um[0]);
+        [
+            r,
+            y,
+            r - y,
+            st.trace.u_ff[0],
+            st.u_applied[0],
             R::code_value(adc_code),
-            R::code_value(code as u32),
-        ];
-        code
+            R::code_value(dac_code as u32),
+        ]
     }
 
-    /// Bumpless switch of the feedback law: the new law starts from the applied voltage.
-    pub fn set_feedback(&mut self, mut fb: Feedback<R>) {
-        let io = LoopSignals {
-            setpoint: Setpoint::hold(self.signals[Signal::RefUm.index()]),
-            y_um: self.signals[Signal::YUm.index()],
-            u_ff: self.signals[Signal::FfVolts.index()],
-            u_applied: self.u_applied,
-        };
-        fb.reset(&io);
-        self.fb = fb;
+    /// Selects `open-loop`, `feedforward` or a feedback law (bumpless).
+    pub fn set_law(
+        &mut self,
+        name: &str,
+        laws: fn(&str, R) -> Option<Feedback<R>>,
+    ) -> Result<(), Error> {
+        match name {
+            "open-loop" => self.p.set_mode(Mode::OpenLoop),
+            "feedforward" => self.p.set_mode(Mode::Feedforward),
+            _ => {
+                // A known law whose configuration this number type cannot hold (ADRC's
+                // gain in Q16.16) is "unsupported", not "unknown".
+                let fb = laws(name, self.sample_hz).ok_or(if LAWS.contains(&name) {
+                    Error::Unsupported
+                } else {
+                    Error::UnknownMode
+                })?;
+                self.p.set_feedback(0, fb).map_err(|_| Error::OutOfRange)?;
+                self.p.set_mode(Mode::ClosedLoop);
+            }
+        }
+        self.law = LAWS
+            .iter()
+            .chain(["feedforward"].iter())
+            .find(|l| **l == name)
+            .copied()
+            .unwrap_or("?");
+        Ok(())
     }
-}
 
-/// Volts to a DAC code, saturating (NaN -> 0).
-#[inline(always)]
-pub fn dac_code(u: R, codes_per_volt: R, max: u16) -> u16 {
-    (u * codes_per_volt).to_code(max)
+    /// Selects the feedforward compensator (restarts at the current setpoint).
+    pub fn set_ff(&mut self, name: &str) -> Result<(), Error> {
+        let ff = ff_by_name(name, self.sample_hz).ok_or(Error::UnknownMode)?;
+        self.p.set_feedforward(MultiFeedforward::PerAxis([ff]));
+        self.ff = FFS.iter().find(|f| **f == name).copied().unwrap_or("?");
+        Ok(())
+    }
+
+    /// Rebuilds the pipeline with new limits, starting from the applied voltage (so the
+    /// output does not jump) in the same mode, law and compensator.
+    fn set_limits(&mut self, f: impl FnOnce(&mut OutputLimits<R>)) -> Result<(), Error> {
+        let mut cfg = *self.p.config();
+        let axis = &mut cfg.axes[0];
+        f(&mut axis.limits);
+        let u = self.p.state().u_applied[0];
+        axis.safe_volts = u.clamp_to(axis.limits.volts_min, axis.limits.volts_max);
+        let wave = *self.p.reference(0).ok_or(Error::OutOfRange)?.wave();
+        let mode = self.p.state().mode;
+        let p = Pipeline::new(
+            cfg,
+            [wave],
+            self.p.feedforward().clone(),
+            self.p.feedback().clone(),
+        )
+        .map_err(|_| Error::OutOfRange)?;
+        self.p = p;
+        self.p.set_mode(mode);
+        Ok(())
+    }
 }
 
 /// Min/max/last of a cycle count, and how many samples there were.
@@ -460,12 +398,24 @@ pub fn ff_by_name(name: &str, sample_hz: R) -> Option<Feedforward<R>> {
 }
 
 impl Ctl {
-    pub fn new(io: Io, sample_hz: R) -> Self {
+    pub fn new(sample_hz: R) -> Self {
         Self {
-            lp: Loop::new(io, sample_hz, Feedback::OpenLoop),
+            lp: Loop::new(sample_hz),
             rec: Recorder::new(),
             timing: Timing::new(),
             laws: law_by_name,
+        }
+    }
+
+    /// Feeds the recorder (only while it captures: the signals cost a few instructions).
+    #[inline(always)]
+    pub fn record(&mut self, adc_code: u32, dac_code: u16) {
+        if matches!(
+            self.rec.state(),
+            recorder::State::Armed | recorder::State::Triggered
+        ) {
+            let s = self.lp.signals(adc_code, dac_code);
+            self.rec.push(&s);
         }
     }
 
@@ -508,28 +458,22 @@ impl Ctl {
                 write!(out, "ok {name} {}", get_param(lp, name)?).ok();
             }
             Command::Mode(name) => {
-                // A known law whose configuration this number type cannot hold (ADRC's gain
-                // in Q16.16) is "unsupported", not "unknown".
-                let fb = (self.laws)(name, lp.sample_hz).ok_or(if LAWS.contains(&name) {
-                    Error::Unsupported
-                } else {
-                    Error::UnknownMode
-                })?;
-                lp.set_feedback(fb);
-                write!(out, "ok mode {}", lp.fb.name()).ok();
+                lp.set_law(name, self.laws)?;
+                write!(out, "ok mode {}", lp.law).ok();
             }
             Command::Feedforward(name) => {
-                lp.ff = ff_by_name(name, lp.sample_hz).ok_or(Error::UnknownMode)?;
-                lp.ff
-                    .reset(&Setpoint::hold(lp.signals[Signal::RefUm.index()]));
-                write!(out, "ok ff {}", lp.ff.name()).ok();
+                lp.set_ff(name)?;
+                write!(out, "ok ff {}", lp.ff).ok();
             }
             Command::WaveOff => {
-                lp.wave = Wave::hold(lp.signals[Signal::RefUm.index()]);
+                let y_um = lp.p.state().trace.setpoint[0].y_um;
+                lp.p.set_wave(0, Wave::Hold { y_um })
+                    .map_err(|_| Error::OutOfRange)?;
                 write!(out, "ok wave off").ok();
             }
             Command::WaveHold(y) => {
-                lp.wave = Wave::hold(c(y as f64));
+                lp.p.set_wave(0, Wave::Hold { y_um: c(y as f64) })
+                    .map_err(|_| Error::OutOfRange)?;
                 write!(out, "ok wave hold {y}").ok();
             }
             Command::Wave {
@@ -538,18 +482,29 @@ impl Ctl {
                 freq_hz,
                 offset_um,
             } => {
-                let (amp_um, freq_hz, offset_um) =
-                    (c(amp_um as f64), c(freq_hz as f64), c(offset_um as f64));
-                if !(freq_hz < c(0.5) * lp.sample_hz) {
-                    return Err(Error::OutOfRange);
-                }
-                lp.wave = Wave::periodic(shape, amp_um, freq_hz, offset_um, lp.sample_hz);
-                write!(
-                    out,
-                    "ok wave {} {amp_um} {freq_hz} {offset_um}",
-                    shape.name()
-                )
-                .ok();
+                let (a, f, o) = (c(amp_um as f64), c(freq_hz as f64), c(offset_um as f64));
+                let wave = match shape {
+                    Shape::Sine => Wave::Sine {
+                        offset_um: o,
+                        amplitude_um: a,
+                        freq_hz: f,
+                        phase_turns: c(0.0),
+                    },
+                    Shape::Triangle => Wave::Triangle {
+                        offset_um: o,
+                        amplitude_um: a,
+                        freq_hz: f,
+                        phase_turns: c(0.0),
+                    },
+                    Shape::Square => Wave::Steps {
+                        low_um: o - a,
+                        high_um: o + a,
+                        levels: 2,
+                        freq_hz: f,
+                    },
+                };
+                lp.p.set_wave(0, wave).map_err(|_| Error::OutOfRange)?;
+                write!(out, "ok wave {} {a} {f} {o}", shape.name()).ok();
             }
             Command::Stats => {
                 let t = &self.timing;
@@ -689,67 +644,50 @@ pub fn stream_frames(
     line(r.as_str());
 }
 
-/// Parameter names of `get`/`set`.
-pub const PARAMS: [&str; 7] = [
+/// Parameter names of `get`/`set` (`sample_hz` and the scalings are read-only).
+pub const PARAMS: [&str; 6] = [
     "u_min",
     "u_max",
     "slew",
     "um_per_code",
-    "offset_um",
-    "codes_per_volt",
-    "ff_um_per_volt",
+    "volts_per_code",
+    "sample_hz",
 ];
 
 fn get_param(lp: &Loop, name: &str) -> Result<R, Error> {
-    let io = &lp.io;
+    let cfg = lp.p.config();
+    let a = &cfg.axes[0];
     Ok(match name {
-        "u_min" => io.u_min,
-        "u_max" => io.u_max,
-        "slew" => io.slew_per_sample,
-        "um_per_code" => io.um_per_code,
-        "offset_um" => io.offset_um,
-        "codes_per_volt" => io.codes_per_volt,
-        "ff_um_per_volt" => match &lp.ff {
-            Feedforward::Linear(l) => l.um_per_volt,
-            _ => return Err(Error::Busy),
-        },
+        "u_min" => a.limits.volts_min,
+        "u_max" => a.limits.volts_max,
+        "slew" => a.limits.slew_volts_per_s,
+        "um_per_code" => a.sensor.um_per_code,
+        "volts_per_code" => a.dac.volts_per_code,
+        "sample_hz" => cfg.sample_hz,
         _ => return Err(Error::UnknownParam),
     })
 }
 
 fn set_param(lp: &mut Loop, name: &str, v: R) -> Result<(), Error> {
-    let io = &mut lp.io;
+    let (lo, hi) = {
+        let l = &lp.p.config().axes[0].limits;
+        (l.volts_min, l.volts_max)
+    };
     let check = |ok: bool| if ok { Ok(()) } else { Err(Error::OutOfRange) };
     match name {
         "u_min" => {
-            check(v < io.u_max)?;
-            io.u_min = v;
+            check(v >= c(0.0) && v < hi)?;
+            lp.set_limits(|l| l.volts_min = v)
         }
         "u_max" => {
-            check(v > io.u_min)?;
-            io.u_max = v;
+            check(v > lo && v <= c(150.0))?;
+            lp.set_limits(|l| l.volts_max = v)
         }
         "slew" => {
             check(v > c(0.0))?;
-            io.slew_per_sample = v;
+            lp.set_limits(|l| l.slew_volts_per_s = v)
         }
-        "um_per_code" => {
-            check(v != c(0.0))?;
-            io.um_per_code = v;
-        }
-        "offset_um" => io.offset_um = v,
-        "codes_per_volt" => {
-            check(v > c(0.0))?;
-            io.codes_per_volt = v;
-        }
-        "ff_um_per_volt" => {
-            check(v > c(0.0))?;
-            match &mut lp.ff {
-                Feedforward::Linear(l) => l.um_per_volt = v,
-                _ => return Err(Error::Busy),
-            }
-        }
-        _ => return Err(Error::UnknownParam),
+        "um_per_code" | "volts_per_code" | "sample_hz" => Err(Error::Busy),
+        _ => Err(Error::UnknownParam),
     }
-    Ok(())
 }
