@@ -98,10 +98,10 @@ pub struct SimStage {
 }
 
 impl SimStage {
-    /// 000 backup slide parameter set 1, 2 kHz lag.
+    /// 000 backup slide parameter set 1, lag pole [`crate::control::STAGE_POLE_PER_S`].
     pub fn new(io: Io, sample_hz: f32) -> Self {
         let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).expect("CBW parameter set 1 is valid");
-        let lag = 1.0 - libm::expf(-2.0 * core::f32::consts::PI * 2_000.0 / sample_hz);
+        let lag = 1.0 - libm::expf(-crate::control::STAGE_POLE_PER_S / sample_hz);
         Self {
             model,
             state: model.init(0.0),
@@ -180,14 +180,7 @@ pub mod bench {
         ctl.lp.ff = crate::control::ff_by_name(ff, sample_hz)?;
         ctl.lp.ff.reset(&piezo_core::signals::Setpoint::hold(10.0));
         let _: &Feedforward<f32> = &ctl.lp.ff;
-        ctl.lp.wave = Wave {
-            shape: Some(Shape::Sine),
-            amp_um: 5.0,
-            offset_um: 10.0,
-            phase: 0.0,
-            dphase: 100.0 / sample_hz,
-            sample_hz,
-        };
+        ctl.lp.wave = Wave::periodic(Shape::Sine, 5.0, 100.0, 10.0, sample_hz);
         Some(ctl)
     }
 
@@ -342,7 +335,7 @@ mod app {
         defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
         uart::line("ready");
         let mut ctl = Ctl::new(Io::on_chip(), SAMPLE_HZ as f32);
-        ctl.lp.wave = crate::control::Wave::hold(10.0, SAMPLE_HZ as f32);
+        ctl.lp.wave = crate::control::Wave::hold(10.0);
         (
             Shared { ctl, periods: 0 },
             Local {

@@ -4,7 +4,10 @@
 
 use core::fmt::Write;
 use piezo_core::command::{self, Command, Error, RecCmd, Shape, TriggerCmd};
-use piezo_core::feedback::Feedback;
+use piezo_core::feedback::{
+    hgo, Adrc, AdrcConfig, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
+    PidConfig, Robust, RobustConfig,
+};
 use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf};
 use piezo_core::hysteresis::Cbw;
 use piezo_core::recorder::{self, Recorder, Signal};
@@ -46,6 +49,10 @@ impl Io {
 }
 
 /// Reference generator (stand-in until the core pipeline's generator is wired).
+///
+/// The sine is a rotating phasor (one complex multiply per sample, renormalised): `sinf` and
+/// `cosf` of libm compute in f64, which the single-precision FPU of the M4F/M7 emulates in
+/// software (thousands of instructions per sample).
 #[derive(Clone, Copy, Debug)]
 pub struct Wave {
     pub shape: Option<Shape>,
@@ -54,18 +61,46 @@ pub struct Wave {
     /// Phase in cycles, `[0, 1)`, and its increment per sample.
     pub phase: f32,
     pub dphase: f32,
-    pub sample_hz: f32,
+    /// Angular frequency (rad/s).
+    pub w: f32,
+    /// Phasor `(cos, sin)` of the phase and its rotation per sample.
+    pub cs: (f32, f32),
+    pub rot: (f32, f32),
 }
 
 impl Wave {
-    pub fn hold(y_um: f32, sample_hz: f32) -> Self {
+    pub fn hold(y_um: f32) -> Self {
         Self {
             shape: None,
             amp_um: 0.0,
             offset_um: y_um,
             phase: 0.0,
             dphase: 0.0,
-            sample_hz,
+            w: 0.0,
+            cs: (1.0, 0.0),
+            rot: (1.0, 0.0),
+        }
+    }
+
+    /// A periodic waveform starting at phase 0 (init time: uses libm).
+    pub fn periodic(
+        shape: Shape,
+        amp_um: f32,
+        freq_hz: f32,
+        offset_um: f32,
+        sample_hz: f32,
+    ) -> Self {
+        let dphase = freq_hz / sample_hz;
+        let step = 2.0 * core::f32::consts::PI * dphase;
+        Self {
+            shape: Some(shape),
+            amp_um,
+            offset_um,
+            phase: 0.0,
+            dphase,
+            w: 2.0 * core::f32::consts::PI * freq_hz,
+            cs: (1.0, 0.0),
+            rot: (libm::cosf(step), libm::sinf(step)),
         }
     }
 
@@ -78,16 +113,20 @@ impl Wave {
         if self.phase >= 1.0 {
             self.phase -= 1.0;
         }
-        let w = 2.0 * f32::PI * self.dphase * self.sample_hz;
         let (y, dy, ddy) = match shape {
             Shape::Sine => {
-                let x = 2.0 * f32::PI * self.phase;
-                let (s, c) = (x.sin(), x.cos());
-                (s, w * c, -w * w * s)
+                let (c, s) = self.cs;
+                let (rc, rs) = self.rot;
+                let (c, s) = (c * rc - s * rs, s * rc + c * rs);
+                // First-order renormalisation keeps |phasor| = 1 without a sqrt.
+                let k = 1.5 - 0.5 * (c * c + s * s);
+                self.cs = (c * k, s * k);
+                let w = self.w;
+                (s * k, w * c * k, -w * w * s * k)
             }
             Shape::Triangle => {
                 let p = self.phase;
-                let slope = 4.0 * self.dphase * self.sample_hz;
+                let slope = 4.0 * self.w / (2.0 * core::f32::consts::PI);
                 if p < 0.25 {
                     (4.0 * p, slope, 0.0)
                 } else if p < 0.75 {
@@ -124,7 +163,7 @@ impl Loop {
         Self {
             io,
             sample_hz,
-            wave: Wave::hold(0.0, sample_hz),
+            wave: Wave::hold(0.0),
             ff: Feedforward::Linear(LinearFf {
                 um_per_volt: 0.16,
                 offset_um: 0.0,
@@ -241,18 +280,106 @@ pub struct Ctl {
     pub laws: fn(&str, f32) -> Option<Feedback<f32>>,
 }
 
-/// Names of the feedback laws `mode` accepts (the bench iterates over them).
-pub const LAWS: [&str; 1] = ["open-loop"];
+/// Names of the feedback laws `mode` accepts (the bench iterates over them); they are the
+/// laws' own [`Feedback::name`]s.
+#[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
+pub const LAWS: [&str; 11] = [
+    "open-loop",
+    "pid",
+    "ff+pid",
+    "hgo-robust",
+    "ff+hgo-robust",
+    "fts",
+    "ff+fts",
+    "adrc",
+    "ff+adrc",
+    "nmpc",
+    "ff+nmpc",
+];
 
-/// The feedback laws of the core, by name (sample rate in Hz).
-pub fn law_by_name(name: &str, _sample_hz: f32) -> Option<Feedback<f32>> {
-    match name {
-        "open-loop" => Some(Feedback::OpenLoop),
+/// Stage the laws are tuned for: CBW set 1 of the 000 backup slide, first-order linear part
+/// with pole [`STAGE_POLE_PER_S`], range 0..150 V.
+pub const STAGE_POLE_PER_S: f32 = 2.0 * core::f32::consts::PI * 500.0;
+
+/// The feedback laws of the core, by name, with gains for [`STAGE_POLE_PER_S`].
+pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
+    let dt_s = 1.0 / sample_hz;
+    let (ff, base) = match name.strip_prefix("ff+") {
+        Some(b) => (true, b),
+        None => (false, name),
+    };
+    let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).ok()?;
+    let hgo = || {
+        Hgo::new(
+            ObserverModel::Cbw(model),
+            STAGE_POLE_PER_S,
+            2e-4,
+            hgo::K1 as f32,
+            hgo::K2 as f32,
+            dt_s,
+        )
+        .ok()
+    };
+    let robust = |convergence| {
+        Robust::new(
+            hgo()?,
+            RobustConfig {
+                lambda1: 2_000.0,
+                lambda2: 2_000.0,
+                feedforward: ff,
+                convergence,
+            },
+        )
+        .ok()
+        .map(Feedback::Robust)
+    };
+    match base {
+        "open-loop" if !ff => Some(Feedback::OpenLoop),
+        "pid" => Pid::new(PidConfig {
+            kp: 0.5,
+            ki: 2_000.0,
+            kd: 0.0,
+            tf_s: 1e-4,
+            kb: 1.0,
+            feedforward: ff,
+            dt_s,
+        })
+        .ok()
+        .map(Feedback::Pid),
+        "hgo-robust" => robust(Convergence::Exponential),
+        "fts" => robust(Convergence::FiniteTime {
+            alpha1: 0.8,
+            alpha2: 0.8,
+            sat_um_per_s: 1e4,
+        }),
+        "adrc" => Adrc::new(AdrcConfig {
+            b: 0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S,
+            eps_s: 2e-4,
+            omega_c: 2_000.0,
+            feedforward: ff,
+            dt_s,
+        })
+        .ok()
+        .map(Feedback::Adrc),
+        "nmpc" => Nmpc::new(
+            hgo()?,
+            NmpcConfig {
+                decimation: 10,
+                r: 1e-3,
+                iterations: 2,
+                u_min: 0.0,
+                u_max: 150.0,
+                feedforward: ff,
+            },
+        )
+        .ok()
+        .map(Feedback::Nmpc),
         _ => None,
     }
 }
 
 /// Names of the feedforward compensators `ff` accepts.
+#[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
 pub const FFS: [&str; 3] = ["linear", "ims-cbw", "ims-cbw-delayed"];
 
 /// The feedforward compensators, by name: linear scaling, or IMS around the CBW model of
@@ -335,11 +462,11 @@ impl Ctl {
                 write!(out, "ok ff {}", lp.ff.name()).ok();
             }
             Command::WaveOff => {
-                lp.wave = Wave::hold(lp.signals[Signal::RefUm.index()], lp.sample_hz);
+                lp.wave = Wave::hold(lp.signals[Signal::RefUm.index()]);
                 write!(out, "ok wave off").ok();
             }
             Command::WaveHold(y) => {
-                lp.wave = Wave::hold(y, lp.sample_hz);
+                lp.wave = Wave::hold(y);
                 write!(out, "ok wave hold {y}").ok();
             }
             Command::Wave {
@@ -351,14 +478,7 @@ impl Ctl {
                 if !(freq_hz < 0.5 * lp.sample_hz) {
                     return Err(Error::OutOfRange);
                 }
-                lp.wave = Wave {
-                    shape: Some(shape),
-                    amp_um,
-                    offset_um,
-                    phase: 0.0,
-                    dphase: freq_hz / lp.sample_hz,
-                    sample_hz: lp.sample_hz,
-                };
+                lp.wave = Wave::periodic(shape, amp_um, freq_hz, offset_um, lp.sample_hz);
                 write!(
                     out,
                     "ok wave {} {amp_um} {freq_hz} {offset_um}",
