@@ -129,6 +129,8 @@ struct Axis {
     creep: Vec<f64>,
     /// Output of the static part + creep (before coupling).
     y_hc: f64,
+    /// Input of the structure at the end of the last step.
+    u_struct: f64,
     /// Structural state: position, velocity.
     x: f64,
     v: f64,
@@ -212,6 +214,7 @@ impl Stage {
                 creep: vec![0.0; gains.len()],
                 creep_gain: gains,
                 y_hc: 0.0,
+                u_struct: 0.0,
                 x: 0.0,
                 v: 0.0,
             });
@@ -279,6 +282,7 @@ impl Stage {
                 .for_each(|(c, g)| *c = g * y);
             ax.y_hc = y + ax.creep.iter().sum::<f64>();
             ax.x = ax.y_hc;
+            ax.u_struct = ax.y_hc;
             ax.v = 0.0;
         }
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
@@ -379,10 +383,14 @@ impl Stage {
                 }
             }
             let ax = &mut self.axes[i];
+            // The structure sees the mean of its input over the step (trapezoid: second
+            // order in h, where holding either end would be first order).
+            let mid = 0.5 * (ax.u_struct + input);
+            ax.u_struct = input;
             match &self.ad {
                 Some(ad) => {
-                    let (dx, dv) = (ax.x - input, ax.v);
-                    ax.x = input + ad[0][0] * dx + ad[0][1] * dv;
+                    let (dx, dv) = (ax.x - mid, ax.v);
+                    ax.x = mid + ad[0][0] * dx + ad[0][1] * dv;
                     ax.v = ad[1][0] * dx + ad[1][1] * dv;
                 }
                 None => {
