@@ -1,6 +1,7 @@
-//! Simulation speed: simulated seconds per wall-clock second at a 100 kHz loop (goal:
-//! >= 200x real time on one core). The whole loop is measured: ADC mock + AD4000 driver,
-//! the firmware pipeline, AD5791 driver + mock, and the stage at its default internal rate.
+//! Simulation speed: simulated seconds per wall-clock second at a 100 kHz loop (goal: at
+//! least 200x real time on one core). The whole loop is measured: ADC mock + AD4000
+//! driver, the firmware pipeline, AD5791 driver + mock, and the stage at its default
+//! internal rate.
 //!
 //! `cargo bench -p hal-sim --bench sim_speed`; criterion's throughput is in loop samples
 //! per second, so real-time factor = samples/s / 100_000 (also printed at the end).

@@ -117,7 +117,10 @@ fn firmware_types_run_closed_loop_on_the_mocks() {
     eprintln!("rmse: linear feedforward {open:.3} um, + integral feedback {closed:.3} um");
     assert_eq!(n, 20_000);
     assert!(open > 2.0, "the hysteresis shows in open loop: {open}");
-    assert!(closed < 0.5 * open, "feedback through the mocks works: {closed} vs {open}");
+    assert!(
+        closed < 0.5 * open,
+        "feedback through the mocks works: {closed} vs {open}"
+    );
 }
 
 #[test]
