@@ -178,6 +178,10 @@ impl<T: Real> Hgo<T> {
     pub fn dt_s(&self) -> T {
         self.dt_s
     }
+    /// Exact discretisation of the linear part: `(exp(-a dt), 1 - exp(-a dt))`.
+    pub fn linear_step(&self) -> (T, T) {
+        (self.ad, self.gd)
+    }
     /// Discrete gains `(l1, l2)`.
     pub fn gains(&self) -> (T, T) {
         (self.l1, self.l2)
