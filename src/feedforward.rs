@@ -6,6 +6,7 @@
 //! condition), no allocation, bounded work per sample, a finite output for any input (a
 //! non-finite reference holds the previous output), voltages inside the configured range.
 
+pub mod creep;
 pub mod ims;
 pub mod mbw;
 pub mod multi;
@@ -13,6 +14,7 @@ pub mod pi;
 pub mod solve;
 pub mod wpmbw;
 
+pub use creep::CreepInverse;
 pub use ims::{Ims, ImsLoop, ImsModel};
 pub use mbw::MbwFf;
 pub use multi::{pseudo_inverse, MultiIms};
@@ -166,9 +168,28 @@ pub enum MultiFeedforward<T: Real, const N: usize> {
     /// Multivariable IMS `U = D^-1 (y_ref + h)` (003 eq. 16), `N` actuators for `N` axes.
     /// Under- and over-actuated systems use [`MultiIms`] with `N != K` directly.
     Ims(MultiIms<T, N, N>),
+    /// Per-axis compensators behind a linear decoupler: for a stage whose axis outputs mix
+    /// as `y = C * y_axis` (cross-talk after each axis' own hysteresis), the axes get
+    /// `C^-1 * y_ref`. Build with [`MultiFeedforward::decoupled`].
+    Decoupled {
+        c_inv: [[T; N]; N],
+        axes: [Feedforward<T>; N],
+    },
 }
 
 impl<T: Real, const N: usize> MultiFeedforward<T, N> {
+    /// Per-axis compensators behind the inverse of the output mixing matrix `c`
+    /// (`c[i][j]`: share of axis `j`'s own output in output `i`; identity = no coupling).
+    pub fn decoupled(c: [[T; N]; N], axes: [Feedforward<T>; N]) -> Result<Self, FfError> {
+        ensure(
+            c.iter().flatten().all(|x| x.is_finite()),
+            "decoupler: coupling matrix must be finite",
+        )?;
+        let c_inv = multi::invert(&c, T::from_f64(1e-6))
+            .ok_or(ParamError("decoupler: coupling matrix must be invertible"))?;
+        Ok(MultiFeedforward::Decoupled { c_inv, axes })
+    }
+
     /// Voltages (V) that should bring every axis to its setpoint.
     #[inline]
     pub fn compensate(&mut self, sp: &[Setpoint<T>; N]) -> [T; N] {
@@ -187,6 +208,27 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
                 }
                 m.compensate(&y)
             }
+            MultiFeedforward::Decoupled { c_inv, axes } => {
+                let mut u = [T::ZERO; N];
+                for ((u, f), row) in u.iter_mut().zip(axes.iter_mut()).zip(c_inv.iter()) {
+                    let mut y = T::ZERO;
+                    let mut dy = T::ZERO;
+                    let mut ddy = T::ZERO;
+                    for (&c, s) in row.iter().zip(sp.iter()) {
+                        y += c * s.y_um;
+                        dy += c * s.dy;
+                        ddy += c * s.ddy;
+                    }
+                    // A non-finite reference on any axis holds every axis.
+                    let y = if sp.iter().all(|s| s.y_um.is_finite()) {
+                        y
+                    } else {
+                        T::from_f64(f64::NAN)
+                    };
+                    *u = f.compensate(&Setpoint { y_um: y, dy, ddy });
+                }
+                u
+            }
         }
     }
 
@@ -201,6 +243,15 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
                 }
                 m.reset(&y);
             }
+            MultiFeedforward::Decoupled { c_inv, axes } => {
+                for (f, row) in axes.iter_mut().zip(c_inv.iter()) {
+                    let y = row
+                        .iter()
+                        .zip(sp.iter())
+                        .fold(T::ZERO, |a, (&c, s)| a + c * s.y_um);
+                    f.reset(&Setpoint::hold(y));
+                }
+            }
         }
     }
 
@@ -208,6 +259,7 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.first().map_or("none", |f| f.name()),
             MultiFeedforward::Ims(m) => ims_name(m.closure(), "multi-ims", "multi-ims-delayed"),
+            MultiFeedforward::Decoupled { axes, .. } => axes.first().map_or("none", |f| f.name()),
         }
     }
 }

@@ -1,1 +1,547 @@
-//! The per-sample control pipeline: ADC code in, DAC code out.
+//! The per-sample control pipeline: ADC code(s) in, DAC code(s) out, one call per sample.
+//!
+//! It reads like the block diagram:
+//! scale + range check ([`Sensor`]) -> reference ([`WaveGen`]) -> feedforward
+//! ([`MultiFeedforward`]) -> feedback ([`Feedback`], fed the previously applied voltage) ->
+//! range + slew limits ([`Output`]) -> DAC code.
+//!
+//! Generic over the number type and the axis count `N` (1..=3). Configuration
+//! ([`Config`], validated once) is kept apart from the state ([`State`]); allocation-free,
+//! panic-free and bounded per sample.
+//!
+//! Faults (an ADC code outside the sensor window, a non-finite command) latch the safe
+//! state: the output slews to `safe_volts` and stays there until [`Pipeline::clear_fault`].
+
+pub mod output;
+pub mod reference;
+pub mod sensor;
+
+pub use output::{DacScale, Limited, Output, OutputLimits};
+pub use reference::{lissajous, raster, Wave, WaveGen, TABLE_LEN};
+pub use sensor::Sensor;
+
+use crate::feedback::Feedback;
+use crate::feedforward::{LinearFf, MultiFeedforward};
+use crate::real::Real;
+use crate::signals::{LoopSignals, Setpoint};
+
+/// The pipeline the firmware runs: one axis in `f32`.
+pub type FirmwarePipeline = Pipeline<f32, 1>;
+/// Configuration of [`FirmwarePipeline`].
+pub type FirmwareConfig = Config<f32, 1>;
+/// The 2-axis (coupled XY scanner) variant of the firmware pipeline.
+pub type FirmwarePipeline2 = Pipeline<f32, 2>;
+
+/// A configuration value is unusable; the text names the field and the condition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConfigError {
+    /// The axis the field belongs to, if any.
+    pub axis: Option<usize>,
+    pub what: &'static str,
+}
+
+impl ConfigError {
+    pub const fn new(what: &'static str) -> Self {
+        Self { axis: None, what }
+    }
+    fn on_axis(self, axis: usize) -> Self {
+        Self {
+            axis: Some(axis),
+            ..self
+        }
+    }
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.axis {
+            Some(a) => write!(f, "pipeline config, axis {a}: {}", self.what),
+            None => write!(f, "pipeline config: {}", self.what),
+        }
+    }
+}
+
+impl core::error::Error for ConfigError {}
+
+/// Configuration of one axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisConfig<T> {
+    pub sensor: Sensor<T>,
+    /// The open-loop mode's linear scaling (no hysteresis model).
+    pub open_loop: LinearFf<T>,
+    pub limits: OutputLimits<T>,
+    pub dac: DacScale<T>,
+    /// Where the output goes at start-up and on a fault (V, inside the limits).
+    pub safe_volts: T,
+}
+
+/// Pipeline configuration (validated by [`Pipeline::new`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Config<T, const N: usize> {
+    /// Loop rate (Hz).
+    pub sample_hz: T,
+    pub axes: [AxisConfig<T>; N],
+}
+
+/// Which path computes the command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Linear scaling of the reference only.
+    #[default]
+    OpenLoop,
+    /// The feedforward compensator alone.
+    Feedforward,
+    /// Feedforward plus the feedback law.
+    ClosedLoop,
+}
+
+/// Why the pipeline went to its safe state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// An ADC code outside the sensor's valid window.
+    SensorRange { axis: usize },
+    /// The controllers produced NaN or infinity.
+    NonFiniteCommand { axis: usize },
+}
+
+/// Event counters (saturating).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    pub samples: u32,
+    /// Samples with an ADC code outside the sensor window (any axis).
+    pub sensor_faults: u32,
+    /// Samples with a non-finite command (any axis).
+    pub nonfinite_commands: u32,
+    /// Samples where the range or slew limit changed a command (any axis).
+    pub saturated_samples: u32,
+}
+
+/// Signals of the last sample, for recording and telemetry.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Trace<T, const N: usize> {
+    pub setpoint: [Setpoint<T>; N],
+    /// Measured position (um); the previous valid value on a sensor fault.
+    pub y_um: [T; N],
+    pub u_ff: [T; N],
+    /// Command before the limits (V).
+    pub u_cmd: [T; N],
+}
+
+/// Everything that changes from sample to sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct State<T, const N: usize> {
+    pub mode: Mode,
+    pub fault: Option<Fault>,
+    /// Applied voltage (V): what the DAC code stands for.
+    pub u_applied: [T; N],
+    pub code: [i32; N],
+    pub counters: Counters,
+    pub trace: Trace<T, N>,
+}
+
+/// The per-sample pipeline of an `N`-axis stage.
+#[derive(Debug, Clone)]
+pub struct Pipeline<T: Real, const N: usize> {
+    config: Config<T, N>,
+    output: [Output<T>; N],
+    reference: [WaveGen<T>; N],
+    feedforward: MultiFeedforward<T, N>,
+    feedback: [Feedback<T>; N],
+    state: State<T, N>,
+}
+
+impl<T: Real, const N: usize> Pipeline<T, N> {
+    /// Validates `config` and `reference`; starts in [`Mode::OpenLoop`] at `safe_volts`.
+    pub fn new(
+        config: Config<T, N>,
+        reference: [Wave<T>; N],
+        feedforward: MultiFeedforward<T, N>,
+        feedback: [Feedback<T>; N],
+    ) -> Result<Self, ConfigError> {
+        if N == 0 || N > 3 {
+            return Err(ConfigError::new("axes: 1 to 3 axes are supported"));
+        }
+        let fs = config.sample_hz;
+        if !(fs.is_finite() && fs > T::ZERO) {
+            return Err(ConfigError::new("sample_hz must be finite and > 0"));
+        }
+        let first = config
+            .axes
+            .first()
+            .ok_or(ConfigError::new("axes: 1 to 3 axes are supported"))?;
+        let mut output = [Output::new(&first.limits, &first.dac, fs).map_err(|e| e.on_axis(0))?; N];
+        let mut gens = [WaveGen::new(Wave::Hold { y_um: T::ZERO }, fs)?; N];
+        for (i, a) in config.axes.iter().enumerate() {
+            a.sensor.validate().map_err(|e| e.on_axis(i))?;
+            let ol = a.open_loop;
+            if !(ol.um_per_volt.is_finite()
+                && ol.um_per_volt != T::ZERO
+                && ol.offset_um.is_finite())
+            {
+                return Err(ConfigError::new(
+                    "open_loop: um_per_volt must be finite and non-zero, offset_um finite",
+                )
+                .on_axis(i));
+            }
+            if !(a.safe_volts >= a.limits.volts_min && a.safe_volts <= a.limits.volts_max) {
+                return Err(ConfigError::new("safe_volts must lie within the limits").on_axis(i));
+            }
+            output[i] = Output::new(&a.limits, &a.dac, fs).map_err(|e| e.on_axis(i))?;
+            gens[i] = WaveGen::new(reference[i], fs).map_err(|e| e.on_axis(i))?;
+        }
+        let reference = gens;
+        let mut p = Self {
+            config,
+            output,
+            reference,
+            feedforward,
+            feedback,
+            state: State {
+                mode: Mode::OpenLoop,
+                fault: None,
+                u_applied: [T::ZERO; N],
+                code: [0; N],
+                counters: Counters::default(),
+                trace: Trace {
+                    setpoint: [Setpoint::default(); N],
+                    y_um: [T::ZERO; N],
+                    u_ff: [T::ZERO; N],
+                    u_cmd: [T::ZERO; N],
+                },
+            },
+        };
+        for i in 0..N {
+            let (o, a) = (&p.output[i], &p.config.axes[i]);
+            let code = o.code_in_range(a.safe_volts);
+            p.state.code[i] = code;
+            p.state.u_applied[i] = o.dac.volts(code);
+            p.state.trace.u_cmd[i] = a.safe_volts;
+            p.state.trace.u_ff[i] = a.safe_volts;
+            p.state.trace.setpoint[i] = p.reference[i].current();
+        }
+        Ok(p)
+    }
+
+    pub fn config(&self) -> &Config<T, N> {
+        &self.config
+    }
+    pub fn state(&self) -> &State<T, N> {
+        &self.state
+    }
+    pub fn output(&self, axis: usize) -> Option<&Output<T>> {
+        self.output.get(axis)
+    }
+    pub fn feedforward(&self) -> &MultiFeedforward<T, N> {
+        &self.feedforward
+    }
+    pub fn feedback(&self) -> &[Feedback<T>; N] {
+        &self.feedback
+    }
+    /// The DAC codes of the last sample (at start-up: the codes of `safe_volts`).
+    pub fn codes(&self) -> [i32; N] {
+        self.state.code
+    }
+
+    /// Replaces the reference wave of `axis` (its phase restarts).
+    pub fn set_wave(&mut self, axis: usize, wave: Wave<T>) -> Result<(), ConfigError> {
+        let g = WaveGen::new(wave, self.config.sample_hz).map_err(|e| e.on_axis(axis))?;
+        let slot = self
+            .reference
+            .get_mut(axis)
+            .ok_or(ConfigError::new("axis index out of range"))?;
+        *slot = g;
+        Ok(())
+    }
+
+    /// Switches mode without a bump: the compensator and the feedback law restart from
+    /// the applied voltage, and the slew limit bounds whatever difference remains.
+    pub fn set_mode(&mut self, mode: Mode) {
+        self.state.mode = mode;
+        self.restart();
+    }
+
+    /// Leaves the safe state (a fault latches it) in the current mode, bumplessly.
+    pub fn clear_fault(&mut self) {
+        self.state.fault = None;
+        self.restart();
+    }
+
+    fn restart(&mut self) {
+        let sp: [Setpoint<T>; N] = core::array::from_fn(|i| {
+            self.reference
+                .get(i)
+                .map_or(Setpoint::default(), |g| g.current())
+        });
+        self.feedforward.reset(&sp);
+        let st = &self.state;
+        for (i, fb) in self.feedback.iter_mut().enumerate() {
+            let u = st.u_applied.get(i).copied().unwrap_or(T::ZERO);
+            fb.reset(&LoopSignals {
+                setpoint: sp.get(i).copied().unwrap_or_default(),
+                y_um: st.trace.y_um.get(i).copied().unwrap_or(T::ZERO),
+                u_ff: u,
+                u_applied: u,
+            });
+        }
+    }
+
+    /// One sample: ADC codes in, DAC codes out.
+    #[inline]
+    pub fn step(&mut self, adc: [i32; N]) -> [i32; N] {
+        let st = &mut self.state;
+        st.counters.samples = st.counters.samples.saturating_add(1);
+
+        // Scale and range-check.
+        let mut bad_sensor = false;
+        for (i, (code, axis)) in adc.iter().zip(&self.config.axes).enumerate() {
+            match axis.sensor.position_um(*code) {
+                Some(y) => st.trace.y_um[i] = y,
+                None => {
+                    if !bad_sensor && st.fault.is_none() {
+                        st.fault = Some(Fault::SensorRange { axis: i });
+                    }
+                    bad_sensor = true;
+                }
+            }
+        }
+        if bad_sensor {
+            st.counters.sensor_faults = st.counters.sensor_faults.saturating_add(1);
+        }
+
+        // Reference.
+        let sp: [Setpoint<T>; N] = core::array::from_fn(|i| {
+            self.reference
+                .get_mut(i)
+                .map_or(Setpoint::default(), |g| g.next_setpoint())
+        });
+        st.trace.setpoint = sp;
+
+        // Feedforward and feedback.
+        let mut u = st.u_applied;
+        if st.fault.is_none() {
+            u = match st.mode {
+                Mode::OpenLoop => {
+                    core::array::from_fn(|i| match (self.config.axes.get(i), sp.get(i)) {
+                        (Some(a), Some(s)) => a.open_loop.compensate(s.y_um),
+                        _ => T::ZERO,
+                    })
+                }
+                Mode::Feedforward => self.feedforward.compensate(&sp),
+                Mode::ClosedLoop => {
+                    let u_ff = self.feedforward.compensate(&sp);
+                    st.trace.u_ff = u_ff;
+                    let mut u = u_ff;
+                    for (i, (u, fb)) in u.iter_mut().zip(self.feedback.iter_mut()).enumerate() {
+                        *u = fb.update(&LoopSignals {
+                            setpoint: sp[i],
+                            y_um: st.trace.y_um[i],
+                            u_ff: u_ff[i],
+                            u_applied: st.u_applied[i],
+                        });
+                    }
+                    u
+                }
+            };
+            if st.mode != Mode::ClosedLoop {
+                st.trace.u_ff = u;
+            }
+            if let Some(i) = u.iter().position(|u| !u.is_finite()) {
+                st.fault = Some(Fault::NonFiniteCommand { axis: i });
+                st.counters.nonfinite_commands = st.counters.nonfinite_commands.saturating_add(1);
+            }
+        }
+        if st.fault.is_some() {
+            for (u, a) in u.iter_mut().zip(&self.config.axes) {
+                *u = a.safe_volts;
+            }
+        }
+        st.trace.u_cmd = u;
+
+        // Limits and conversion.
+        let mut saturated = false;
+        for (i, (o, u)) in self.output.iter().zip(u).enumerate() {
+            let l = o.limit(u, st.code[i]);
+            saturated |= l.saturated;
+            st.code[i] = l.code;
+            st.u_applied[i] = o.dac.volts(l.code);
+        }
+        if saturated && st.fault.is_none() {
+            st.counters.saturated_samples = st.counters.saturated_samples.saturating_add(1);
+        }
+        st.code
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::feedforward::Feedforward;
+    use proptest::prelude::*;
+
+    const FULL: i32 = (1 << 20) - 1;
+
+    pub(crate) fn axis() -> AxisConfig<f64> {
+        AxisConfig {
+            sensor: Sensor {
+                um_per_code: 100.0 / 1_000_000.0,
+                offset_um: 0.0,
+                code_min: -10,
+                code_max: 1_000_010,
+            },
+            open_loop: LinearFf {
+                um_per_volt: 100.0 / 150.0,
+                offset_um: 0.0,
+            },
+            limits: OutputLimits {
+                volts_min: 0.0,
+                volts_max: 150.0,
+                slew_volts_per_s: 20_000.0,
+            },
+            dac: DacScale {
+                volts_per_code: 150.0 / FULL as f64,
+                volts_at_zero: 0.0,
+                code_min: 0,
+                code_max: FULL,
+            },
+            safe_volts: 0.0,
+        }
+    }
+
+    fn pipeline(um_per_volt_ff: f64, wave: Wave<f64>) -> Pipeline<f64, 1> {
+        Pipeline::new(
+            Config {
+                sample_hz: 100_000.0,
+                axes: [axis()],
+            },
+            [wave],
+            MultiFeedforward::PerAxis([Feedforward::Linear(LinearFf {
+                um_per_volt: um_per_volt_ff,
+                offset_um: 0.0,
+            })]),
+            [Feedback::OpenLoop],
+        )
+        .unwrap()
+    }
+
+    fn sine() -> Wave<f64> {
+        Wave::Sine {
+            offset_um: 50.0,
+            amplitude_um: 40.0,
+            freq_hz: 100.0,
+            phase_turns: 0.0,
+        }
+    }
+
+    #[test]
+    fn open_loop_tracks_linear_scaling() {
+        let mut p = pipeline(100.0 / 150.0, Wave::Hold { y_um: 30.0 });
+        for _ in 0..2000 {
+            p.step([300_000]);
+        }
+        let u = p.state().u_applied[0];
+        assert!((u - 45.0).abs() < 1e-3, "{u}");
+        // 45 V at 0.2 V/sample: slew-limited for 225 samples.
+        let n = p.state().counters.saturated_samples;
+        assert!((224..=226).contains(&n), "{n}");
+    }
+
+    #[test]
+    fn sensor_fault_latches_safe_state_and_counts() {
+        let mut p = pipeline(100.0 / 150.0, Wave::Hold { y_um: 30.0 });
+        for _ in 0..1000 {
+            p.step([300_000]);
+        }
+        p.step([2_000_000]);
+        assert_eq!(p.state().fault, Some(Fault::SensorRange { axis: 0 }));
+        for _ in 0..1000 {
+            p.step([300_000]);
+        }
+        assert_eq!(p.state().counters.sensor_faults, 1);
+        assert_eq!(p.codes()[0], 0, "slewed to safe_volts = 0");
+        p.clear_fault();
+        for _ in 0..1000 {
+            p.step([300_000]);
+        }
+        assert!((p.state().u_applied[0] - 45.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn nonfinite_command_goes_safe() {
+        let mut p = pipeline(0.0, Wave::Hold { y_um: 30.0 });
+        p.set_mode(Mode::Feedforward);
+        p.step([0]);
+        assert_eq!(p.state().fault, Some(Fault::NonFiniteCommand { axis: 0 }));
+        assert_eq!(p.codes()[0], 0);
+    }
+
+    #[test]
+    fn mode_switch_is_bumpless_within_slew() {
+        let mut p = pipeline(100.0 / 150.0 * 1.1, sine());
+        let step = p.output(0).unwrap().max_step();
+        let mut prev = p.codes()[0];
+        for k in 0..30_000 {
+            if k == 10_000 {
+                p.set_mode(Mode::Feedforward);
+            }
+            if k == 20_000 {
+                p.set_mode(Mode::ClosedLoop);
+            }
+            let c = p.step([500_000])[0];
+            assert!((c - prev).abs() <= step);
+            prev = c;
+        }
+    }
+
+    #[test]
+    fn config_errors_name_the_axis_and_field() {
+        let mut a = axis();
+        a.safe_volts = 200.0;
+        let e = Pipeline::<f64, 2>::new(
+            Config {
+                sample_hz: 1e5,
+                axes: [axis(), a],
+            },
+            [sine(), sine()],
+            MultiFeedforward::PerAxis([
+                Feedforward::Linear(axis().open_loop),
+                Feedforward::Linear(axis().open_loop),
+            ]),
+            [Feedback::OpenLoop, Feedback::OpenLoop],
+        )
+        .unwrap_err();
+        assert_eq!(e.axis, Some(1));
+        assert!(e.what.contains("safe_volts"));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Whatever the ADC delivers (garbage, out of range), the DAC code stays in the
+        /// configured range and moves at most the slew limit per sample, in every mode.
+        #[test]
+        fn dac_code_stays_in_range_and_slew(
+            codes in proptest::collection::vec(prop_oneof![
+                any::<i32>(),
+                -20i32..1_000_020,
+            ], 1..400),
+            mode in 0u8..3,
+            gain in prop_oneof![Just(0.0), Just(f64::NAN), 0.01f64..10.0],
+            clear_every in 0usize..50,
+        ) {
+            let mut p = pipeline(gain, sine());
+            p.set_mode(match mode { 0 => Mode::OpenLoop, 1 => Mode::Feedforward, _ => Mode::ClosedLoop });
+            let o = *p.output(0).unwrap();
+            let (lo, hi) = o.code_range();
+            let mut prev = p.codes()[0];
+            for (k, c) in codes.iter().enumerate() {
+                if clear_every > 0 && k % clear_every == 0 {
+                    p.clear_fault();
+                }
+                let code = p.step([*c])[0];
+                prop_assert!(code >= lo && code <= hi);
+                prop_assert!((code - prev).abs() <= o.max_step());
+                prop_assert!(p.state().u_applied[0] >= 0.0 && p.state().u_applied[0] <= 150.0);
+                prev = code;
+            }
+        }
+    }
+}

@@ -410,6 +410,26 @@ fn sample_rate_independence_1khz_vs_100khz() {
     let dahl = Dahl::new(0.16, 0.07, 3.0, 1.5).unwrap();
     check("Dahl", 100.0, &|u, dt| run(&dahl, u, dt));
 
+    let multi = MultiBw::<f64, 2, 2>::new(
+        [[0.16, 0.01], [-0.02, 0.15]],
+        [[0.07, 0.004], [-0.003, 0.06]],
+        [[0.02, 0.001], [0.0005, 0.02]],
+        [[0.01, 0.0], [0.0, 0.01]],
+    )
+    .unwrap();
+    for axis in 0..2 {
+        let name = ["MultiBW x", "MultiBW y"][axis];
+        check(name, 100.0, &|u, dt| {
+            let mut s = multi.init([0.0; 2]);
+            u.iter()
+                .enumerate()
+                .map(|(k, &u)| {
+                    multi.step(&mut s, [u, 0.5 * u * (k as f64 * dt * 7.0).cos()], dt)[axis]
+                })
+                .collect()
+        });
+    }
+
     let e_euler = rate_error(
         &cbw_forward_euler(&cbw, &sweep(100.0, 1e3), 1e-3),
         &cbw_forward_euler(&cbw, &sweep(100.0, 1e5), 1e-5),
@@ -422,4 +442,82 @@ fn sample_rate_independence_1khz_vs_100khz() {
         e_euler > 1e-3,
         "forward Euler unexpectedly met 0.1 %: {e_euler}"
     );
+}
+
+/// 003 eq. (5): over-actuated (`K > N`), `hh_j = 0` for `j > N`, so the `B` and `Gamma`
+/// columns beyond `N` have no effect, while `D` and `A` columns do.
+#[test]
+fn over_actuated_multivariable_bw_pads_h_with_zeros() {
+    let d = [[0.16, 0.01, 0.02], [0.0, 0.15, 0.03]];
+    let a = [[0.07, 0.002, 0.004], [0.001, 0.06, 0.003]];
+    let b = [[0.02, 0.001, 0.0], [0.0, 0.02, 0.0]];
+    let g = [[0.01, 0.0, 0.0], [0.0, 0.01, 0.0]];
+    let (mut b2, mut g2) = (b, g);
+    b2[0][2] = 0.05;
+    b2[1][2] = -0.03;
+    g2[0][2] = 0.02;
+    let m1 = MultiBw::<f64, 2, 3>::new(d, a, b, g).unwrap();
+    let m2 = MultiBw::<f64, 2, 3>::new(d, a, b2, g2).unwrap();
+    let mut a3 = a;
+    a3[0][2] = 0.0;
+    let m3 = MultiBw::<f64, 2, 3>::new(d, a3, b, g).unwrap();
+    let (mut s1, mut s2, mut s3) = (m1.init([0.0; 3]), m2.init([0.0; 3]), m3.init([0.0; 3]));
+    let mut diff_a: f64 = 0.0;
+    for k in 0..3000 {
+        let t = k as f64 * 1e-3;
+        let u = [
+            100.0 * (2.0 * PI64 * t).sin(),
+            60.0 * (2.0 * PI64 * 1.3 * t).sin(),
+            80.0 * (2.0 * PI64 * 0.7 * t).sin(),
+        ];
+        let y1 = m1.step(&mut s1, u, 1e-3);
+        let y2 = m2.step(&mut s2, u, 1e-3);
+        let y3 = m3.step(&mut s3, u, 1e-3);
+        assert_eq!(y1, y2, "B/Gamma column 3 must not matter");
+        diff_a = diff_a.max((y1[0] - y3[0]).abs());
+    }
+    assert!(diff_a > 0.1, "A column 3 should matter: {diff_a}");
+}
+
+/// Under-actuated (`N > K`): the third output has no input of its own; its state follows
+/// the couplings only, and with zero couplings it stays 0.
+#[test]
+fn under_actuated_multivariable_bw_runs_and_isolated_state_stays_zero() {
+    let d = [[0.16, 0.0], [0.0, 0.15], [0.01, 0.01]];
+    let a = [[0.07, 0.0], [0.0, 0.06], [0.0, 0.0]];
+    let b = [[0.02, 0.0], [0.0, 0.02], [0.0, 0.0]];
+    let g = [[0.01, 0.0], [0.0, 0.01], [0.0, 0.0]];
+    let m = MultiBw::<f64, 3, 2>::new(d, a, b, g).unwrap();
+    let mut s = m.init([0.0; 2]);
+    for k in 0..2000 {
+        let t = k as f64 * 1e-3;
+        let u = [
+            100.0 * (2.0 * PI64 * t).sin(),
+            50.0 * (2.0 * PI64 * 2.0 * t).cos(),
+        ];
+        let y = m.step(&mut s, u, 1e-3);
+        assert_eq!(s.h[2], 0.0);
+        assert!((y[2] - 0.01 * (u[0] + u[1])).abs() < 1e-12);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    #[test]
+    fn abw_abs_stays_within_its_bound(
+        alpha in 0.05f64..1.0,
+        beta in 0.05f64..2.0,
+        g_frac in -0.9f64..1.0,
+        d_frac in -0.95f64..0.95,
+        n in prop::sample::select(vec![1.0f64, 1.5, 2.0]),
+        u in prop::collection::vec(-50.0f64..50.0, 1..150),
+    ) {
+        let m = AbwAbs::new(1.0, alpha, beta, g_frac * beta, n, d_frac * alpha).unwrap();
+        let mut s = m.init(0.0);
+        for &u in &u {
+            m.step(&mut s, u, 1e-3);
+            prop_assert!(s.h.abs() <= m.h_bound() * (1.0 + 1e-6), "{} > {}", s.h, m.h_bound());
+        }
+    }
 }

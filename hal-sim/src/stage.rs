@@ -1,1 +1,523 @@
-//! The simulated actuator: amplifier, hysteresis, creep, structural dynamics, drift, noise, delay, coupling.
+//! The simulated actuator, a Hammerstein chain per axis:
+//!
+//! DAC volts -> high-voltage amplifier (gain, rails, slew limit `I/C`, first-order
+//! bandwidth) -> hysteresis (a model of `piezo_core::hysteresis` plus an asymmetric static
+//! term) -> creep (first-order elements) -> axis coupling -> structural dynamics (one lightly
+//! damped resonance, external force through the stiffness) -> thermal drift -> pure delay
+//! -> sensor noise.
+//!
+//! Integration runs at `substeps` times the loop rate; every linear block is discretised
+//! exactly for an input held over one internal step, and the slew-limited amplifier is
+//! solved exactly, so the error comes only from holding the block inputs over one step.
+
+use crate::scenario::{HysteresisModel, Scenario, StageConfig};
+use anyhow::{Context, Result};
+use piezo_core::hysteresis::{BwState, Cbw, Dahl, Gbw, Hysteresis};
+use std::f64::consts::PI;
+
+/// Small, fast, seedable generator (xorshift64*) with a cheap near-Gaussian sample.
+#[derive(Debug, Clone)]
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+
+    #[inline]
+    pub fn next_u64(&mut self) -> u64 {
+        let mut x = self.0;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.0 = x;
+        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// Uniform in `[0, 1)`.
+    #[inline]
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Zero-mean, unit-variance noise: the sum of four 16-bit uniforms (Irwin-Hall), which
+    /// is Gaussian to within a few percent out to 3 sigma and bounded at +-3.46.
+    #[inline]
+    pub fn gauss(&mut self) -> f64 {
+        let r = self.next_u64();
+        let s = (r & 0xFFFF) + ((r >> 16) & 0xFFFF) + ((r >> 32) & 0xFFFF) + (r >> 48);
+        // mean 4 * 32767.5, variance 4 * (65536^2 - 1) / 12
+        (s as f64 - 131_070.0) * (3.0f64.sqrt() / 65_536.0)
+    }
+}
+
+/// The static (rate-independent) part of one axis.
+#[derive(Debug, Clone)]
+enum Static {
+    Linear { d: f64, u: f64 },
+    Cbw(Cbw<f64>, BwState<f64>),
+    Gbw(Gbw<f64>, BwState<f64>),
+    Dahl(Dahl<f64>, BwState<f64>),
+}
+
+impl Static {
+    #[inline]
+    fn step(&mut self, u: f64, dt: f64) -> f64 {
+        match self {
+            Static::Linear { d, u: last } => {
+                *last = u;
+                *d * u
+            }
+            Static::Cbw(m, s) => m.step(s, u, dt),
+            Static::Gbw(m, s) => m.step(s, u, dt),
+            Static::Dahl(m, s) => m.step(s, u, dt),
+        }
+    }
+}
+
+/// Amplifier state and constants for one internal step.
+#[derive(Debug, Clone)]
+struct Amp {
+    gain: f64,
+    offset: f64,
+    rail_min: f64,
+    rail_max: f64,
+    tau: f64,
+    /// `exp(-h/tau)`
+    decay: f64,
+    slew: f64,
+    h: f64,
+    v: f64,
+}
+
+impl Amp {
+    /// Exact solution of `v' = clamp((target - v)/tau, -slew, slew)` over one step.
+    #[inline]
+    fn step(&mut self, dac_volts: f64) -> f64 {
+        let target = (self.gain * dac_volts + self.offset).clamp(self.rail_min, self.rail_max);
+        let e = target - self.v;
+        let knee = self.slew * self.tau; // |e| above which the slew limit is active
+        let mut rest = self.h;
+        let mut v = self.v;
+        if e.abs() > knee {
+            let t1 = (e.abs() - knee) / self.slew;
+            if t1 >= rest {
+                self.v = v + e.signum() * self.slew * rest;
+                return self.v;
+            }
+            v += e.signum() * self.slew * t1;
+            rest -= t1;
+        }
+        let decay = if rest == self.h {
+            self.decay
+        } else {
+            (-rest / self.tau).exp()
+        };
+        self.v = target + (v - target) * decay;
+        self.v
+    }
+}
+
+/// Everything of one axis.
+#[derive(Debug, Clone)]
+struct Axis {
+    amp: Amp,
+    stat: Static,
+    asym: f64,
+    creep_gain: Vec<f64>,
+    creep_alpha: Vec<f64>,
+    creep: Vec<f64>,
+    /// Output of the static part + creep (before coupling).
+    y_hc: f64,
+    /// Structural state: position, velocity.
+    x: f64,
+    v: f64,
+}
+
+/// The simulated stage.
+#[derive(Debug, Clone)]
+pub struct Stage {
+    axes: Vec<Axis>,
+    /// Internal step (s).
+    h: f64,
+    substeps: usize,
+    /// Exact transition matrix of the structure over `h`; `None`: structure off.
+    ad: Option<[[f64; 2]; 2]>,
+    coupling: Option<Vec<Vec<f64>>>,
+    force: Option<(f64, f64, f64, f64)>, // (um at full force, at_s, freq_hz, stiffness)
+    drift: Option<(f64, f64, f64)>,      // (um, tau_s, rate)
+    noise_sigma_um: f64,
+    /// Delay line of positions at the internal rate, per axis.
+    delay: Vec<Vec<f64>>,
+    delay_pos: usize,
+    rng: Rng,
+    t: f64,
+    steps: u64,
+}
+
+impl Stage {
+    /// The stage of `scenario` integrated with `substeps` steps per loop period.
+    pub fn new(scenario: &Scenario) -> Result<Self> {
+        Self::with_substeps(scenario, scenario.run.substeps)
+    }
+
+    pub fn with_substeps(scenario: &Scenario, substeps: usize) -> Result<Self> {
+        let cfg: &StageConfig = &scenario.stage;
+        anyhow::ensure!(substeps >= 1, "substeps must be >= 1");
+        let h = 1.0 / (scenario.run.loop_hz * substeps as f64);
+        let a = &cfg.amplifier;
+        let tau = 1.0 / (2.0 * PI * a.bandwidth_hz);
+        let hy = &cfg.hysteresis;
+        let mut axes = Vec::new();
+        for _ in 0..cfg.axes {
+            let stat = match hy.model {
+                HysteresisModel::None => Static::Linear { d: hy.d, u: 0.0 },
+                HysteresisModel::Cbw => {
+                    let m = Cbw::new(hy.d, hy.alpha, hy.beta, hy.gamma, hy.n)
+                        .context("stage.hysteresis (cbw)")?;
+                    Static::Cbw(m, m.init(0.0))
+                }
+                HysteresisModel::Gbw => {
+                    let m = Gbw::new(hy.d, hy.alpha, hy.a, hy.beta, hy.gamma, hy.n)
+                        .context("stage.hysteresis (gbw)")?;
+                    Static::Gbw(m, m.init(0.0))
+                }
+                HysteresisModel::Dahl => {
+                    let m = Dahl::new(hy.d, hy.alpha, hy.hc, hy.n)
+                        .context("stage.hysteresis (dahl)")?;
+                    Static::Dahl(m, m.init(0.0))
+                }
+            };
+            let (gains, taus) = if cfg.creep.enabled {
+                (cfg.creep.gains.clone(), cfg.creep.taus_s.clone())
+            } else {
+                (vec![], vec![])
+            };
+            let v0 = (a.offset_volts).clamp(a.rail_min_volts, a.rail_max_volts);
+            axes.push(Axis {
+                amp: Amp {
+                    gain: a.gain,
+                    offset: a.offset_volts,
+                    rail_min: a.rail_min_volts,
+                    rail_max: a.rail_max_volts,
+                    tau,
+                    decay: (-h / tau).exp(),
+                    slew: a.current_limit_a / a.capacitance_f,
+                    h,
+                    v: v0,
+                },
+                stat,
+                asym: hy.asym_um_per_v2,
+                creep_alpha: taus.iter().map(|t| -(-h / t).exp_m1()).collect(),
+                creep: vec![0.0; gains.len()],
+                creep_gain: gains,
+                y_hc: 0.0,
+                x: 0.0,
+                v: 0.0,
+            });
+        }
+        let ad = cfg.resonance.enabled.then(|| {
+            let w = 2.0 * PI * cfg.resonance.freq_hz;
+            let z = cfg.resonance.zeta;
+            let s = z * w;
+            let wd = w * (1.0 - z * z).sqrt();
+            let e = (-s * h).exp();
+            let (sn, cs) = (wd * h).sin_cos();
+            [
+                [e * (cs + s / wd * sn), e * sn / wd],
+                [-e * w * w / wd * sn, e * (cs - s / wd * sn)],
+            ]
+        });
+        let f = &cfg.force;
+        let delay_steps = if cfg.delay.enabled {
+            (cfg.delay.seconds / h).round() as usize
+        } else {
+            0
+        };
+        let mut st = Self {
+            delay: vec![vec![0.0; delay_steps + 1]; cfg.axes],
+            delay_pos: 0,
+            axes,
+            h,
+            substeps,
+            ad,
+            coupling: cfg.coupling.enabled.then(|| cfg.coupling.matrix.clone()),
+            force: f.enabled.then_some((
+                f.newtons / f.stiffness_n_per_um,
+                f.at_s,
+                f.freq_hz,
+                f.stiffness_n_per_um,
+            )),
+            drift: cfg.drift.enabled.then_some((
+                cfg.drift.um,
+                cfg.drift.tau_s,
+                cfg.drift.rate_um_per_s,
+            )),
+            noise_sigma_um: if cfg.noise.enabled {
+                cfg.noise.sigma_um
+            } else {
+                0.0
+            },
+            rng: Rng::new(scenario.run.seed ^ 0x5EED),
+            t: 0.0,
+            steps: 0,
+        };
+        // Rest at the amplifier's output for 0 V in.
+        let zero = vec![0.0; st.axes.len()];
+        st.settle(&zero);
+        Ok(st)
+    }
+
+    /// Puts every state at rest for the constant DAC voltages `dac_volts`.
+    fn settle(&mut self, dac_volts: &[f64]) {
+        for (ax, &u) in self.axes.iter_mut().zip(dac_volts) {
+            ax.amp.v = (ax.amp.gain * u + ax.amp.offset).clamp(ax.amp.rail_min, ax.amp.rail_max);
+            let y = ax.stat.step(ax.amp.v, self.h) + ax.asym * ax.amp.v * ax.amp.v;
+            ax.creep
+                .iter_mut()
+                .zip(&ax.creep_gain)
+                .for_each(|(c, g)| *c = g * y);
+            ax.y_hc = y + ax.creep.iter().sum::<f64>();
+            ax.x = ax.y_hc;
+            ax.v = 0.0;
+        }
+        for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
+            line.iter_mut().for_each(|p| *p = ax.x);
+        }
+    }
+
+    pub fn axes(&self) -> usize {
+        self.axes.len()
+    }
+
+    /// Simulated time (s).
+    pub fn time_s(&self) -> f64 {
+        self.t
+    }
+
+    /// Internal integration step (s).
+    pub fn step_s(&self) -> f64 {
+        self.h
+    }
+
+    /// Amplifier output (V) of `axis`.
+    pub fn piezo_volts(&self, axis: usize) -> f64 {
+        self.axes.get(axis).map_or(f64::NAN, |a| a.amp.v)
+    }
+
+    /// True position (um) of `axis` now (no delay, no noise, with drift).
+    pub fn position_um(&self, axis: usize) -> f64 {
+        self.axes.get(axis).map_or(f64::NAN, |a| a.x) + self.drift_um()
+    }
+
+    fn drift_um(&self) -> f64 {
+        match self.drift {
+            Some((um, tau, rate)) => -um * (-self.t / tau).exp_m1() + rate * self.t,
+            None => 0.0,
+        }
+    }
+
+    /// What the position sensor reads now (um): delayed position, drift, noise.
+    #[inline]
+    pub fn sensor_um(&mut self, axis: usize) -> f64 {
+        let Some(line) = self.delay.get(axis) else {
+            return f64::NAN;
+        };
+        let n = line.len();
+        let old = line[(self.delay_pos + 1) % n];
+        let noise = if self.noise_sigma_um > 0.0 {
+            self.noise_sigma_um * self.rng.gauss()
+        } else {
+            0.0
+        };
+        old + noise
+    }
+
+    /// Advances one loop period with the DAC output voltages held.
+    #[inline]
+    pub fn advance(&mut self, dac_volts: &[f64]) {
+        for _ in 0..self.substeps {
+            self.step_internal(dac_volts);
+        }
+    }
+
+    fn force_um(&self) -> f64 {
+        match self.force {
+            Some((um, at, f, _)) if self.t >= at => {
+                if f > 0.0 {
+                    um * (2.0 * PI * f * (self.t - at)).sin()
+                } else {
+                    um
+                }
+            }
+            _ => 0.0,
+        }
+    }
+
+    #[inline]
+    fn step_internal(&mut self, dac_volts: &[f64]) {
+        let h = self.h;
+        for (ax, &u) in self.axes.iter_mut().zip(dac_volts) {
+            let v = ax.amp.step(u);
+            let y = ax.stat.step(v, h) + ax.asym * v * v;
+            let mut yc = y;
+            for ((c, g), a) in ax.creep.iter_mut().zip(&ax.creep_gain).zip(&ax.creep_alpha) {
+                *c += (g * y - *c) * a;
+                yc += *c;
+            }
+            ax.y_hc = yc;
+        }
+        let f_um = self.force_um();
+        let n = self.axes.len();
+        for i in 0..n {
+            let mut input = self.axes[i].y_hc + f_um;
+            if let Some(row) = self.coupling.as_ref().and_then(|m| m.get(i)) {
+                for (j, (c, ax)) in row.iter().zip(&self.axes).enumerate() {
+                    if j != i {
+                        input += c * ax.y_hc;
+                    }
+                }
+            }
+            let ax = &mut self.axes[i];
+            match &self.ad {
+                Some(ad) => {
+                    let (dx, dv) = (ax.x - input, ax.v);
+                    ax.x = input + ad[0][0] * dx + ad[0][1] * dv;
+                    ax.v = ad[1][0] * dx + ad[1][1] * dv;
+                }
+                None => {
+                    ax.x = input;
+                    ax.v = 0.0;
+                }
+            }
+        }
+        self.steps += 1;
+        self.t = self.steps as f64 * h;
+        let drift = self.drift_um();
+        let len = self.delay.first().map_or(1, |l| l.len());
+        self.delay_pos = (self.delay_pos + 1) % len;
+        for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
+            line[self.delay_pos] = ax.x + drift;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quasi_static() -> Scenario {
+        let mut s = Scenario::default();
+        s.stage.creep.enabled = false;
+        s.stage.drift.enabled = false;
+        s.stage.noise.enabled = false;
+        s.stage.delay.enabled = false;
+        s.run.loop_hz = 10_000.0;
+        s
+    }
+
+    /// Drives the DAC with a slow full-range sine and returns (piezo volts, position).
+    fn sweep(s: &Scenario, freq_hz: f64, periods: f64) -> (Vec<f64>, Vec<f64>) {
+        let mut st = Stage::new(s).unwrap();
+        let n = (periods * s.run.loop_hz / freq_hz) as usize;
+        let full = s.converters.dac_vrefp * 150.0 / 150.0;
+        let (mut u, mut y) = (vec![], vec![]);
+        for k in 0..n {
+            let t = k as f64 / s.run.loop_hz;
+            let dac = full * 0.5 * (1.0 - (2.0 * PI * freq_hz * t).cos());
+            st.advance(&[dac]);
+            u.push(st.piezo_volts(0));
+            y.push(st.position_um(0));
+        }
+        (u, y)
+    }
+
+    /// Loop width: largest gap between ascending and descending branch at equal voltage.
+    pub(crate) fn loop_width(u: &[f64], y: &[f64]) -> f64 {
+        let bins = 200;
+        let (lo, hi) = (
+            u.iter().cloned().fold(f64::INFINITY, f64::min),
+            u.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+        );
+        let mut up = vec![f64::NAN; bins];
+        let mut dn = vec![f64::NAN; bins];
+        for k in 1..u.len() {
+            let b = (((u[k] - lo) / (hi - lo)) * (bins as f64 - 1.0)) as usize;
+            if u[k] > u[k - 1] {
+                up[b] = y[k];
+            } else if u[k] < u[k - 1] {
+                dn[b] = y[k];
+            }
+        }
+        up.iter()
+            .zip(&dn)
+            .filter(|(a, b)| a.is_finite() && b.is_finite())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn default_stage_has_100um_stroke_and_15pct_hysteresis() {
+        let s = quasi_static();
+        let (u, y) = sweep(&s, 1.0, 3.0);
+        let tail = u.len() / 3;
+        let (u, y) = (&u[u.len() - tail..], &y[y.len() - tail..]);
+        let stroke = y.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+            - y.iter().cloned().fold(f64::INFINITY, f64::min);
+        let width = loop_width(u, y) / stroke;
+        eprintln!("stroke {stroke:.2} um, hysteresis {:.1} %", 100.0 * width);
+        assert!((90.0..110.0).contains(&stroke), "stroke {stroke}");
+        assert!((0.12..0.18).contains(&width), "hysteresis {width}");
+    }
+
+    #[test]
+    fn slew_limited_amplifier_is_exact() {
+        let s = quasi_static();
+        let mut st = Stage::new(&s).unwrap();
+        // A 150 V step: the amplifier ramps at I/C = 40 kV/s.
+        st.advance(&[10.0]);
+        let rate = st.piezo_volts(0) / 1e-4;
+        assert!((rate - 40_000.0).abs() < 1.0, "{rate}");
+    }
+
+    #[test]
+    fn resonance_rings_at_its_frequency() {
+        let mut s = quasi_static();
+        s.stage.hysteresis.model = HysteresisModel::None;
+        s.stage.hysteresis.asym_um_per_v2 = 0.0;
+        s.stage.amplifier.current_limit_a = 100.0;
+        s.stage.amplifier.bandwidth_hz = 1e6;
+        s.run.loop_hz = 100_000.0;
+        let mut st = Stage::new(&s).unwrap();
+        let mut y = vec![];
+        for _ in 0..2000 {
+            st.advance(&[0.1]);
+            y.push(st.position_um(0));
+        }
+        // Upward zero crossings of (y - final) give the damped frequency.
+        let fin = 0.1 * 15.0 * s.stage.hysteresis.d;
+        let ups: Vec<usize> = (1..y.len())
+            .filter(|&k| y[k - 1] < fin && y[k] >= fin)
+            .collect();
+        let period = (ups[ups.len() - 1] - ups[0]) as f64 / (ups.len() - 1) as f64 / 1e5;
+        let fd = 1500.0 * (1.0f64 - 0.03 * 0.03).sqrt();
+        assert!((1.0 / period - fd).abs() < 10.0, "{}", 1.0 / period);
+        let overshoot = y.iter().cloned().fold(0.0, f64::max) / fin - 1.0;
+        assert!(overshoot > 0.8, "lightly damped: overshoot {overshoot}");
+    }
+
+    #[test]
+    fn rng_gauss_has_unit_variance() {
+        let mut r = Rng::new(3);
+        let n = 200_000;
+        let (mut m, mut v) = (0.0, 0.0);
+        for _ in 0..n {
+            let g = r.gauss();
+            m += g;
+            v += g * g;
+        }
+        m /= n as f64;
+        v = v / n as f64 - m * m;
+        assert!(m.abs() < 0.01 && (v - 1.0).abs() < 0.02, "{m} {v}");
+    }
+}

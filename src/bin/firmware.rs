@@ -20,6 +20,12 @@ mod board_h743;
 #[cfg(all(target_os = "none", feature = "board-h743"))]
 use {defmt_rtt as _, panic_probe as _};
 
+#[cfg(all(target_os = "none", feature = "board-qemu"))]
+#[path = "firmware/board_qemu.rs"]
+mod board_qemu;
+#[cfg(all(target_os = "none", feature = "board-qemu"))]
+use {cortex_m_rt as _, defmt_semihosting as _};
+
 #[cfg(not(target_os = "none"))]
 fn main() {
     eprintln!("firmware: build with --target thumbv7em-none-eabihf");

@@ -9,6 +9,7 @@
 //! ([`super::solve::solve_increasing`]). [`ImsLoop::Delayed`] is the usual one-sample-delay
 //! workaround of 004 §4.4 (`h` from the previous sample), kept for comparison.
 
+use super::creep::CreepInverse;
 use super::solve::solve_increasing_hinted;
 use super::FfError;
 use crate::hysteresis::{Cbw, Hysteresis};
@@ -53,6 +54,10 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     volts_max: T,
     dt_s: T,
     min_slope: T,
+    /// Static quadratic term added to the model output (um/V^2), e.g. a stage's asymmetry.
+    quad: T,
+    /// Inverse creep applied to the reference (None: no creep).
+    creep: Option<CreepInverse<T>>,
     /// Secant slope of the last solved step (first trial of the next solve).
     slope_hint: T,
     state: M::State,
@@ -105,12 +110,39 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             volts_max,
             dt_s,
             min_slope,
+            quad: T::ZERO,
+            creep: None,
             slope_hint,
             state,
             u: u0,
             y,
             evals: 0,
         })
+    }
+
+    /// Adds a static term `quad*u^2` to the model output (`y = model(u) + quad*u^2`).
+    /// Refused when it would let `y` decrease with `u` inside the voltage range.
+    pub fn with_quadratic(mut self, quad_um_per_v2: T) -> Result<Self, FfError> {
+        let u_max = self.volts_min.abs().max(self.volts_max.abs());
+        let min_slope =
+            self.model.d() - self.model.max_h_slope() - T::TWO * quad_um_per_v2.abs() * u_max;
+        super::ensure(
+            quad_um_per_v2.is_finite() && min_slope > T::ZERO,
+            "IMS: quadratic term too large (y must increase with u over the voltage range)",
+        )?;
+        self.min_slope = min_slope;
+        self.quad = quad_um_per_v2;
+        let u = self.u;
+        self.reset_volts(u);
+        Ok(self)
+    }
+
+    /// Inverts linear creep of the stage before the hysteresis (see [`CreepInverse`]).
+    pub fn with_creep(mut self, creep: CreepInverse<T>) -> Self {
+        self.creep = Some(creep);
+        let u = self.u;
+        self.reset_volts(u);
+        self
     }
 
     pub fn model(&self) -> &M {
@@ -134,12 +166,16 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         if !y_ref_um.is_finite() {
             return self.u;
         }
+        let y_ref_um = match &self.creep {
+            Some(c) => c.static_target(y_ref_um),
+            None => y_ref_um,
+        };
         let u = match self.closure {
             ImsLoop::Solved => {
-                let (model, state, dt) = (&self.model, self.state, self.dt_s);
+                let (model, state, dt, quad) = (&self.model, self.state, self.dt_s, self.quad);
                 let f = |u: T| {
                     let mut s = state;
-                    model.step(&mut s, u, dt) - y_ref_um
+                    model.step(&mut s, u, dt) + quad * u * u - y_ref_um
                 };
                 let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
                 let tol = T::from_f64(8.0) * T::EPSILON * scale;
@@ -164,23 +200,30 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
         let u = if u.is_finite() { u } else { self.u };
         let u = u.clamp_to(self.volts_min, self.volts_max);
-        self.y = self.model.step(&mut self.state, u, self.dt_s);
+        self.y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
         self.u = u;
+        if let Some(c) = &mut self.creep {
+            c.commit(self.y);
+        }
         u
     }
 
     /// Restart relaxed (hysteresis state zero) at the voltage that gives `y_um`.
     pub fn reset(&mut self, y_um: T) {
+        let dc = self.creep.as_ref().map_or(T::ONE, |c| c.dc_gain());
         let u0 = if y_um.is_finite() {
-            y_um / self.model.d()
+            y_um / (dc * self.model.d())
         } else {
             T::ZERO
         };
         let u0 = u0.clamp_to(self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
-        self.y = self.model.step(&mut self.state, u0, self.dt_s);
+        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.u = u0;
         self.evals = 0;
+        if let Some(c) = &mut self.creep {
+            c.settle(self.y);
+        }
     }
 
     /// Restart relaxed at voltage `u0` (e.g. 0 V at power-up).
@@ -188,8 +231,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u0 = if u0.is_finite() { u0 } else { T::ZERO };
         let u0 = u0.clamp_to(self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
-        self.y = self.model.step(&mut self.state, u0, self.dt_s);
+        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.u = u0;
+        if let Some(c) = &mut self.creep {
+            c.settle(self.y);
+        }
     }
 }
 
@@ -249,5 +295,48 @@ mod tests {
         assert_eq!(ff.compensate(f64::INFINITY), u);
         assert_eq!(ff.compensate(1e9), 100.0);
         assert_eq!(ff.compensate(-1e9), 0.0);
+    }
+}
+
+#[cfg(test)]
+mod stage_terms {
+    use super::*;
+
+    /// CBW + quadratic + creep, as the simulated stage composes them.
+    #[test]
+    fn quadratic_and_creep_are_inverted_exactly() {
+        let m = Cbw::with_n1(0.9f64, 0.3, 0.012, 0.004).unwrap();
+        let (g, tau, dt) = ([0.01, 0.015, 0.02], [0.02, 0.3, 5.0], 1e-4);
+        let q = -2e-4;
+        let creep = CreepInverse::new(&g, &tau, dt).unwrap();
+        let mut ff = Ims::new(m, ImsLoop::Solved, 0.0, 150.0, dt)
+            .unwrap()
+            .with_quadratic(q)
+            .unwrap()
+            .with_creep(creep);
+        let mut s = m.init(0.0);
+        let mut c = [0.0f64; 3];
+        let mut max_err: f64 = 0.0;
+        for k in 0..20_000 {
+            let t = k as f64 * dt;
+            let y_ref =
+                50.0 - 20.0 * (2.0 * core::f64::consts::PI * t).cos() * (1.0 - (-10.0 * t).exp());
+            let u = ff.compensate(y_ref);
+            let ys = m.step(&mut s, u, dt) + q * u * u;
+            let mut y = ys;
+            for i in 0..3 {
+                let e = (-dt / tau[i]).exp();
+                c[i] = e * c[i] + (1.0 - e) * g[i] * ys;
+                y += c[i];
+            }
+            if k > 0 {
+                max_err = max_err.max((y - y_ref).abs());
+            }
+        }
+        assert!(max_err < 1e-8, "{max_err}");
+        assert!(Ims::new(m, ImsLoop::Solved, 0.0, 150.0, dt)
+            .unwrap()
+            .with_quadratic(-0.01)
+            .is_err());
     }
 }

@@ -20,6 +20,10 @@ use crate::real::Real;
 /// `h` holds. This changes nothing for sweeps that stay out of that region and bounds
 /// `-h_down <= h <= h_up` ([`Gbw::h_bound`]).
 ///
+/// Because the rise settles at `h_up` and the fall at `-h_down`, a zero-mean periodic input
+/// ratchets `h` toward the larger equilibrium: the loops drift until they sit against it
+/// (visible in `piezo demo`); this is eq. (3)'s own behaviour, not a discretisation effect.
+///
 /// Accepted when `alpha > 0`, `A > 0`, `G > |B|` (both equilibria exist), `n >= 1`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gbw<T> {

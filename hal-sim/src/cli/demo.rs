@@ -1,8 +1,13 @@
-//! `piezo demo`: every hysteresis model driven by a decaying sine; each loop as CSV and SVG.
+//! `piezo demo`: every hysteresis model driven by a decaying sine; each loop as CSV and SVG,
+//! plus all loops in one grid `loops.svg`.
 use anyhow::{Context, Result};
-use piezo_core::hysteresis::{Cbw, Hysteresis};
+use piezo_core::hysteresis::{
+    AbwAbs, AbwU, BwState, Cbw, Dahl, Dpi, Gbw, Hysteresis, Mbw002, MbwRlm, MultiBw, Pi, Ppi,
+    RlmState, Wpmbw,
+};
+use piezo_core::linear::{Discretisation, Linear, Section};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::plot::{write_grid, Plot};
 
@@ -27,10 +32,64 @@ pub fn decaying_sine(amp: f64, rate_hz: f64) -> (Vec<f64>, Vec<f64>) {
     (t, u)
 }
 
+/// 004 eq. (19): `u(t) = amp*e^(-0.21 t)*[sin(2 pi t + 1.5 pi) + 1]` (starts at 0, stays >= 0).
+pub fn decaying_sine_004(amp: f64, t: &[f64]) -> Vec<f64> {
+    t.iter()
+        .map(|t| {
+            amp * (-0.21 * t).exp()
+                * ((2.0 * std::f64::consts::PI * t + 1.5 * std::f64::consts::PI).sin() + 1.0)
+        })
+        .collect()
+}
+
 /// Runs `model` over `u` from rest and returns its output.
 pub fn run_model<M: Hysteresis<f64>>(model: &M, u: &[f64], dt: f64) -> Vec<f64> {
     let mut s = model.init(0.0);
     u.iter().map(|&u| model.step(&mut s, u, dt)).collect()
+}
+
+/// Runs a single-variable BW-type model and returns `(y, h)`.
+fn run_bw<M: Hysteresis<f64, State = BwState<f64>>>(
+    model: &M,
+    u: &[f64],
+    dt: f64,
+) -> (Vec<f64>, Vec<f64>) {
+    let mut s = model.init(0.0);
+    u.iter()
+        .map(|&u| {
+            let y = model.step(&mut s, u, dt);
+            (y, s.h)
+        })
+        .unzip()
+}
+
+/// One model's run: name, what the y axis is, input, output, extra CSV columns.
+struct Loop {
+    name: &'static str,
+    ylabel: &'static str,
+    u: Vec<f64>,
+    y: Vec<f64>,
+    extra: Vec<(&'static str, Vec<f64>)>,
+}
+
+fn write_csv(path: &Path, t: &[f64], l: &Loop) -> Result<()> {
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
+    );
+    write!(f, "t,u,y")?;
+    for (name, _) in &l.extra {
+        write!(f, ",{name}")?;
+    }
+    writeln!(f)?;
+    for k in 0..t.len() {
+        write!(f, "{},{},{}", t[k], l.u[k], l.y[k])?;
+        for (_, col) in &l.extra {
+            write!(f, ",{}", col[k])?;
+        }
+        writeln!(f)?;
+    }
+    f.flush()?;
+    Ok(())
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -42,25 +101,233 @@ pub fn run(args: Args) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let dt = 1.0 / args.rate_hz;
-    let (t, u) = decaying_sine(100.0, args.rate_hz);
+    let (t, u100) = decaying_sine(100.0, args.rate_hz);
+    let (_, u5) = decaying_sine(5.0, args.rate_hz);
+    let u004 = decaying_sine_004(5.45, &t);
+    let mut loops = Vec::new();
+
+    // 000 backup slide, set 1.
     let cbw = Cbw::with_n1(0.16, 0.07, 0.02, 0.01)?;
-    let models: Vec<(&str, Vec<f64>)> = vec![("cbw", run_model(&cbw, &u, dt))];
-    let mut plots = Vec::new();
-    for (name, y) in &models {
-        let path = args.out.join(format!("{name}.csv"));
-        let mut f = std::io::BufWriter::new(
-            std::fs::File::create(&path)
-                .with_context(|| format!("cannot write {}", path.display()))?,
-        );
-        writeln!(f, "t,u,y")?;
-        for k in 0..t.len() {
-            writeln!(f, "{},{},{}", t[k], u[k], y[k])?;
+    let (y, h) = run_bw(&cbw, &u100, dt);
+    loops.push(Loop {
+        name: "cbw",
+        ylabel: "y [um]",
+        u: u100.clone(),
+        y,
+        extra: vec![("h", h)],
+    });
+
+    // 000 eq. (3): A like set 1, B = 0.003, G = 0.02 (asymmetric equilibria 3.0 / 4.1 um);
+    // 60 V keeps the sweep out of the run-away region the model guards (see `Gbw`).
+    let gbw = Gbw::new(0.16, 1.0, 0.07, 0.003, 0.02, 1.0)?;
+    let u60: Vec<f64> = u100.iter().map(|u| 0.6 * u).collect();
+    let (y, h) = run_bw(&gbw, &u60, dt);
+    loops.push(Loop {
+        name: "gbw",
+        ylabel: "y [um]",
+        u: u60,
+        y,
+        extra: vec![("h", h)],
+    });
+
+    // 000 eq. (4): stiffness like set 1's A_bw, saturation 3 um.
+    let dahl = Dahl::new(0.16, 0.07, 3.0, 1.5)?;
+    let (y, h) = run_bw(&dahl, &u100, dt);
+    loops.push(Loop {
+        name: "dahl",
+        ylabel: "y [um]",
+        u: u100.clone(),
+        y,
+        extra: vec![("h", h)],
+    });
+
+    // 001 eq. (4-10): 8 backlash operators, thresholds 0..100 V, weights falling off.
+    let r: [f64; 8] = core::array::from_fn(|i| 12.5 * i as f64 + 1.0);
+    let w: [f64; 8] = core::array::from_fn(|i| 0.03 * 0.75f64.powi(i as i32));
+    let pi = Pi::new(0.1, w, r)?;
+    let y = run_model(&pi, &u100, dt);
+    loops.push(Loop {
+        name: "pi",
+        ylabel: "y [um]",
+        u: u100.clone(),
+        y,
+        extra: vec![],
+    });
+    let ppi = Ppi::new(3e-6, 0.1, w, r)?;
+    let y = run_model(&ppi, &u100, dt);
+    loops.push(Loop {
+        name: "ppi",
+        ylabel: "y [um]",
+        u: u100.clone(),
+        y,
+        extra: vec![],
+    });
+    let w_dpi: [f64; 8] = w.map(|w| w + 0.1 / 8.0); // absorb w0 into the bank (eq. 10 has none)
+    let dpi = Dpi::new(w_dpi, r, [1.0, 0.4, 0.4], [0.0, 3.0, 6.0])?;
+    let y = run_model(&dpi, &u100, dt);
+    loops.push(Loop {
+        name: "dpi",
+        ylabel: "y [um]",
+        u: u100.clone(),
+        y,
+        extra: vec![],
+    });
+
+    // 004 eq. (21) "traditional asymmetric BW" (= 001 eq. 3 in piezo form), 004's values.
+    let abw_u = AbwU::new(0.9221, 0.3050, 0.5913, 0.1649, 1.7170, 0.0415)?;
+    let (y, h) = run_bw(&abw_u, &u5, dt);
+    loops.push(Loop {
+        name: "abw_u",
+        ylabel: "y [mrad]",
+        u: u5.clone(),
+        y,
+        extra: vec![("h", h)],
+    });
+
+    // 002 table 1, asymmetric BW column, mapped to piezo form.
+    let abw_abs = AbwAbs::from_002(1.0986, -0.6715, 1.9231, -0.35, 1.0, 0.032)?;
+    let (y, h) = run_bw(&abw_abs, &u5, dt);
+    loops.push(Loop {
+        name: "abw_abs",
+        ylabel: "y [um]",
+        u: u5.clone(),
+        y,
+        extra: vec![("h", h)],
+    });
+
+    // 002 table 1, MBW column.
+    let mbw = Mbw002::from_002(1.0998, -0.0656, 0.3922, -0.15, 1.0, -0.011, 0.0108, 3.68e-5)?;
+    let mut s = mbw.init(0.0);
+    let (mut y, mut h, mut rate) = (Vec::new(), Vec::new(), Vec::new());
+    for &u in &u5 {
+        y.push(mbw.step(&mut s, u, dt));
+        h.push(s.h);
+        rate.push(s.du_dt);
+    }
+    loops.push(Loop {
+        name: "mbw_002",
+        ylabel: "y [um]",
+        u: u5.clone(),
+        y,
+        extra: vec![("h", h), ("du_dt", rate)],
+    });
+
+    // 004 fig. 5b (rho 0.5, lambda 0.4, mu 0.45) and the identified WPMBW, 004 eq. (19) input.
+    let rlm = MbwRlm::new(0.5, 0.4, 0.45)?;
+    let y = run_model(&rlm, &u004, dt);
+    loops.push(Loop {
+        name: "mbw_rlm",
+        ylabel: "w",
+        u: u004.clone(),
+        y,
+        extra: vec![],
+    });
+    let wpmbw = Wpmbw::new(MbwRlm::new(0.6485, 0.7217, 0.7440)?, [0.9268, 0.0048])?;
+    let run_rlm = |s: &mut RlmState<f64>, u: f64| (wpmbw.step(s, u, dt), s.w);
+    let mut s = wpmbw.init(0.0);
+    let (y, w): (Vec<f64>, Vec<f64>) = u004.iter().map(|&u| run_rlm(&mut s, u)).unzip();
+    loops.push(Loop {
+        name: "wpmbw",
+        ylabel: "v [mrad]",
+        u: u004.clone(),
+        y: y.clone(),
+        extra: vec![("w", w.clone())],
+    });
+
+    // Hammerstein (004 eq. 6-8): WPMBW then the stage's 2nd-order dynamics from 004's
+    // m, b, k (wn = sqrt(k/m) = 554 rad/s, zeta = b/(2 sqrt(k m)) = 0.71), exact ZOH.
+    let (m, b, k) = (0.1029, 81.3370, 3.1628e4);
+    let lin = Linear::<f64, 1>::new(
+        1.0,
+        [Section::Second {
+            wn: f64::sqrt(k / m),
+            zeta: b / (2.0 * f64::sqrt(k * m)),
+            zero: None,
+        }],
+        dt,
+        Discretisation::Zoh,
+    )?;
+    let mut ls = lin.init(0.0);
+    let yl: Vec<f64> = y.iter().map(|&v| lin.step(&mut ls, v)).collect();
+    loops.push(Loop {
+        name: "wpmbw_linear",
+        ylabel: "y [mrad]",
+        u: u004.clone(),
+        y: yl,
+        extra: vec![("w", w), ("v", y)],
+    });
+
+    // 003 eq. (4-7), 3 x 3, A/B/Gamma magnitudes after 003 eq. (22) (illustrative D);
+    // U_x swept +-200 V as in 003's characterisation, U_y = U_z = 0.
+    let multi = MultiBw::<f64, 3, 3>::new(
+        [
+            [0.18, 0.0054, -0.036],
+            [-0.0345, 0.18, -0.0259],
+            [0.01, -0.01, 0.031],
+        ],
+        [
+            [0.0616, 0.0013, -0.0338],
+            [-0.0026, 0.0658, -0.0259],
+            [0.0111, -0.0364, 0.0160],
+        ],
+        [
+            [0.0073, 0.0002, 0.0],
+            [-0.0001, 0.0054, 0.0],
+            [0.0004, 0.0, 0.0017],
+        ],
+        [
+            [0.0016, 0.0, 0.0],
+            [-0.0001, 0.0010, 0.0],
+            [0.0001, 0.0, 0.0005],
+        ],
+    )?;
+    let ux: Vec<f64> = u100.iter().map(|u| 2.0 * u).collect();
+    let mut s = multi.init([0.0; 3]);
+    let mut cols: [Vec<f64>; 6] = Default::default();
+    for &u in &ux {
+        let y = multi.step(&mut s, [u, 0.0, 0.0], dt);
+        for i in 0..3 {
+            cols[i].push(y[i]);
+            cols[3 + i].push(s.h[i]);
         }
-        plots.push(Plot::new(name, "u [V]", "y [um]").line(name, &u, y));
-        println!("{name}: {}", path.display());
+    }
+    let [yx, yy, yz, hx, hy, hz] = cols;
+    loops.push(Loop {
+        name: "multi_bw_x",
+        ylabel: "y_x [um]",
+        u: ux.clone(),
+        y: yx,
+        extra: vec![
+            ("y_y", yy.clone()),
+            ("y_z", yz.clone()),
+            ("h_x", hx),
+            ("h_y", hy),
+            ("h_z", hz),
+        ],
+    });
+
+    let mut plots = Vec::new();
+    for l in &loops {
+        let csv = args.out.join(format!("{}.csv", l.name));
+        write_csv(&csv, &t, l)?;
+        let xlabel = if l.name.starts_with("multi") {
+            "U_x [V]"
+        } else {
+            "u [V]"
+        };
+        let mut plot = Plot::new(l.name, xlabel, l.ylabel).line(l.name, &l.u, &l.y);
+        if l.name.starts_with("multi") {
+            // the couplings on the same axes
+            plot = plot.line("y_y", &l.u, &yy).line("y_z", &l.u, &yz);
+        }
+        let svg = args.out.join(format!("{}.svg", l.name));
+        plot.write_svg(&svg)
+            .with_context(|| format!("cannot write {}", svg.display()))?;
+        plots.push(plot);
+        println!("{:13} {} {}", l.name, csv.display(), svg.display());
     }
     let svg = args.out.join("loops.svg");
-    write_grid(&svg, &plots, 3)?;
+    write_grid(&svg, &plots, 4).with_context(|| format!("cannot write {}", svg.display()))?;
     println!("plot: {}", svg.display());
     Ok(())
 }

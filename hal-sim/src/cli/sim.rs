@@ -1,9 +1,277 @@
-//! `piezo sim`.
-use anyhow::Result;
+//! `piezo sim`: runs scenarios x controllers on the simulated stage and prints tracking
+//! metrics; `--json` for machines, `--out DIR` for CSV time series and SVG plots.
+use anyhow::{bail, Context, Result};
+use rayon::prelude::*;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::plot::{write_grid, Plot};
+use crate::scenario::Scenario;
+use crate::sim::controllers::{registry, Entry};
+use crate::sim::{calibrate, default_scenarios, run_calibrated, Record, RunResult};
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// A built-in scenario name (selects it) or a TOML file (adds it); repeatable.
+    /// Without any name every built-in scenario runs.
+    #[arg(long = "scenario", value_name = "NAME|FILE")]
+    pub scenarios: Vec<String>,
+    /// Controller name from the registry; repeatable. Default: all.
+    #[arg(long = "controller", value_name = "NAME")]
+    pub controllers: Vec<String>,
+    /// Reference frequency (Hz) of the built-in periodic scenarios.
+    #[arg(long)]
+    pub freq_hz: Option<f64>,
+    /// Reference amplitude (um, peak) of the built-in periodic scenarios.
+    #[arg(long)]
+    pub amplitude_um: Option<f64>,
+    /// Simulated duration (s) of every scenario.
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Print `{"runs":[...]}` instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Write time series (CSV) and plots (SVG) here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// List scenarios and controllers, then exit.
+    #[arg(long)]
+    pub list: bool,
+}
 
-pub fn run(_args: Args) -> Result<()> {
-    anyhow::bail!("piezo sim is not implemented yet")
+/// Resolves the scenario arguments: names select built-ins, files add scenarios.
+pub fn select_scenarios(args: &Args) -> Result<Vec<Scenario>> {
+    if let Some(f) = args.freq_hz {
+        if !(f.is_finite() && f > 0.0) {
+            bail!("--freq-hz must be finite and > 0, got {f}");
+        }
+    }
+    if let Some(a) = args.amplitude_um {
+        if !(a.is_finite() && a >= 0.0) {
+            bail!("--amplitude-um must be finite and >= 0, got {a}");
+        }
+    }
+    let builtin = default_scenarios(args.freq_hz, args.amplitude_um);
+    let mut named = Vec::new();
+    let mut files = Vec::new();
+    for s in &args.scenarios {
+        let p = Path::new(s);
+        if s.ends_with(".toml") || p.is_file() {
+            files.push(Scenario::load(p)?);
+        } else if let Some(b) = builtin.iter().find(|b| &b.name == s) {
+            named.push(b.clone());
+        } else {
+            let names: Vec<_> = builtin.iter().map(|b| b.name.as_str()).collect();
+            bail!(
+                "--scenario {s}: no such built-in scenario or file (built-ins: {})",
+                names.join(", ")
+            );
+        }
+    }
+    let mut out = if named.is_empty() { builtin } else { named };
+    out.extend(files);
+    if let Some(d) = args.duration_s {
+        for s in &mut out {
+            s.run.duration_s = d;
+            s.run.settle_s = s.run.settle_s.map(|x| x.min(0.5 * d));
+        }
+    }
+    for s in &out {
+        s.validate()
+            .with_context(|| format!("scenario {} with the command-line overrides", s.name))?;
+    }
+    Ok(out)
+}
+
+/// Resolves `--controller` names.
+pub fn select_controllers(names: &[String]) -> Result<Vec<Entry>> {
+    let all = registry();
+    if names.is_empty() {
+        return Ok(all);
+    }
+    names
+        .iter()
+        .map(|n| {
+            all.iter().find(|e| e.name == n).copied().ok_or_else(|| {
+                let known: Vec<_> = all.iter().map(|e| e.name).collect();
+                anyhow::anyhow!("--controller {n}: unknown (known: {})", known.join(", "))
+            })
+        })
+        .collect()
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let scenarios = select_scenarios(&args)?;
+    let controllers = select_controllers(&args.controllers)?;
+    if args.list {
+        println!("scenarios:");
+        for s in &scenarios {
+            println!(
+                "  {:<16} {} axis, {:?} {} Hz, {} s",
+                s.name, s.stage.axes, s.reference.wave, s.reference.freq_hz, s.run.duration_s
+            );
+        }
+        println!("controllers:");
+        for c in &controllers {
+            println!("  {:<16} {}", c.name, c.about);
+        }
+        return Ok(());
+    }
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    // Calibrate each scenario once, then every (scenario, controller) in parallel.
+    let cals: Vec<_> = scenarios.par_iter().map(calibrate).collect::<Result<_>>()?;
+    let jobs: Vec<(usize, Entry)> = scenarios
+        .iter()
+        .enumerate()
+        .flat_map(|(i, s)| {
+            controllers
+                .iter()
+                .filter(move |c| s.stage.axes == 1 || c.two_axis.is_some())
+                .map(move |c| (i, *c))
+        })
+        .collect();
+    let total: f64 = jobs
+        .iter()
+        .map(|(i, _)| scenarios[*i].run.duration_s * scenarios[*i].run.loop_hz)
+        .sum();
+    let verbose = total > 2e7;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let results: Vec<(RunResult, Option<Record>)> = jobs
+        .par_iter()
+        .map(|(i, c)| {
+            let r = run_calibrated(&scenarios[*i], c, &cals[*i], args.out.is_some());
+            if verbose {
+                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                eprintln!("[{d}/{}] {} / {}", jobs.len(), scenarios[*i].name, c.name);
+            }
+            r
+        })
+        .collect::<Result<_>>()?;
+    if let Some(dir) = &args.out {
+        for (r, rec) in &results {
+            if let Some(rec) = rec {
+                write_outputs(dir, r, rec)?;
+            }
+        }
+    }
+    let runs: Vec<&RunResult> = results.iter().map(|(r, _)| r).collect();
+    if args.json {
+        println!("{}", serde_json::to_string(&Runs { runs: &runs })?);
+    } else {
+        println!(
+            "{:<16} {:<22} {:>10} {:>9} {:>11} {:>10} {:>7}",
+            "scenario", "controller", "rmse_um", "rmse_%", "max_err_%", "saturated", "faults"
+        );
+        for r in &runs {
+            println!(
+                "{:<16} {:<22} {:>10.4} {:>9.3} {:>11.3} {:>10} {:>7}",
+                r.scenario,
+                r.controller,
+                r.rmse_um,
+                r.rmse_pct,
+                r.max_err_pct,
+                r.saturated_samples,
+                r.sensor_faults + r.nonfinite_commands
+            );
+        }
+    }
+    if let Some(dir) = &args.out {
+        let path = dir.join("summary.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&Runs { runs: &runs })?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        if !args.json {
+            println!("wrote {}", dir.display());
+        }
+    }
+    Ok(())
+}
+
+/// The `--json` document: `{"runs":[...]}`, fields in [`RunResult`] order.
+#[derive(serde::Serialize)]
+struct Runs<'a> {
+    runs: &'a [&'a RunResult],
+}
+
+fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {
+    let stem = format!("{}_{}", r.scenario, r.controller);
+    let path = dir.join(format!("{stem}.csv"));
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
+    );
+    let n_ax = rec.reference.len();
+    let mut header = String::from("t_s");
+    for i in 0..n_ax {
+        header += &format!(",ref{i}_um,pos{i}_um,meas{i}_um,volts{i},err{i}_um");
+    }
+    writeln!(f, "{header}")?;
+    for k in 0..rec.t.len() {
+        write!(f, "{:.7}", rec.t[k])?;
+        for i in 0..n_ax {
+            write!(
+                f,
+                ",{:.5},{:.5},{:.5},{:.4},{:.5}",
+                rec.reference[i][k],
+                rec.position[i][k],
+                rec.measured[i][k],
+                rec.volts[i][k],
+                rec.reference[i][k] - rec.position[i][k]
+            )?;
+        }
+        writeln!(f)?;
+    }
+    f.flush()?;
+    let mut plots = Vec::new();
+    for i in 0..n_ax {
+        let err: Vec<f64> = rec.reference[i]
+            .iter()
+            .zip(&rec.position[i])
+            .map(|(a, b)| a - b)
+            .collect();
+        let ax = if n_ax > 1 {
+            format!(" axis {i}")
+        } else {
+            String::new()
+        };
+        plots.push(
+            Plot::new(&format!("{stem}{ax}: tracking"), "t [s]", "position [um]")
+                .line("reference", &rec.t, &rec.reference[i])
+                .line("position", &rec.t, &rec.position[i]),
+        );
+        plots.push(
+            Plot::new(
+                &format!("{stem}{ax}: position vs reference"),
+                "reference [um]",
+                "position [um]",
+            )
+            .line("position", &rec.reference[i], &rec.position[i])
+            .line("ideal", &rec.reference[i], &rec.reference[i]),
+        );
+        plots.push(
+            Plot::new(
+                &format!("{stem}{ax}: tracking error"),
+                "t [s]",
+                "error [um]",
+            )
+            .line("reference - position", &rec.t, &err),
+        );
+        plots.push(
+            Plot::new(
+                &format!("{stem}{ax}: piezo voltage"),
+                "t [s]",
+                "voltage [V]",
+            )
+            .line("applied", &rec.t, &rec.volts[i]),
+        );
+    }
+    if n_ax == 2 {
+        plots.push(
+            Plot::new(&format!("{stem}: scan"), "x [um]", "y [um]")
+                .line("reference", &rec.reference[0], &rec.reference[1])
+                .line("position", &rec.position[0], &rec.position[1]),
+        );
+    }
+    write_grid(dir.join(format!("{stem}.svg")), &plots, 4)?;
+    Ok(())
 }

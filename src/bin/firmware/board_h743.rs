@@ -18,8 +18,9 @@ pub const SYSCLK_HZ: u32 = 400_000_000;
 #[rtic::app(device = stm32h7xx_hal::pac, peripherals = true, dispatchers = [SAI1, SAI2])]
 mod app {
     use super::{SAMPLE_HZ, SYSCLK_HZ};
-    use crate::control::{Io, Loop, Timing};
+    use crate::control::{stream_frames, Ctl, Io};
     use cortex_m::peripheral::DWT;
+    use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
     use rtic_monotonics::systick::prelude::*;
     use stm32h7xx_hal::{
         adc, delay::Delay, pac, prelude::*, rcc::rec::AdcClkSel, serial, timer::Timer,
@@ -32,8 +33,7 @@ mod app {
 
     #[shared]
     struct Shared {
-        ctl: Loop,
-        timing: Timing,
+        ctl: Ctl,
     }
 
     #[local]
@@ -43,6 +43,7 @@ mod app {
         _timer: Timer<pac::TIM2>,
         rx: serial::Rx<pac::USART3>,
         tx: serial::Tx<pac::USART3>,
+        line: LineBuffer,
         period_cycles: u32,
     }
 
@@ -117,8 +118,7 @@ mod app {
         defmt::info!("firmware up: {} Hz sample rate", SAMPLE_HZ);
         (
             Shared {
-                ctl: Loop::new(Io::on_chip(), SAMPLE_HZ as f32),
-                timing: Timing::new(),
+                ctl: Ctl::new(Io::on_chip(), SAMPLE_HZ as f32),
             },
             Local {
                 adc,
@@ -126,6 +126,7 @@ mod app {
                 _timer: timer,
                 rx,
                 tx,
+                line: LineBuffer::new(),
                 period_cycles: SYSCLK_HZ / SAMPLE_HZ,
             },
         )
@@ -143,8 +144,8 @@ mod app {
     }
 
     /// The control period: sample in, step, DAC out. Highest priority.
-    #[task(binds = ADC1_2, priority = 3, shared = [ctl, timing], local = [adc, dac, period_cycles])]
-    fn control(mut cx: control::Context) {
+    #[task(binds = ADC1_2, priority = 3, shared = [ctl], local = [adc, dac, period_cycles])]
+    fn sample(mut cx: sample::Context) {
         let t0 = DWT::cycle_count();
         let regs = cx.local.adc.inner();
         // Reading DR clears EOC. OVR means a conversion was overwritten: a missed deadline.
@@ -153,13 +154,16 @@ mod app {
             regs.isr.write(|w| w.ovr().set_bit());
         }
         let code = regs.dr.read().bits();
-        let t1 = DWT::cycle_count();
-        let dac_code = cx.shared.ctl.lock(|ctl| ctl.step(code));
-        let t2 = DWT::cycle_count();
-        cx.local.dac.set_value(dac_code);
         let period = *cx.local.period_cycles;
-        cx.shared.timing.lock(|t| {
+        let dac = cx.local.dac;
+        cx.shared.ctl.lock(|ctl| {
+            let t1 = DWT::cycle_count();
+            let dac_code = ctl.lp.step(code);
+            let t2 = DWT::cycle_count();
+            dac.set_value(dac_code);
+            ctl.rec.push(&ctl.lp.signals);
             let isr = DWT::cycle_count().wrapping_sub(t0);
+            let t = &mut ctl.timing;
             t.step.record(t2.wrapping_sub(t1));
             t.isr.record(isr);
             if overrun || isr > period {
@@ -168,32 +172,51 @@ mod app {
         });
     }
 
-    /// Command bytes from the serial port.
-    #[task(binds = USART3, priority = 1, shared = [ctl, timing], local = [rx, tx])]
+    /// Command lines from the serial port (priority 1; the control task preempts it).
+    #[task(binds = USART3, priority = 1, shared = [ctl], local = [rx, tx, line])]
     fn serial_rx(mut cx: serial_rx::Context) {
-        use core::fmt::Write;
-        while let Ok(byte) = embedded_hal_nb_read(cx.local.rx) {
-            if byte == b'r' {
-                cx.shared.timing.lock(|t| *t = Timing::new());
-                writeln!(cx.local.tx, "ok").ok();
+        use stm32h7xx_hal::hal::serial::Read;
+        let tx = cx.local.tx;
+        while let Ok(byte) = cx.local.rx.read() {
+            let Some(line) = cx.local.line.push(byte) else {
+                continue;
+            };
+            let mut reply = cmd::Reply::<160>::new();
+            match line.and_then(cmd::parse) {
+                Ok(Command::Empty) => continue,
+                Ok(Command::Rec(RecCmd::Read { start, count })) => {
+                    let ctl = &mut cx.shared.ctl;
+                    stream_frames(
+                        start,
+                        count,
+                        |i| ctl.lock(|c| c.rec.frame(i).copied()),
+                        |l| send(tx, l),
+                    );
+                    continue;
+                }
+                Ok(c) => cx.shared.ctl.lock(|ctl| ctl.execute(c, &mut reply)),
+                Err(e) => {
+                    use core::fmt::Write;
+                    write!(reply, "{e}").ok();
+                }
             }
+            send(tx, reply.as_str());
         }
-        let _ = &mut cx.shared.ctl;
     }
 
-    fn embedded_hal_nb_read(
-        rx: &mut serial::Rx<pac::USART3>,
-    ) -> stm32h7xx_hal::nb::Result<u8, serial::Error> {
-        use stm32h7xx_hal::hal::serial::Read;
-        rx.read()
+    /// One reply line, blocking (low priority; 115200 Bd).
+    fn send(tx: &mut serial::Tx<pac::USART3>, line: &str) {
+        use core::fmt::Write;
+        tx.write_str(line).ok();
+        tx.write_str("\r\n").ok();
     }
 
     /// Timing and overruns over defmt, once per second.
-    #[task(priority = 1, shared = [timing])]
+    #[task(priority = 1, shared = [ctl])]
     async fn telemetry(mut cx: telemetry::Context) {
         loop {
             Mono::delay(rtic_monotonics::fugit::ExtU32::millis(1000)).await;
-            let t = cx.shared.timing.lock(|t| *t);
+            let t = cx.shared.ctl.lock(|c| c.timing);
             defmt::info!(
                 "step cycles min {} max {} last {} | isr min {} max {} last {} | samples {} overruns {}",
                 t.step.min, t.step.max, t.step.last, t.isr.min, t.isr.max, t.isr.last,

@@ -1,0 +1,458 @@
+//! QEMU `mps2-an386` (Cortex-M4F) board: the RTIC app boots in CI with a simulated stage.
+//!
+//! * SysTick (25 MHz in QEMU's mps2 model) fires at the sample rate and runs the control
+//!   step at the highest priority. The converters are replaced by [`SimStage`]: the CBW model
+//!   of the core plus a first-order lag, quantised like the on-chip 16-bit ADC / 12-bit DAC.
+//! * The CMSDK UART0 (0x4000_4000, QEMU `-serial`) carries the command protocol, polled from
+//!   the idle task (lowest priority).
+//! * defmt logs go out over semihosting (decode with `defmt-print -e <elf>`).
+//! * Before the loop starts, `init` measures the instructions per control step of every
+//!   feedback law x feedforward combination (run QEMU with `-icount shift=0`: one instruction
+//!   per virtual ns, so SysTick ticks over N steps count instructions; a loop of known length
+//!   calibrates ticks to instructions). The `bench` command prints that table.
+//! * After at least [`PERIODS_MIN`] periods and one answered command the app exits through
+//!   semihosting with status 0 (1 if no command arrived within [`PERIODS_MAX`] periods).
+
+/// Sample rate of the control loop (Hz of virtual time).
+pub const SAMPLE_HZ: u32 = 100_000;
+/// SysTick clock of QEMU's mps2 machines (Hz).
+pub const SYSTICK_HZ: u32 = 25_000_000;
+/// Control periods to run before exiting.
+pub const PERIODS_MIN: u32 = 10_000;
+/// Give up (exit 1) when no command was answered after this many periods.
+pub const PERIODS_MAX: u32 = 300_000;
+/// Steps per benchmark row.
+pub const BENCH_STEPS: usize = 2_000;
+
+/// The "device" RTIC needs: no vendor interrupts are used, only SysTick.
+pub mod pac {
+    /// QEMU's NVIC implements 8 bits; RTIC only needs 3 levels here.
+    pub const NVIC_PRIO_BITS: u8 = 3;
+}
+
+/// CMSDK APB UART0 of the mps2 machines.
+mod uart {
+    const BASE: usize = 0x4000_4000;
+    const DATA: usize = BASE;
+    const STATE: usize = BASE + 0x4;
+    const CTRL: usize = BASE + 0x8;
+    const BAUDDIV: usize = BASE + 0x10;
+    const TX_FULL: u32 = 1;
+    const RX_FULL: u32 = 2;
+
+    #[allow(unsafe_code)]
+    fn read(addr: usize) -> u32 {
+        // SAFETY: a CMSDK UART register of the mps2 memory map, always mapped.
+        unsafe { core::ptr::read_volatile(addr as *const u32) }
+    }
+    #[allow(unsafe_code)]
+    fn write(addr: usize, v: u32) {
+        // SAFETY: as above; only the UART owns these addresses.
+        unsafe { core::ptr::write_volatile(addr as *mut u32, v) }
+    }
+
+    /// 115200 Bd at 25 MHz, transmitter and receiver on, no interrupts.
+    pub fn init() {
+        write(BAUDDIV, 217);
+        write(CTRL, 0b11);
+    }
+
+    pub fn try_read() -> Option<u8> {
+        if read(STATE) & RX_FULL != 0 {
+            Some(read(DATA) as u8)
+        } else {
+            None
+        }
+    }
+
+    pub fn write_bytes(bytes: &[u8]) {
+        for &b in bytes {
+            // Bounded wait: QEMU drains the holding register at once.
+            for _ in 0..100_000 {
+                if read(STATE) & TX_FULL == 0 {
+                    break;
+                }
+            }
+            write(DATA, b as u32);
+        }
+    }
+
+    pub fn line(s: &str) {
+        write_bytes(s.as_bytes());
+        write_bytes(b"\n");
+    }
+}
+
+use crate::control::Io;
+use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
+
+/// The stage the converters would see: CBW hysteresis (000 eq. 1-2) followed by a
+/// first-order lag (mechanical bandwidth), sampled by a 16-bit ADC from a 12-bit DAC.
+pub struct SimStage {
+    model: Cbw<f32>,
+    state: BwState<f32>,
+    /// Lag factor per sample, `1 - exp(-2 pi f_c / f_s)`.
+    lag: f32,
+    y_um: f32,
+    io: Io,
+}
+
+impl SimStage {
+    /// 000 backup slide parameter set 1, lag pole [`crate::control::STAGE_POLE_PER_S`].
+    pub fn new(io: Io, sample_hz: f32) -> Self {
+        let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).expect("CBW parameter set 1 is valid");
+        let lag = 1.0 - libm::expf(-crate::control::STAGE_POLE_PER_S / sample_hz);
+        Self {
+            model,
+            state: model.init(0.0),
+            lag,
+            y_um: 0.0,
+            io,
+        }
+    }
+
+    /// DAC code in, ADC code out (one sample).
+    pub fn step(&mut self, dac_code: u16) -> u32 {
+        let u = dac_code as f32 / self.io.codes_per_volt;
+        let y = self.model.step(&mut self.state, u, 1.0 / SAMPLE_HZ as f32);
+        self.y_um += self.lag * (y - self.y_um);
+        let code = (self.y_um - self.io.offset_um) / self.io.um_per_code + 0.5;
+        if code >= 65535.0 {
+            65535
+        } else if code >= 0.0 {
+            code as u32
+        } else {
+            0
+        }
+    }
+}
+
+/// Instruction counts per control step, measured in `init`.
+pub mod bench {
+    use super::{uart, SimStage, BENCH_STEPS, SAMPLE_HZ};
+    use crate::control::{Ctl, Io, Wave, FFS, LAWS};
+    use core::fmt::Write;
+    use core::hint::black_box;
+    use cortex_m::peripheral::{syst::SystClkSource, SYST};
+    use piezo_core::command::{Reply, Shape};
+    use piezo_core::feedforward::Feedforward;
+
+    pub const ROWS: usize = LAWS.len() * FFS.len();
+
+    #[derive(Clone, Copy, Debug, Default)]
+    pub struct Row {
+        pub law: &'static str,
+        pub ff: &'static str,
+        /// Instructions per step x 100.
+        pub instr_x100: u32,
+        /// Worst single step (instructions, SysTick resolution).
+        pub max_instr: u32,
+    }
+
+    pub struct Table {
+        pub rows: [Row; ROWS],
+        /// Instructions per SysTick tick x 1000 (calibration, 40 000 expected).
+        pub instr_per_tick_x1000: u32,
+        /// Loop overhead subtracted (ticks over BENCH_STEPS).
+        pub overhead_ticks: u32,
+    }
+
+    /// Ticks elapsed on the down-counting SysTick between two readings.
+    fn ticks(start: u32, end: u32) -> u32 {
+        start.wrapping_sub(end) & 0x00FF_FFFF
+    }
+
+    /// `n` iterations of a two-instruction loop (`subs` + `bne`).
+    #[allow(unsafe_code)]
+    fn known_loop(n: u32) {
+        // SAFETY: register-only countdown, no memory access.
+        unsafe {
+            core::arch::asm!("1:", "subs {n}, {n}, #1", "bne 1b", n = inout(reg) n => _,
+                options(nomem, nostack));
+        }
+    }
+
+    fn configured(law: &str, ff: &str) -> Option<Ctl> {
+        let sample_hz = SAMPLE_HZ as f32;
+        let mut ctl = Ctl::new(Io::on_chip(), sample_hz);
+        let fb = (ctl.laws)(law, sample_hz)?;
+        ctl.lp.set_feedback(fb);
+        ctl.lp.ff = crate::control::ff_by_name(ff, sample_hz)?;
+        ctl.lp.ff.reset(&piezo_core::signals::Setpoint::hold(10.0));
+        let _: &Feedforward<f32> = &ctl.lp.ff;
+        ctl.lp.wave = Wave::periodic(Shape::Sine, 5.0, 100.0, 10.0, sample_hz);
+        Some(ctl)
+    }
+
+    /// Runs every row; SysTick is left free-running (no interrupt).
+    pub fn run(syst: &mut SYST) -> Table {
+        syst.disable_interrupt();
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(0x00FF_FFFF);
+        syst.clear_current();
+        syst.enable_counter();
+
+        const CAL: u32 = 100_000;
+        let t0 = SYST::get_current();
+        known_loop(CAL);
+        let cal_ticks = ticks(t0, SYST::get_current()).max(1);
+        let instr_per_tick_x1000 = ((2 * CAL as u64 * 1000) / cal_ticks as u64) as u32;
+
+        // ADC codes of a closed-loop run, replayed identically to every timed run.
+        let mut codes = [0u32; BENCH_STEPS];
+        let mut overhead_ticks = 0;
+        {
+            let t0 = SYST::get_current();
+            for c in codes.iter() {
+                black_box(black_box(*c) as u16);
+            }
+            overhead_ticks = overhead_ticks.max(ticks(t0, SYST::get_current()));
+        }
+
+        let mut rows = [Row::default(); ROWS];
+        let mut slot = rows.iter_mut();
+        for law in LAWS {
+            for ff in FFS {
+                let Some(row) = slot.next() else { break };
+                row.law = law;
+                row.ff = ff;
+                let Some(mut ctl) = configured(law, ff) else {
+                    continue;
+                };
+                let mut stage = SimStage::new(Io::on_chip(), SAMPLE_HZ as f32);
+                let mut dac = 0u16;
+                for c in codes.iter_mut() {
+                    *c = stage.step(dac);
+                    dac = ctl.lp.step(*c);
+                }
+                // Same codes, same initial state: the timed run repeats that trajectory.
+                let Some(mut ctl) = configured(law, ff) else {
+                    continue;
+                };
+                let mut worst = 0;
+                for c in codes.iter().take(50) {
+                    let t = SYST::get_current();
+                    black_box(ctl.lp.step(black_box(*c)));
+                    worst = worst.max(ticks(t, SYST::get_current()));
+                }
+                let Some(mut ctl) = configured(law, ff) else {
+                    continue;
+                };
+                let t0 = SYST::get_current();
+                for c in codes.iter() {
+                    black_box(ctl.lp.step(black_box(*c)));
+                }
+                let dt = ticks(t0, SYST::get_current()).saturating_sub(overhead_ticks);
+                row.instr_x100 =
+                    ((dt as u64 * instr_per_tick_x1000 as u64) / (10 * BENCH_STEPS as u64)) as u32;
+                row.max_instr = ((worst as u64 * instr_per_tick_x1000 as u64) / 1000) as u32;
+            }
+        }
+        Table {
+            rows,
+            instr_per_tick_x1000,
+            overhead_ticks,
+        }
+    }
+
+    /// The table as text lines (UART) and, with `log`, defmt (semihosting stops the core,
+    /// so not while the loop runs).
+    pub fn print(t: &Table, log: bool) {
+        let mut r = Reply::<160>::new();
+        write!(
+            r,
+            "bench: instructions per control step (ADC code -> DAC code), {} steps, QEMU -icount shift=0, {}.{:03} instr/SysTick tick, loop overhead {} ticks",
+            BENCH_STEPS,
+            t.instr_per_tick_x1000 / 1000,
+            t.instr_per_tick_x1000 % 1000,
+            t.overhead_ticks
+        )
+        .ok();
+        uart::line(r.as_str());
+        uart::line("mode               feedforward        instr/step  first-50-max");
+        for row in &t.rows {
+            r.clear();
+            write!(
+                r,
+                "{:<18} {:<18} {:>7}.{:02}  {:>8}",
+                row.law,
+                row.ff,
+                row.instr_x100 / 100,
+                row.instr_x100 % 100,
+                row.max_instr
+            )
+            .ok();
+            uart::line(r.as_str());
+            if !log {
+                continue;
+            }
+            defmt::info!(
+                "bench {=str} + {=str}: {=u32}.{=u32:02} instructions/step",
+                row.law,
+                row.ff,
+                row.instr_x100 / 100,
+                row.instr_x100 % 100
+            );
+        }
+    }
+}
+
+#[rtic::app(device = crate::board_qemu::pac, peripherals = false)]
+mod app {
+    use super::{bench, uart, SimStage, PERIODS_MAX, PERIODS_MIN, SAMPLE_HZ, SYSTICK_HZ};
+    use crate::control::{stream_frames, Ctl, Io};
+    use core::fmt::Write;
+    use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
+    use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
+
+    #[shared]
+    struct Shared {
+        ctl: Ctl,
+        periods: u32,
+    }
+
+    #[local]
+    struct Local {
+        stage: SimStage,
+        dac: u16,
+        line: LineBuffer,
+        table: bench::Table,
+    }
+
+    #[init]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let mut syst = cx.core.SYST;
+        uart::init();
+        defmt::info!("qemu board: bench");
+        let table = bench::run(&mut syst);
+        bench::print(&table, true);
+
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(SYSTICK_HZ / SAMPLE_HZ - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+        defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
+        uart::line("ready");
+        let mut ctl = Ctl::new(Io::on_chip(), SAMPLE_HZ as f32);
+        ctl.lp.wave = crate::control::Wave::hold(10.0);
+        (
+            Shared { ctl, periods: 0 },
+            Local {
+                stage: SimStage::new(Io::on_chip(), SAMPLE_HZ as f32),
+                dac: 0,
+                line: LineBuffer::new(),
+                table,
+            },
+        )
+    }
+
+    /// The control period. SysTick ticks stand in for cycles (x40 = instructions with
+    /// `-icount shift=0`).
+    #[task(binds = SysTick, priority = 2, shared = [ctl, periods], local = [stage, dac])]
+    fn sample(cx: sample::Context) {
+        let t0 = SYST::get_current();
+        let code = cx.local.stage.step(*cx.local.dac);
+        let dac = cx.local.dac;
+        (cx.shared.ctl, cx.shared.periods).lock(|ctl, periods| {
+            let t1 = SYST::get_current();
+            *dac = ctl.lp.step(code);
+            let t2 = SYST::get_current();
+            ctl.rec.push(&ctl.lp.signals);
+            let overrun = SCB::is_pendst_pending();
+            let t = &mut ctl.timing;
+            t.step.record(elapsed(t1, t2));
+            t.isr.record(elapsed(t0, SYST::get_current()));
+            if overrun {
+                t.overruns = t.overruns.wrapping_add(1);
+            }
+            *periods = periods.wrapping_add(1);
+        });
+    }
+
+    /// Ticks between two readings of SysTick counting down within one period (a reload
+    /// in between is undone).
+    fn elapsed(start: u32, end: u32) -> u32 {
+        const PERIOD: u32 = SYSTICK_HZ / SAMPLE_HZ;
+        let d = start.wrapping_sub(end);
+        if d > PERIOD {
+            d.wrapping_add(PERIOD)
+        } else {
+            d
+        }
+    }
+
+    #[idle(shared = [ctl, periods], local = [line, table])]
+    fn idle(mut cx: idle::Context) -> ! {
+        let mut answered = 0u32;
+        loop {
+            while let Some(byte) = uart::try_read() {
+                let Some(line) = cx.local.line.push(byte) else {
+                    continue;
+                };
+                let mut reply = cmd::Reply::<160>::new();
+                match line.and_then(cmd::parse) {
+                    Ok(Command::Empty) => continue,
+                    Ok(Command::Bench) => {
+                        bench::print(cx.local.table, false);
+                        write!(reply, "ok bench {}", bench::ROWS).ok();
+                    }
+                    Ok(Command::Rec(RecCmd::Read { start, count })) => {
+                        let ctl = &mut cx.shared.ctl;
+                        stream_frames(
+                            start,
+                            count,
+                            |i| ctl.lock(|c| c.rec.frame(i).copied()),
+                            uart::line,
+                        );
+                        answered += 1;
+                        continue;
+                    }
+                    Ok(c) => cx.shared.ctl.lock(|ctl| ctl.execute(c, &mut reply)),
+                    Err(e) => {
+                        write!(reply, "{e}").ok();
+                    }
+                }
+                uart::line(reply.as_str());
+                answered += 1;
+            }
+            let periods = cx.shared.periods.lock(|p| *p);
+            if periods >= PERIODS_MIN && answered > 0 {
+                finish(&mut cx.shared.ctl, periods, answered, 0);
+            }
+            if periods >= PERIODS_MAX {
+                uart::line("error: no command received");
+                finish(&mut cx.shared.ctl, periods, answered, 1);
+            }
+        }
+    }
+
+    fn finish(ctl: &mut impl rtic::Mutex<T = Ctl>, periods: u32, answered: u32, code: i32) -> ! {
+        let t = ctl.lock(|c| c.timing);
+        let mut r = cmd::Reply::<160>::new();
+        write!(
+            r,
+            "done periods {periods} commands {answered} step_ticks {} {} isr_ticks {} {} overruns {}",
+            t.step.min, t.step.max, t.isr.min, t.isr.max, t.overruns
+        )
+        .ok();
+        uart::line(r.as_str());
+        defmt::info!(
+            "done: {=u32} periods, {=u32} commands, step ticks min {=u32} max {=u32}, overruns {=u32}",
+            periods,
+            answered,
+            t.step.min,
+            t.step.max,
+            t.overruns
+        );
+        semihosting::process::exit(code)
+    }
+}
+
+/// A panic ends the QEMU run with a failure status.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    uart::line("panic");
+    semihosting::process::exit(101)
+}
