@@ -74,7 +74,6 @@ pub struct Robust<T> {
     p1: T,
     den_lo: T,
     den_hi: T,
-    h_lim: T,
     state: RobustState<T>,
     pub(crate) guard: InputGuard<T>,
 }
@@ -124,7 +123,6 @@ impl<T: Real> Robust<T> {
             p1: (-cfg.lambda1 * hgo.dt_s()).exp(),
             den_lo: m.d() / T::from_f64(20.0),
             den_hi: T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs(),
-            h_lim: T::TWO * m.h_bound(),
             state: RobustState {
                 fresh: true,
                 ..Default::default()
@@ -192,7 +190,7 @@ impl<T: Real> Robust<T> {
         let u0 = io.u_applied;
         self.hgo.step(&mut self.state.obs, io.y_um, u0);
         let m = *self.hgo.model();
-        let h_hat = self.state.obs.h.clamp_to(-self.h_lim, self.h_lim);
+        let h_hat = self.state.obs.h_hat();
         let v_hat = m.d() * u0 - h_hat;
         let v_d = self.v_d(&io, self.state.obs.x);
         // Target effective input for this sample: what is left of the error to v_d.
@@ -206,7 +204,8 @@ impl<T: Real> Robust<T> {
         let s = &mut self.state;
         s.v_d_prev = v_d;
         s.u_ff_prev = io.u_ff;
-        let den = (m.d() - m.slope(h_hat, dv.sgn())).clamp_to(self.den_lo, self.den_hi);
+        // The model's slope at the hysteresis part of the estimate (inside the loop bound).
+        let den = (m.d() - m.slope(s.obs.h, dv.sgn())).clamp_to(self.den_lo, self.den_hi);
         let u = u0 + du_ff + dv / den;
         if u.is_finite() {
             u
