@@ -41,7 +41,7 @@ const FRAC: u32 = 16;
 const ONE_RAW: i32 = 1 << FRAC;
 
 /// Signed Q16.16 fixed-point number, saturating (see the module docs).
-#[derive(Clone, Copy, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, Default, PartialEq, Eq, PartialOrd, Hash)]
 pub struct Q16(i32);
 
 impl Q16 {

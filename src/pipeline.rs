@@ -237,6 +237,10 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     pub fn feedback(&self) -> &[Feedback<T>; N] {
         &self.feedback
     }
+    /// The reference generator of `axis`.
+    pub fn reference(&self, axis: usize) -> Option<&WaveGen<T>> {
+        self.reference.get(axis)
+    }
     /// The DAC codes of the last sample (at start-up: the codes of `safe_volts`).
     pub fn codes(&self) -> [i32; N] {
         self.state.code
@@ -251,6 +255,23 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             .ok_or(ConfigError::new("axis index out of range"))?;
         *slot = g;
         Ok(())
+    }
+
+    /// Replaces the feedback law of `axis`; it restarts bumplessly from the applied voltage.
+    pub fn set_feedback(&mut self, axis: usize, feedback: Feedback<T>) -> Result<(), ConfigError> {
+        let slot = self
+            .feedback
+            .get_mut(axis)
+            .ok_or(ConfigError::new("axis index out of range"))?;
+        *slot = feedback;
+        self.restart();
+        Ok(())
+    }
+
+    /// Replaces the feedforward compensator; it restarts at the current setpoints.
+    pub fn set_feedforward(&mut self, feedforward: MultiFeedforward<T, N>) {
+        self.feedforward = feedforward;
+        self.restart();
     }
 
     /// Switches mode without a bump: the compensator and the feedback law restart from

@@ -254,7 +254,7 @@ pub struct ManipRow {
 }
 
 impl ManipRow {
-    fn new(scenario: &str, controller: &str) -> Self {
+    pub fn new(scenario: &str, controller: &str) -> Self {
         Self {
             scenario: scenario.into(),
             controller: controller.into(),

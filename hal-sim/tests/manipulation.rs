@@ -45,3 +45,29 @@ fn blf_force_error_stays_inside_kb() {
         assert!(max_true < b.kb_mn, "true error {max_true} left k_b");
     }
 }
+
+#[test]
+fn hgo_and_nno_track_the_control_point() {
+    use hal_sim::beam::{est_errors, run_beam, BeamConfig};
+    let cfg = BeamConfig {
+        duration_s: 1.0,
+        ..Default::default()
+    };
+    let run = run_beam(&cfg).unwrap();
+    let r = &run.y_c[run.skip..];
+    let range = r.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        - r.iter().copied().fold(f64::INFINITY, f64::min);
+    let (h_rms, h_max) = est_errors(&run, &run.hgo);
+    let (n_rms, n_max) = est_errors(&run, &run.nno);
+    let (l_rms, _) = est_errors(&run, &run.luenberger);
+    println!(
+        "beam x_c = 0.5, range {range:.3} um: HGO rms {h_rms:.4} max {h_max:.4}; NNO rms {n_rms:.4} max {n_max:.4}; no-learning rms {l_rms:.4} um"
+    );
+    assert!(range > 3.0, "the beam must move, range {range}");
+    for (name, rms, max) in [("HGO", h_rms, h_max), ("NNO", n_rms, n_max)] {
+        assert!(rms < 0.02 * range, "{name} rms {rms} um");
+        assert!(max < 0.05 * range, "{name} max {max} um");
+    }
+    // The network must earn its keep against the same observer without learning.
+    assert!(n_rms < 0.9 * l_rms, "NNO {n_rms} vs no learning {l_rms}");
+}

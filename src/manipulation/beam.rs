@@ -168,7 +168,7 @@ impl<T: Real, const M: usize> Hgo<T, M> {
     }
 }
 
-/// Inputs of the network: tip estimate, voltage, model hysteresis, voltage rate, bias.
+/// Inputs of the network: voltage, model hysteresis, voltage rate (two scales), bias.
 pub const NNO_INPUTS: usize = 5;
 
 /// Network and adaptation settings of the [`Nno`].
@@ -305,12 +305,14 @@ impl<T: Real, const N: usize, const H: usize> Nno<T, N, H> {
         self.cbw.step(&mut s.cbw, s.input.u_h, self.dt);
         let v_model = self.cbw.d() * s.input.u_lin - s.cbw.h;
         let du = (s.input.u_lin - u_prev) / self.dt;
-        let tip = dot(&self.model.c_tip, &s.x);
+        // Inputs: what the hysteresis error depends on (voltage, model state, direction);
+        // not the estimate itself, so the network does not feed back on its own output.
+        let hb = self.cbw.h_bound();
         let xi = [
-            tip / self.cfg.y_scale_um,
             s.input.u_lin / self.cfg.u_scale_volts,
-            s.cbw.h / self.cfg.y_scale_um,
+            s.cbw.h / hb,
             (du / self.cfg.du_scale).tanh(),
+            (T::from_f64(10.0) * du / self.cfg.du_scale).tanh(),
             T::ONE,
         ];
         let mut sigma = [T::ZERO; H];

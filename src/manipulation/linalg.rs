@@ -82,11 +82,75 @@ pub fn solve<T: Real, const N: usize>(mut a: [[T; N]; N], mut b: [T; N]) -> Opti
 
 /// Observer gain by Ackermann's formula: the eigenvalues of `a - l c` become the roots of
 /// `s^N + p[0] s^(N-1) + ... + p[N-1]`. `None` if `(a, c)` is not observable.
+///
+/// The pair is balanced first (diagonal similarity `D^-1 a D`, Osborne's iteration) and time
+/// scaled by its largest entry (`a / w`, roots `/ w`, gain `* w`), so plants with fast modes
+/// keep the observability matrix well conditioned; the gain is mapped back (`l = D l_b`).
+#[allow(clippy::needless_range_loop)] // row and column i of a square matrix at once
 pub fn ackermann<T: Real, const N: usize>(
     a: &[[T; N]; N],
     c: &[T; N],
     p: &[T; N],
 ) -> Option<[T; N]> {
+    let mut ab = *a;
+    let mut d = [T::ONE; N];
+    for _ in 0..20 {
+        for i in 0..N {
+            let (mut row, mut col) = (T::ZERO, T::ZERO);
+            for j in 0..N {
+                if j != i {
+                    row += ab[i][j].abs();
+                    col += ab[j][i].abs();
+                }
+            }
+            if row > T::ZERO && col > T::ZERO && row.is_finite() && col.is_finite() {
+                // x_i = f x_b,i: row i scales by 1/f, column i by f.
+                let f = (row / col).sqrt();
+                for j in 0..N {
+                    ab[i][j] /= f;
+                    ab[j][i] *= f;
+                }
+                d[i] *= f;
+            }
+        }
+    }
+    let mut cb = *c;
+    for (ci, di) in cb.iter_mut().zip(&d) {
+        *ci *= *di;
+    }
+    let lb = ackermann_scaled(&ab, &cb, p)?;
+    let mut l = lb;
+    for (li, di) in l.iter_mut().zip(&d) {
+        *li *= *di;
+    }
+    l.iter().all(|x| x.is_finite()).then_some(l)
+}
+
+fn ackermann_scaled<T: Real, const N: usize>(
+    a: &[[T; N]; N],
+    c: &[T; N],
+    p: &[T; N],
+) -> Option<[T; N]> {
+    let w = a
+        .iter()
+        .flat_map(|r| r.iter())
+        .fold(T::ZERO, |m, v| m.max(v.abs()));
+    let w = if w > T::ZERO && w.is_finite() {
+        w
+    } else {
+        T::ONE
+    };
+    let mut a_s = *a;
+    a_s.iter_mut()
+        .flat_map(|r| r.iter_mut())
+        .for_each(|v| *v /= w);
+    let mut p_s = *p;
+    let mut wk = T::ONE;
+    for pk in p_s.iter_mut() {
+        wk *= w;
+        *pk /= wk;
+    }
+    let a = &a_s;
     // Observability matrix, rows c, c a, c a^2, ...
     let mut obs = [[T::ZERO; N]; N];
     let mut row = *c;
@@ -107,15 +171,16 @@ pub fn ackermann<T: Real, const N: usize>(
         *last = T::ONE;
     }
     let q = solve(obs, e_n)?;
-    // p(a) q by Horner: (((a + p0) a + p1) a + ...) q, applied to the vector.
+    // p(a) q by Horner: v <- a v + p_k q.
     let mut v = q;
-    for pk in p.iter() {
+    for pk in p_s.iter() {
         let mut av = mat_vec(a, &v);
         for (x, qi) in av.iter_mut().zip(q.iter()) {
             *x += *pk * *qi;
         }
         v = av;
     }
+    v.iter_mut().for_each(|x| *x *= w);
     v.iter().all(|x| x.is_finite()).then_some(v)
 }
 
@@ -161,6 +226,34 @@ mod tests {
         );
         // Unobservable pair.
         assert!(ackermann(&a, &[0.0, 1.0], &[1.0, 1.0]).is_none());
+    }
+
+    #[test]
+    fn ackermann_handles_fast_modes() {
+        // Two modes at 100 Hz and 627 Hz, tip sensor: poles at -2000 (four times).
+        let (w1, w2) = (628.3, 3940.0);
+        let a = [
+            [0.0, 1.0, 0.0, 0.0],
+            [-w1 * w1, -0.04 * w1, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+            [0.0, 0.0, -w2 * w2, -0.04 * w2],
+        ];
+        let c = [2.0, 0.0, -2.0, 0.0];
+        let l = ackermann(&a, &c, &repeated_pole::<f64, 4>(2000.0)).unwrap();
+        // Check: det(a - l c + 2000 I) = 0 (a root at -2000), via a singular solve.
+        let mut m = a;
+        for i in 0..4 {
+            for j in 0..4 {
+                m[i][j] -= l[i] * c[j];
+            }
+            m[i][i] += 2000.0;
+        }
+        // Power of the shifted matrix: nilpotent (all roots at -2000) -> m^4 ~ 0.
+        let m2 = mat_mul(&m, &m);
+        let m4 = mat_mul(&m2, &m2);
+        let big = a.iter().flatten().fold(0.0f64, |s, v| s.max(v.abs()));
+        let worst = m4.iter().flatten().fold(0.0f64, |s, v| s.max(v.abs()));
+        assert!(worst < 1e-6 * big.powi(4), "{worst}");
     }
 
     #[test]

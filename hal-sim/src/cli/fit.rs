@@ -1,9 +1,432 @@
-//! `piezo fit`.
-use anyhow::Result;
+//! `piezo fit`: identify a model of the core from a CSV record.
+use crate::ident::fit::resample::Edge;
+use crate::ident::fit::{fit_siso, metrics, models, FitOptions, Fitted, Metrics};
+use crate::plot::{write_grid, Plot};
+use crate::record::Record;
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Model name (`piezo fit --list` shows them all), e.g. cbw, gbw, pi, structural-bw.
+    #[arg(long, required_unless_present = "list")]
+    pub model: Option<String>,
+    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yn`).
+    #[arg(long, required_unless_present = "list")]
+    pub train: Option<PathBuf>,
+    /// Validation record, simulated with the identified model (never used for fitting).
+    #[arg(long)]
+    pub valid: Option<PathBuf>,
+    /// The validation record is one period of a periodic steady state: simulate this many
+    /// periods of its input first and score the last (0: from rest).
+    #[arg(long, default_value_t = 0)]
+    pub valid_periodic: usize,
+    /// Hammerstein: second-order linear sections after the hysteresis (004 eq. 8), 0..=2.
+    #[arg(long, default_value_t = 0)]
+    pub linear: usize,
+    /// Hammerstein two-step (004 sec. 4.2): identify the linear part first on this record
+    /// (PRBS or step response), then the hysteresis on --train with it fixed.
+    #[arg(long)]
+    pub linear_train: Option<PathBuf>,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the simulated output of the validation record (or of the training record
+    /// without --valid) as CSV: `y` simulated, measured output kept as `y_meas`.
+    #[arg(long)]
+    pub predict: Option<PathBuf>,
+    /// Folder for plots (loops, time series, residuals) and fit.json.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Differential-evolution generations of the global search (0: LM only).
+    #[arg(long, default_value_t = 300)]
+    pub generations: usize,
+    /// DE population (0: 10 per parameter).
+    #[arg(long, default_value_t = 0)]
+    pub population: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Levenberg-Marquardt iterations of the local refinement.
+    #[arg(long, default_value_t = 60)]
+    pub lm_iterations: usize,
+    /// Dynamic models: input upsampling for integration (the Bouc-Wen benchmark uses 20).
+    #[arg(long, default_value_t = 20)]
+    pub upsample: usize,
+    /// No progress lines on stderr.
+    #[arg(long)]
+    pub quiet: bool,
+    /// List the models and exit.
+    #[arg(long)]
+    pub list: bool,
+}
 
-pub fn run(_args: Args) -> Result<()> {
-    anyhow::bail!("piezo fit is not implemented yet")
+/// One identified channel pair.
+#[derive(Debug, Serialize)]
+pub struct Part {
+    /// `direct` (u_i -> y_i), `coupling` (u_j -> y_i, 003 sec. IV.C) or `siso`.
+    pub kind: &'static str,
+    pub input: usize,
+    pub output: usize,
+    pub fit: Fitted,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ChannelMetrics {
+    pub output: usize,
+    pub metrics: Metrics,
+}
+
+/// What `piezo fit` reports.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    pub model: String,
+    pub train: String,
+    pub valid: Option<String>,
+    /// Two-step Hammerstein: the linear part identified first.
+    pub linear_step: Option<Fitted>,
+    pub parts: Vec<Part>,
+    pub train_metrics: Vec<ChannelMetrics>,
+    pub valid_metrics: Vec<ChannelMetrics>,
+    pub seconds: f64,
+}
+
+fn name_channel(base: char, i: usize, n: usize) -> String {
+    if n == 1 {
+        base.to_string()
+    } else {
+        format!("{base}{}", i + 1)
+    }
+}
+
+/// Simulates every output of `rec` with the identified parts.
+fn simulate(parts: &[Part], rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
+    let mut out = vec![vec![0.0; rec.len()]; rec.y.len()];
+    for p in parts {
+        let u = rec.u.get(p.input).with_context(|| {
+            format!(
+                "the record has {} inputs; the model needs input {}",
+                rec.u.len(),
+                p.input + 1
+            )
+        })?;
+        let y = if periodic > 0 {
+            p.fit.simulate_periodic(u, rec.dt(), periodic)?
+        } else {
+            p.fit.simulate(u, rec.dt(), Edge::Hold)?
+        };
+        let dst = out.get_mut(p.output).with_context(|| {
+            format!(
+                "the record has {} outputs; the model needs output {}",
+                rec.y.len(),
+                p.output + 1
+            )
+        })?;
+        for (d, v) in dst.iter_mut().zip(y) {
+            *d += v;
+        }
+    }
+    Ok(out)
+}
+
+fn all_metrics(rec: &Record, sim: &[Vec<f64>]) -> Vec<ChannelMetrics> {
+    rec.y
+        .iter()
+        .zip(sim)
+        .enumerate()
+        .map(|(i, (y, s))| ChannelMetrics {
+            output: i,
+            metrics: metrics(y, s),
+        })
+        .collect()
+}
+
+/// Identifies `def` on `train`: one SISO fit, or the two-step multivariable procedure of
+/// 003 sec. IV for multi-axis records (direct pairs first, then couplings on what the
+/// direct models leave, kept where they lower the RMSE by more than 1 %). The coupling
+/// models are driven by their own input (a model of the class of `def` per pair), not by
+/// the direct state `h_j` as in 003 eq. (12).
+pub fn identify(
+    def: &'static models::ModelDef,
+    train: &Record,
+    opts: &FitOptions,
+) -> Result<Vec<Part>> {
+    let (k, n) = (train.u.len(), train.y.len());
+    let dt = train.dt();
+    if k == 1 && n == 1 {
+        let f = fit_siso(def, &train.u[0], &train.y[0], dt, opts)?;
+        return Ok(vec![Part {
+            kind: "siso",
+            input: 0,
+            output: 0,
+            fit: f,
+        }]);
+    }
+    let sim = |f: &Fitted, j: usize| f.simulate(&train.u[j], dt, Edge::Hold);
+    let mut direct: Vec<Option<Fitted>> = (0..n).map(|_| None).collect();
+    let mut couplings: Vec<Vec<(usize, Fitted)>> = (0..n).map(|_| Vec::new()).collect();
+    // Two rounds: the second refits each direct model on what the couplings of the first
+    // leave (a coupled output is not zero while its own input rests).
+    for round in 1..=2 {
+        for i in 0..n {
+            let mut target = train.y[i].clone();
+            for (j, f) in &couplings[i] {
+                for (t, v) in target.iter_mut().zip(sim(f, *j)?) {
+                    *t -= v;
+                }
+            }
+            // Step 1 (003 sec. IV.B): direct hysteresis u_i -> y_i.
+            let mut residual = train.y[i].clone();
+            if i < k {
+                if opts.progress {
+                    eprintln!("round {round}, step 1: direct u{} -> y{}", i + 1, i + 1);
+                }
+                let f = fit_siso(def, &train.u[i], &target, dt, opts)
+                    .with_context(|| format!("direct fit u{} -> y{}", i + 1, i + 1))?;
+                for (r, v) in residual.iter_mut().zip(sim(&f, i)?) {
+                    *r -= v;
+                }
+                direct[i] = Some(f);
+            }
+            // Step 2 (003 sec. IV.C): couplings u_j -> y_i on the direct residual.
+            couplings[i].clear();
+            for j in (0..k).filter(|&j| j != i) {
+                if opts.progress {
+                    eprintln!("round {round}, step 2: coupling u{} -> y{}", j + 1, i + 1);
+                }
+                let f = fit_siso(def, &train.u[j], &residual, dt, opts)
+                    .with_context(|| format!("coupling fit u{} -> y{}", j + 1, i + 1))?;
+                let c = sim(&f, j)?;
+                let before = metrics(&residual, &vec![0.0; residual.len()]).rmse;
+                if metrics(&residual, &c).rmse < 0.99 * before {
+                    for (r, v) in residual.iter_mut().zip(&c) {
+                        *r -= v;
+                    }
+                    couplings[i].push((j, f));
+                }
+            }
+        }
+    }
+    let mut parts = Vec::new();
+    for (i, (d, cs)) in direct.into_iter().zip(couplings).enumerate() {
+        if let Some(f) = d {
+            parts.push(Part {
+                kind: "direct",
+                input: i,
+                output: i,
+                fit: f,
+            });
+        }
+        for (j, f) in cs {
+            parts.push(Part {
+                kind: "coupling",
+                input: j,
+                output: i,
+                fit: f,
+            });
+        }
+    }
+    Ok(parts)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if args.list {
+        for m in models::MODELS {
+            println!("{:<14} {}", m.name, m.about);
+        }
+        return Ok(());
+    }
+    let (Some(model), Some(train_path)) = (&args.model, &args.train) else {
+        anyhow::bail!("--model and --train are required (see --help)");
+    };
+    let def = models::find(model)?;
+    anyhow::ensure!(
+        args.linear <= 2,
+        "--linear {}: at most 2 sections",
+        args.linear
+    );
+    let t0 = std::time::Instant::now();
+    let train = Record::read(train_path)?;
+    let valid = args.valid.as_ref().map(Record::read).transpose()?;
+    if let Some(v) = &valid {
+        anyhow::ensure!(
+            v.u.len() >= train.u.len().min(v.u.len()) && v.y.len() == train.y.len(),
+            "validation record has {} inputs / {} outputs, training record {} / {}",
+            v.u.len(),
+            v.y.len(),
+            train.u.len(),
+            train.y.len()
+        );
+    }
+    let mut opts = FitOptions {
+        generations: args.generations,
+        population: args.population,
+        seed: args.seed,
+        lm_iterations: args.lm_iterations,
+        upsample: args.upsample.max(1),
+        linear_sections: args.linear,
+        progress: !args.quiet,
+        ..Default::default()
+    };
+    // Two-step Hammerstein: linear part from its own record first.
+    let linear_step = if let Some(path) = &args.linear_train {
+        let rec = Record::read(path)?;
+        anyhow::ensure!(
+            rec.u.len() == 1 && rec.y.len() == 1,
+            "--linear-train {}: needs one input and one output",
+            path.display()
+        );
+        let step1 = FitOptions {
+            linear_sections: args.linear.max(1),
+            ..opts.clone()
+        };
+        if opts.progress {
+            eprintln!("step 1: linear part from {}", path.display());
+        }
+        let f = fit_siso(
+            models::find("gain")?,
+            &rec.u[0],
+            &rec.y[0],
+            rec.dt(),
+            &step1,
+        )?;
+        opts.linear_fixed = Some(f.linear.clone());
+        Some(f)
+    } else {
+        None
+    };
+    let parts = identify(def, &train, &opts)?;
+    let train_sim = simulate(&parts, &train, 0)?;
+    let valid_sim = valid
+        .as_ref()
+        .map(|v| simulate(&parts, v, args.valid_periodic))
+        .transpose()?;
+    let report = Report {
+        model: def.name.into(),
+        train: train_path.display().to_string(),
+        valid: args.valid.as_ref().map(|p| p.display().to_string()),
+        linear_step,
+        train_metrics: all_metrics(&train, &train_sim),
+        valid_metrics: match (&valid, &valid_sim) {
+            (Some(v), Some(s)) => all_metrics(v, s),
+            _ => Vec::new(),
+        },
+        parts,
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    if let Some(path) = &args.predict {
+        let (rec, sim) = match (&valid, &valid_sim) {
+            (Some(v), Some(s)) => (v, s),
+            _ => (&train, &train_sim),
+        };
+        write_prediction(path, rec, sim, def.name)?;
+    }
+    if let Some(dir) = &args.out {
+        write_plots(dir, &train, &train_sim, "train")?;
+        if let (Some(v), Some(s)) = (&valid, &valid_sim) {
+            write_plots(dir, v, s, "valid")?;
+        }
+        std::fs::write(dir.join("fit.json"), serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("cannot write {}", dir.join("fit.json").display()))?;
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_report(&report);
+    }
+    Ok(())
+}
+
+fn write_prediction(path: &Path, rec: &Record, sim: &[Vec<f64>], model: &str) -> Result<()> {
+    let mut out = Record {
+        comments: vec![format!(
+            " piezo fit --model {model}: simulated output y (model), measured output y_meas"
+        )],
+        t: rec.t.clone(),
+        u: rec.u.clone(),
+        y: sim.to_vec(),
+        extra: Vec::new(),
+    };
+    for (i, y) in rec.y.iter().enumerate() {
+        out.extra.push((
+            format!("{}_meas", name_channel('y', i, rec.y.len())),
+            y.clone(),
+        ));
+    }
+    out.write(path)
+}
+
+fn write_plots(dir: &Path, rec: &Record, sim: &[Vec<f64>], what: &str) -> Result<()> {
+    for (i, (y, s)) in rec.y.iter().zip(sim).enumerate() {
+        let yn = name_channel('y', i, rec.y.len());
+        let un = name_channel('u', i.min(rec.u.len() - 1), rec.u.len());
+        let u = &rec.u[i.min(rec.u.len() - 1)];
+        let e: Vec<f64> = y.iter().zip(s).map(|(a, b)| a - b).collect();
+        let plots = [
+            Plot::new(
+                &format!("{what}: {un} -> {yn} loop"),
+                un.as_str(),
+                yn.as_str(),
+            )
+            .line("measured", u, y)
+            .line("model", u, s),
+            Plot::new(&format!("{what}: {yn} over time"), "t [s]", yn.as_str())
+                .line("measured", &rec.t, y)
+                .line("model", &rec.t, s),
+            Plot::new(
+                &format!("{what}: residual {yn} - model"),
+                "t [s]",
+                &format!("{yn} error"),
+            )
+            .line("residual", &rec.t, &e),
+        ];
+        let path = dir.join(format!("{what}_{yn}.svg"));
+        write_grid(&path, &plots, 3).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn print_report(r: &Report) {
+    println!(
+        "model {} fitted on {} in {:.1} s",
+        r.model, r.train, r.seconds
+    );
+    if let Some(l) = &r.linear_step {
+        println!(
+            "step 1 linear part: {:?} (gain {:.6e})",
+            l.linear,
+            l.values()[0]
+        );
+    }
+    for p in &r.parts {
+        println!(
+            "{} u{} -> y{}: sign {:+}, offset {:.6e}",
+            p.kind,
+            p.input + 1,
+            p.output + 1,
+            p.fit.sign,
+            p.fit.offset
+        );
+        for (name, v) in &p.fit.params {
+            println!("  {name:<16} {v:.6e}");
+        }
+        for (k, (f, z)) in p.fit.linear.iter().enumerate() {
+            println!("  linear {}: f = {f:.4} Hz, zeta = {z:.4}", k + 1);
+        }
+    }
+    let show = |what: &str, ms: &[ChannelMetrics]| {
+        for m in ms {
+            println!(
+                "{what} y{}: RMSE {:.4e}  MPME {:.3} %  RE {:.3} %  max|e| {:.4e}  ({} samples)",
+                m.output + 1,
+                m.metrics.rmse,
+                m.metrics.mpme_pct,
+                m.metrics.re_pct,
+                m.metrics.max_abs,
+                m.metrics.samples
+            );
+        }
+    };
+    show("train", &r.train_metrics);
+    show("valid", &r.valid_metrics);
 }

@@ -338,6 +338,9 @@ where
             .into_par_iter()
             .map(|j| {
                 let width = hi[j] - lo[j];
+                if width == 0.0 {
+                    return (vec![0.0; m], 0.0); // fixed parameter
+                }
                 let mut h = cfg.fd_step * x[j].abs().max(1e-6 * width).max(1e-300);
                 if x[j] + h > hi[j] {
                     h = -h; // step inward at the upper bound
@@ -368,6 +371,20 @@ where
         }
         if a.iter().chain(&g).any(|v| !v.is_finite()) {
             break;
+        }
+        // Parameters pinned at a bound with the descent pointing outward leave the step
+        // (active set): clamping their step would spoil the others' direction.
+        for j in 0..n {
+            let pinned =
+                hi[j] == lo[j] || (x[j] <= lo[j] && g[j] > 0.0) || (x[j] >= hi[j] && g[j] < 0.0);
+            if pinned {
+                for k in 0..n {
+                    a[j * n + k] = 0.0;
+                    a[k * n + j] = 0.0;
+                }
+                a[j * n + j] = 1.0;
+                g[j] = 0.0;
+            }
         }
         let mut improved = false;
         let mut small_step = false;
@@ -588,6 +605,32 @@ mod tests {
         for (v, w) in o.x.iter().zip(&truth) {
             assert!((v - w).abs() <= 1e-6 * w.abs().max(1e-3), "{o:?}");
         }
+    }
+
+    #[test]
+    fn lm_moves_free_parameters_when_one_is_pinned() {
+        // Unconstrained optimum (2, 1); with x0 <= 1 the optimum is (1, 1).
+        let res = |x: &[f64], r: &mut [f64]| {
+            r[0] = x[0] + x[1] - 3.0;
+            r[1] = x[0] - x[1] - 1.0 + 0.5 * (x[0] - 1.0);
+        };
+        let o = levenberg_marquardt(
+            res,
+            2,
+            &[0.0, 5.0],
+            &[-5.0; 2],
+            &[1.0, 5.0],
+            &LmConfig::default(),
+        )
+        .unwrap();
+        let want = {
+            // x0 = 1: minimise (x1 - 2)^2 + (x1)^2 -> x1 = 1.
+            [1.0, 1.0]
+        };
+        assert!(
+            (o.x[0] - want[0]).abs() < 1e-9 && (o.x[1] - want[1]).abs() < 1e-6,
+            "{o:?}"
+        );
     }
 
     #[test]
