@@ -122,20 +122,48 @@ impl<T: Real> Feedforward<T> {
         }
     }
 
-    /// Restart from rest at setpoint `sp` (mode switch, fault recovery).
+    /// Restart from rest (mode switch, fault recovery). The stage does not jump to the
+    /// setpoint: the pipeline holds the applied voltage and slew-limits any difference. So
+    /// a model-based compensator relaxes its model at the voltage it last commanded (at
+    /// power-up: 0 V, where the stage rests) and only restarts its filters from `sp`.
+    /// Use [`Feedforward::reset_at`] when the applied voltage is known.
     pub fn reset(&mut self, sp: &Setpoint<T>) {
+        let u = self.volts(sp);
+        self.reset_at(sp, u);
+    }
+
+    /// The voltage this compensator last commanded (linear: the one for `sp`).
+    pub fn volts(&self, sp: &Setpoint<T>) -> T {
+        match self {
+            Feedforward::Linear(l) => l.compensate(sp.y_um),
+            Feedforward::ImsCbw(c) => c.volts(),
+            Feedforward::ImsGbw(c) => c.volts(),
+            Feedforward::ImsDahl(c) => c.volts(),
+            Feedforward::ImsAbw(c) => c.volts(),
+            Feedforward::ImsMbw(c) => c.volts(),
+            Feedforward::Mbw(c) => c.volts(),
+            Feedforward::Wpmbw(c) => c.volts(),
+            Feedforward::PiInverse(c) => c.volts(),
+            Feedforward::PpiInverse(c) => c.volts(),
+            Feedforward::DpiInverse(c) => c.volts(),
+        }
+    }
+
+    /// Restart with the model relaxed at the applied voltage `u_applied` (V).
+    pub fn reset_at(&mut self, _sp: &Setpoint<T>, u_applied: T) {
+        let u = u_applied;
         match self {
             Feedforward::Linear(_) => {}
-            Feedforward::ImsCbw(c) => c.reset(sp.y_um),
-            Feedforward::ImsGbw(c) => c.reset(sp.y_um),
-            Feedforward::ImsDahl(c) => c.reset(sp.y_um),
-            Feedforward::ImsAbw(c) => c.reset(sp.y_um),
-            Feedforward::ImsMbw(c) => c.reset(sp.y_um),
-            Feedforward::Mbw(c) => c.reset(sp.y_um),
-            Feedforward::Wpmbw(c) => c.reset(sp.y_um),
-            Feedforward::PiInverse(c) => c.reset(sp.y_um),
-            Feedforward::PpiInverse(c) => c.reset(sp.y_um),
-            Feedforward::DpiInverse(c) => c.reset(sp.y_um),
+            Feedforward::ImsCbw(c) => c.reset_volts(u),
+            Feedforward::ImsGbw(c) => c.reset_volts(u),
+            Feedforward::ImsDahl(c) => c.reset_volts(u),
+            Feedforward::ImsAbw(c) => c.reset_volts(u),
+            Feedforward::ImsMbw(c) => c.reset_volts(u),
+            Feedforward::Mbw(c) => c.reset_volts(u),
+            Feedforward::Wpmbw(c) => c.reset_volts(u),
+            Feedforward::PiInverse(c) => c.reset_volts(u),
+            Feedforward::PpiInverse(c) => c.reset_volts(u),
+            Feedforward::DpiInverse(c) => c.reset_volts(u),
         }
     }
 
@@ -232,26 +260,29 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
         }
     }
 
-    /// Restart from rest at the given setpoints.
+    /// Restart from rest at the voltages last commanded (see [`Feedforward::reset`]).
     pub fn reset(&mut self, sp: &[Setpoint<T>; N]) {
         match self {
             MultiFeedforward::PerAxis(ff) => ff.iter_mut().zip(sp).for_each(|(f, s)| f.reset(s)),
             MultiFeedforward::Ims(m) => {
-                let mut y = [T::ZERO; N];
-                for (y, s) in y.iter_mut().zip(sp) {
-                    *y = s.y_um;
-                }
-                m.reset(&y);
+                let u = m.volts();
+                m.reset_volts(&u);
             }
-            MultiFeedforward::Decoupled { c_inv, axes } => {
-                for (f, row) in axes.iter_mut().zip(c_inv.iter()) {
-                    let y = row
-                        .iter()
-                        .zip(sp.iter())
-                        .fold(T::ZERO, |a, (&c, s)| a + c * s.y_um);
-                    f.reset(&Setpoint::hold(y));
-                }
+            MultiFeedforward::Decoupled { axes, .. } => {
+                axes.iter_mut().zip(sp).for_each(|(f, s)| f.reset(s))
             }
+        }
+    }
+
+    /// Restart with every model relaxed at the applied voltages.
+    pub fn reset_at(&mut self, sp: &[Setpoint<T>; N], u_applied: &[T; N]) {
+        match self {
+            MultiFeedforward::PerAxis(ff) | MultiFeedforward::Decoupled { axes: ff, .. } => ff
+                .iter_mut()
+                .zip(sp)
+                .zip(u_applied)
+                .for_each(|((f, s), &u)| f.reset_at(s, u)),
+            MultiFeedforward::Ims(m) => m.reset_volts(u_applied),
         }
     }
 

@@ -309,3 +309,38 @@ fn decoupler_makes_per_axis_ims_exact_on_a_coupled_stage() {
     assert!(p > 100.0 * d, "{p}");
     assert!(MultiFeedforward::decoupled([[1.0f32, 1.0], [1.0, 1.0]], axes()).is_err());
 }
+
+#[test]
+fn reset_at_applied_voltage_is_consistent_with_the_model_at_rest_there() {
+    let u0 = 37.0f32;
+    let pi = Pi::new(0.1f32, [0.03, 0.02], [2.0, 10.0]).unwrap();
+    let dpi = Dpi::new([0.1f32, 0.03], [1.0, 10.0], [1.0, 0.3], [0.0, 3.0]).unwrap();
+    let cbw = cbw(1.0);
+    let cases: Vec<(Feedforward<f32>, f32)> = vec![
+        (
+            Feedforward::PiInverse(PiInverse::new(&pi, V.0, V.1).unwrap()),
+            pi.step(&mut pi.init(u0), u0, DT),
+        ),
+        (
+            Feedforward::DpiInverse(DpiInverse::new(&dpi, V.0, V.1).unwrap()),
+            dpi.step(&mut dpi.init(u0), u0, DT),
+        ),
+        (
+            Feedforward::ImsCbw(Ims::new(cbw, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
+            cbw.step(&mut cbw.init(u0), u0, DT),
+        ),
+    ];
+    for (mut ff, y0) in cases {
+        ff.compensate(&Setpoint::hold(3.0));
+        ff.reset_at(&Setpoint::hold(y0), u0);
+        let u = ff.compensate(&Setpoint::hold(y0));
+        assert!((u - u0).abs() < 1e-4, "{}: {u} vs {u0}", ff.name());
+        // reset() keeps the last commanded voltage
+        ff.reset(&Setpoint::hold(0.0));
+        assert!(
+            (ff.volts(&Setpoint::hold(0.0)) - u).abs() < 1e-4,
+            "{}",
+            ff.name()
+        );
+    }
+}

@@ -1,43 +1,57 @@
 #!/usr/bin/env bash
-# The RTIC firmware boots under QEMU (mps2-an386, Cortex-M4F) with a simulated stage:
-# >= 10 000 control periods, serial commands answered, and the instructions per control step
-# of every feedback law x feedforward (QEMU -icount shift=0: 1 instruction = 1 ns).
-# Also the README's command for the instruction table.
+# The RTIC firmware boots under QEMU with a simulated stage, twice:
+#   mps2-an386 (Cortex-M4F, thumbv7em-none-eabihf, f32) and
+#   mps2-an385 (Cortex-M3, thumbv7m-none-eabi, Q16.16 fixed point);
+# each runs >= 10 000 control periods (SysTick), answers commands on its serial port and
+# prints the instructions per control step of every feedback law x feedforward
+# (QEMU -icount shift=0: 1 instruction = 1 ns of virtual time). This script is also the
+# README's command for the instruction tables.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
-cargo build --release --target thumbv7em-none-eabihf -p piezo-core --bin firmware \
-  --no-default-features --features board-qemu
-elf=target/thumbv7em-none-eabihf/release/firmware
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-cp "$elf" "$work/firmware-qemu.elf"
-mkfifo "$work/uart.in" "$work/uart.out"
-cat "$work/uart.out" >"$work/uart.txt" &
-reader=$!
-set +e
-timeout 120 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
-  -icount shift=0 -chardev pipe,id=ser,path="$work/uart" -serial chardev:ser \
-  -semihosting-config enable=on,target=native \
-  -kernel "$work/firmware-qemu.elf" >"$work/defmt.bin" &
-qemu=$!
-printf 'ping\nbench\nget u_max\nset slew 0\nmode open-loop\nstats\n' >"$work/uart.in"
-wait $qemu
-status=$?
-set -e
-wait $reader || true
-echo "--- serial port"
-cat "$work/uart.txt"
-if command -v defmt-print >/dev/null 2>&1; then
-  echo "--- defmt (semihosting)"
-  defmt-print -e "$work/firmware-qemu.elf" <"$work/defmt.bin" || true
-else
-  echo "--- defmt log not decoded (defmt-print not installed): $(wc -c <"$work/defmt.bin") bytes"
-fi
-echo "---"
-[ "$status" -eq 0 ] || { echo "QEMU run failed with status $status"; exit 1; }
-grep -q '^ok pong$' "$work/uart.txt" || { echo "no answer to ping"; exit 1; }
-grep -q '^err 8 value out of range$' "$work/uart.txt" || { echo "bad set not rejected"; exit 1; }
-periods=$(sed -n 's/^done periods \([0-9]*\) .*/\1/p' "$work/uart.txt")
-[ -n "$periods" ] && [ "$periods" -ge 10000 ] || { echo "too few control periods: '$periods'"; exit 1; }
-echo "QEMU: $periods control periods, commands answered"
+
+# run <name> <target> <qemu machine> <qemu cpu>
+run() {
+  local name=$1 target=$2 machine=$3 cpu=$4 status periods
+  cargo build --release --target "$target" -p piezo-core --bin firmware \
+    --no-default-features --features board-qemu
+  local dir="$work/$name" elf
+  mkdir -p "$dir"
+  elf="$dir/firmware.elf"
+  cp "target/$target/release/firmware" "$elf"
+  mkfifo "$dir/uart.in" "$dir/uart.out"
+  cat "$dir/uart.out" >"$dir/uart.txt" &
+  local reader=$!
+  set +e
+  timeout 300 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
+    -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
+    -semihosting-config enable=on,target=native -kernel "$elf" >"$dir/defmt.bin" &
+  local qemu=$!
+  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nstats\n' \
+    >"$dir/uart.in"
+  wait $qemu
+  status=$?
+  set -e
+  wait $reader || true
+  echo "=== $name: serial port"
+  cat "$dir/uart.txt"
+  if command -v defmt-print >/dev/null 2>&1; then
+    echo "=== $name: defmt log (semihosting)"
+    defmt-print -e "$elf" <"$dir/defmt.bin" || true
+  else
+    echo "=== $name: defmt log not decoded (defmt-print not installed): $(wc -c <"$dir/defmt.bin") bytes"
+  fi
+  [ "$status" -eq 0 ] || { echo "$name: QEMU run failed with status $status"; exit 1; }
+  grep -q '^ok pong$' "$dir/uart.txt" || { echo "$name: no answer to ping"; exit 1; }
+  grep -q '^err 8 value out of range$' "$dir/uart.txt" || { echo "$name: bad set not rejected"; exit 1; }
+  grep -q '^ok mode ff+hgo-robust$' "$dir/uart.txt" || { echo "$name: mode switch failed"; exit 1; }
+  grep -q '^ok rec sel ref_um y_um u_volts error_um$' "$dir/uart.txt" || { echo "$name: recorder setup failed"; exit 1; }
+  periods=$(sed -n 's/^done periods \([0-9]*\) .*/\1/p' "$dir/uart.txt")
+  [ -n "$periods" ] && [ "$periods" -ge 10000 ] || { echo "$name: too few control periods: '$periods'"; exit 1; }
+  echo "=== $name: $periods control periods, commands answered"
+}
+
+run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4
+run m3-q16 thumbv7m-none-eabi mps2-an385 cortex-m3

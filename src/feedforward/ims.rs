@@ -58,6 +58,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     quad: T,
     /// Inverse creep applied to the reference (None: no creep).
     creep: Option<CreepInverse<T>>,
+    /// Largest voltage change per sample (the pipeline's slew limit), `T::MAX`: none.
+    max_step_volts: T,
     /// Secant slope of the last solved step (first trial of the next solve).
     slope_hint: T,
     state: M::State,
@@ -112,6 +114,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             min_slope,
             quad: T::ZERO,
             creep: None,
+            max_step_volts: T::MAX,
             slope_hint,
             state,
             u: u0,
@@ -143,6 +146,22 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u = self.u;
         self.reset_volts(u);
         self
+    }
+
+    /// Limits the voltage slew as the pipeline does, so the internal model follows the
+    /// voltage the stage actually gets.
+    pub fn with_slew(mut self, volts_per_s: T) -> Result<Self, FfError> {
+        super::ensure(
+            volts_per_s.is_finite() && volts_per_s > T::ZERO,
+            "IMS: slew limit finite and > 0",
+        )?;
+        self.max_step_volts = volts_per_s * self.dt_s;
+        Ok(self)
+    }
+
+    /// The last voltage (V).
+    pub fn volts(&self) -> T {
+        self.u
     }
 
     pub fn model(&self) -> &M {
@@ -199,7 +218,9 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         };
         // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
         let u = if u.is_finite() { u } else { self.u };
-        let u = u.clamp_to(self.volts_min, self.volts_max);
+        let u = u
+            .clamp_to(self.volts_min, self.volts_max)
+            .clamp_to(self.u - self.max_step_volts, self.u + self.max_step_volts);
         self.y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
         self.u = u;
         if let Some(c) = &mut self.creep {

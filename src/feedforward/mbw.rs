@@ -76,6 +76,19 @@ impl<T: Real> MbwFf<T> {
         self.u
     }
 
+    /// The last voltage (V).
+    pub fn volts(&self) -> T {
+        self.u
+    }
+
+    /// Restart at rest at voltage `u0`.
+    pub fn reset_volts(&mut self, u0: T) {
+        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
+        self.u = u0.clamp_to(self.volts_min, self.volts_max);
+        self.v_r = self.u / self.k_p;
+        self.h = T::ZERO;
+    }
+
     /// Restart at rest at `y_um`.
     pub fn reset(&mut self, y_um: T) {
         let y = if y_um.is_finite() { y_um } else { T::ZERO };

@@ -243,6 +243,21 @@ impl<T: Real, const N: usize, const K: usize> MultiIms<T, N, K> {
         self.state.u
     }
 
+    /// The last voltages (V).
+    pub fn volts(&self) -> [T; K] {
+        self.state.u
+    }
+
+    /// Restart relaxed (`h = 0`) at the voltages `u0`.
+    pub fn reset_volts(&mut self, u0: &[T; K]) {
+        let mut u = *u0;
+        for x in u.iter_mut() {
+            *x = if x.is_finite() { *x } else { T::ZERO };
+            *x = x.clamp_to(self.volts_min, self.volts_max);
+        }
+        self.state = self.model.init(u);
+    }
+
     /// Restart relaxed at the voltages that give `y` with `h = 0`.
     pub fn reset(&mut self, y: &[T; N]) {
         let mut y0 = *y;

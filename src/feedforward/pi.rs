@@ -82,6 +82,8 @@ fn kuhnen<T: Real>(
 #[derive(Debug, Clone, PartialEq)]
 pub struct PiInverse<T: Real> {
     inv: PiBank<T>,
+    /// Forward slope at rest `w0 + sum w_i`.
+    fwd_gain: T,
     volts_min: T,
     volts_max: T,
     state: PiState<T, MAX_OPS>,
@@ -95,8 +97,10 @@ impl<T: Real> PiInverse<T> {
         let (w, r) = pad(pi.weights(), pi.thresholds())?;
         let (w0i, what, rhat) = kuhnen(pi.w0(), &w, &r)?;
         let inv = Pi::new(w0i, what, rhat)?;
+        let fwd_gain = pi.weights().iter().fold(pi.w0(), |a, &w| a + w);
         let mut s = Self {
             inv,
+            fwd_gain,
             volts_min,
             volts_max,
             state: inv.init(T::ZERO),
@@ -125,6 +129,17 @@ impl<T: Real> PiInverse<T> {
         self.u
     }
 
+    /// The last voltage (V).
+    pub fn volts(&self) -> T {
+        self.u
+    }
+
+    /// Restart at rest at voltage `u0` (the forward model's operators centred there).
+    pub fn reset_volts(&mut self, u0: T) {
+        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
+        self.reset(self.fwd_gain * u0);
+    }
+
     /// Restart at rest (operators centred) at output `y_um`.
     pub fn reset(&mut self, y_um: T) {
         let y = if y_um.is_finite() { y_um } else { T::ZERO };
@@ -150,6 +165,8 @@ pub struct DpiInverse<T: Real> {
     dz_len: usize,
     inv: PiBank<T>,
     r1: T,
+    /// Slope `sum w_i` of the DPI's PI at rest.
+    pi_gain: T,
     volts_min: T,
     volts_max: T,
     state: PiState<T, MAX_OPS>,
@@ -216,6 +233,7 @@ impl<T: Real> DpiInverse<T> {
             dz_len: M,
             inv,
             r1,
+            pi_gain: w.iter().fold(T::ZERO, |a, &w| a + w),
             volts_min,
             volts_max,
             state: inv.init(T::ZERO),
@@ -238,6 +256,28 @@ impl<T: Real> DpiInverse<T> {
             }
         }
         p
+    }
+
+    /// The dead-zone sum `sum ws_k*S_dk[p]` (001 eq. 9) from the tables.
+    pub fn dead_zones(&self, p: T) -> T {
+        let mut z = p * self.dz_s[0];
+        for k in 0..self.dz_len.min(MAX_OPS) {
+            if p >= self.dz_d[k] {
+                z = self.dz_z[k] + (p - self.dz_d[k]) * self.dz_s[k];
+            }
+        }
+        z
+    }
+
+    /// The last voltage (V).
+    pub fn volts(&self) -> T {
+        self.u
+    }
+
+    /// Restart at rest at voltage `u0`.
+    pub fn reset_volts(&mut self, u0: T) {
+        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
+        self.reset(self.dead_zones(self.pi_gain * u0));
     }
 
     #[inline]

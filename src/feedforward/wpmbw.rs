@@ -215,6 +215,11 @@ impl<T: Real> WpmbwInverse<T> {
         self.u
     }
 
+    /// The last voltage (V).
+    pub fn volts(&self) -> T {
+        self.u
+    }
+
     /// Restart at rest at voltage `u0` (operator state zero); the prefilter starts from
     /// the output there.
     pub fn reset_volts(&mut self, u0: T) {

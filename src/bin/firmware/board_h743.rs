@@ -10,15 +10,14 @@
 //!
 //! Analog input: PA3 (ADC12_INP15, CN9 pin 1 "A0" on the Nucleo-144).
 
-/// Sample rate of the control loop (Hz).
-pub const SAMPLE_HZ: u32 = 100_000;
+pub use crate::control::SAMPLE_HZ;
 /// Core clock (Hz): DWT cycle counts are in these cycles.
 pub const SYSCLK_HZ: u32 = 400_000_000;
 
 #[rtic::app(device = stm32h7xx_hal::pac, peripherals = true, dispatchers = [SAI1, SAI2])]
 mod app {
     use super::{SAMPLE_HZ, SYSCLK_HZ};
-    use crate::control::{stream_frames, Ctl, Io};
+    use crate::control::{c, stream_frames, Ctl};
     use cortex_m::peripheral::DWT;
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
     use rtic_monotonics::systick::prelude::*;
@@ -118,7 +117,7 @@ mod app {
         defmt::info!("firmware up: {} Hz sample rate", SAMPLE_HZ);
         (
             Shared {
-                ctl: Ctl::new(Io::on_chip(), SAMPLE_HZ as f32),
+                ctl: Ctl::new(c(SAMPLE_HZ as f64)),
             },
             Local {
                 adc,
@@ -161,7 +160,7 @@ mod app {
             let dac_code = ctl.lp.step(code);
             let t2 = DWT::cycle_count();
             dac.set_value(dac_code);
-            ctl.rec.push(&ctl.lp.signals);
+            ctl.record(code, dac_code);
             let isr = DWT::cycle_count().wrapping_sub(t0);
             let t = &mut ctl.timing;
             t.step.record(t2.wrapping_sub(t1));

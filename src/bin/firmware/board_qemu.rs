@@ -13,8 +13,8 @@
 //! * After at least [`PERIODS_MIN`] periods and one answered command the app exits through
 //!   semihosting with status 0 (1 if no command arrived within [`PERIODS_MAX`] periods).
 
-/// Sample rate of the control loop (Hz of virtual time).
-pub const SAMPLE_HZ: u32 = 100_000;
+/// Sample rate of the control loop (Hz of virtual time): 100 kHz in f32, 16 384 Hz in Q16.16.
+pub use crate::control::SAMPLE_HZ;
 /// SysTick clock of QEMU's mps2 machines (Hz).
 pub const SYSTICK_HZ: u32 = 25_000_000;
 /// Control periods to run before exiting.
@@ -83,7 +83,6 @@ mod uart {
     }
 }
 
-use crate::control::Io;
 use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 
 /// The stage the converters would see: CBW hysteresis (000 eq. 1-2) followed by a
@@ -94,29 +93,32 @@ pub struct SimStage {
     /// Lag factor per sample, `1 - exp(-2 pi f_c / f_s)`.
     lag: f32,
     y_um: f32,
-    io: Io,
+    /// Converter scaling (the same as [`Io::on_chip`], in f32 on every target).
+    volts_per_code: f32,
+    codes_per_um: f32,
 }
 
 impl SimStage {
     /// 000 backup slide parameter set 1, lag pole [`crate::control::STAGE_POLE_PER_S`].
-    pub fn new(io: Io, sample_hz: f32) -> Self {
+    pub fn new(sample_hz: f32) -> Self {
         let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).expect("CBW parameter set 1 is valid");
-        let lag = 1.0 - libm::expf(-crate::control::STAGE_POLE_PER_S / sample_hz);
+        let lag = 1.0 - libm::expf(-(crate::control::STAGE_POLE_PER_S as f32) / sample_hz);
         Self {
             model,
             state: model.init(0.0),
             lag,
             y_um: 0.0,
-            io,
+            volts_per_code: 150.0 / 4095.0,
+            codes_per_um: 65535.0 / 100.0,
         }
     }
 
     /// DAC code in, ADC code out (one sample).
     pub fn step(&mut self, dac_code: u16) -> u32 {
-        let u = dac_code as f32 / self.io.codes_per_volt;
+        let u = dac_code as f32 * self.volts_per_code;
         let y = self.model.step(&mut self.state, u, 1.0 / SAMPLE_HZ as f32);
         self.y_um += self.lag * (y - self.y_um);
-        let code = (self.y_um - self.io.offset_um) / self.io.um_per_code + 0.5;
+        let code = self.y_um * self.codes_per_um + 0.5;
         if code >= 65535.0 {
             65535
         } else if code >= 0.0 {
@@ -130,12 +132,12 @@ impl SimStage {
 /// Instruction counts per control step, measured in `init`.
 pub mod bench {
     use super::{uart, SimStage, BENCH_STEPS, SAMPLE_HZ};
-    use crate::control::{Ctl, Io, Wave, FFS, LAWS};
+    use crate::control::{c, Ctl, FFS, LAWS};
     use core::fmt::Write;
     use core::hint::black_box;
     use cortex_m::peripheral::{syst::SystClkSource, SYST};
-    use piezo_core::command::{Reply, Shape};
-    use piezo_core::feedforward::Feedforward;
+    use piezo_core::command::Reply;
+    use piezo_core::pipeline::Wave;
 
     pub const ROWS: usize = LAWS.len() * FFS.len();
 
@@ -147,6 +149,8 @@ pub mod bench {
         pub instr_x100: u32,
         /// Worst single step (instructions, SysTick resolution).
         pub max_instr: u32,
+        /// The law or compensator could not be configured for this number type.
+        pub unsupported: bool,
     }
 
     pub struct Table {
@@ -172,15 +176,29 @@ pub mod bench {
         }
     }
 
+    /// A loop with `ff` and `law` (`open-loop` means the feedforward alone) on a 5 um,
+    /// 100 Hz sine around 10 um.
     fn configured(law: &str, ff: &str) -> Option<Ctl> {
-        let sample_hz = SAMPLE_HZ as f32;
-        let mut ctl = Ctl::new(Io::on_chip(), sample_hz);
-        let fb = (ctl.laws)(law, sample_hz)?;
-        ctl.lp.set_feedback(fb);
-        ctl.lp.ff = crate::control::ff_by_name(ff, sample_hz)?;
-        ctl.lp.ff.reset(&piezo_core::signals::Setpoint::hold(10.0));
-        let _: &Feedforward<f32> = &ctl.lp.ff;
-        ctl.lp.wave = Wave::periodic(Shape::Sine, 5.0, 100.0, 10.0, sample_hz);
+        let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        ctl.lp.set_ff(ff).ok()?;
+        let law = if law == "open-loop" {
+            "feedforward"
+        } else {
+            law
+        };
+        ctl.lp.set_law(law, ctl.laws).ok()?;
+        ctl.lp
+            .p
+            .set_wave(
+                0,
+                Wave::Sine {
+                    offset_um: c(10.0),
+                    amplitude_um: c(5.0),
+                    freq_hz: c(100.0),
+                    phase_turns: c(0.0),
+                },
+            )
+            .ok()?;
         Some(ctl)
     }
 
@@ -217,9 +235,10 @@ pub mod bench {
                 row.law = law;
                 row.ff = ff;
                 let Some(mut ctl) = configured(law, ff) else {
+                    row.unsupported = true;
                     continue;
                 };
-                let mut stage = SimStage::new(Io::on_chip(), SAMPLE_HZ as f32);
+                let mut stage = SimStage::new(SAMPLE_HZ as f32);
                 let mut dac = 0u16;
                 for c in codes.iter_mut() {
                     *c = stage.step(dac);
@@ -272,6 +291,11 @@ pub mod bench {
         uart::line("mode               feedforward        instr/step  first-50-max");
         for row in &t.rows {
             r.clear();
+            if row.unsupported {
+                write!(r, "{:<18} {:<18} {:>10}", row.law, row.ff, "n/a").ok();
+                uart::line(r.as_str());
+                continue;
+            }
             write!(
                 r,
                 "{:<18} {:<18} {:>7}.{:02}  {:>8}",
@@ -300,7 +324,7 @@ pub mod bench {
 #[rtic::app(device = crate::board_qemu::pac, peripherals = false)]
 mod app {
     use super::{bench, uart, SimStage, PERIODS_MAX, PERIODS_MIN, SAMPLE_HZ, SYSTICK_HZ};
-    use crate::control::{stream_frames, Ctl, Io};
+    use crate::control::{c, stream_frames, Ctl};
     use core::fmt::Write;
     use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
@@ -334,12 +358,15 @@ mod app {
         syst.enable_counter();
         defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
         uart::line("ready");
-        let mut ctl = Ctl::new(Io::on_chip(), SAMPLE_HZ as f32);
-        ctl.lp.wave = crate::control::Wave::hold(10.0);
+        let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        ctl.lp
+            .p
+            .set_wave(0, piezo_core::pipeline::Wave::Hold { y_um: c(10.0) })
+            .ok();
         (
             Shared { ctl, periods: 0 },
             Local {
-                stage: SimStage::new(Io::on_chip(), SAMPLE_HZ as f32),
+                stage: SimStage::new(SAMPLE_HZ as f32),
                 dac: 0,
                 line: LineBuffer::new(),
                 table,
@@ -358,7 +385,7 @@ mod app {
             let t1 = SYST::get_current();
             *dac = ctl.lp.step(code);
             let t2 = SYST::get_current();
-            ctl.rec.push(&ctl.lp.signals);
+            ctl.record(code, *dac);
             let overrun = SCB::is_pendst_pending();
             let t = &mut ctl.timing;
             t.step.record(elapsed(t1, t2));

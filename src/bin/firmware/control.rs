@@ -8,219 +8,215 @@ use piezo_core::feedback::{
     hgo, Adrc, AdrcConfig, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
     PidConfig, Robust, RobustConfig,
 };
-use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf};
+use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf, MultiFeedforward};
 use piezo_core::hysteresis::Cbw;
+use piezo_core::pipeline::{
+    AxisConfig, Config, DacScale, Mode, OutputLimits, Pipeline, Sensor, Wave,
+};
 use piezo_core::recorder::{self, Recorder, Signal};
-use piezo_core::signals::{LoopSignals, Setpoint};
 use piezo_core::Real;
 
-/// Recorder size: 4 channels x 1024 frames of f32 (16 KiB).
+/// The number type of the control path: `f32` with an FPU (thumbv7em-none-eabihf), the
+/// Q16.16 fixed point of [`piezo_core::fixed`] without one (thumbv7m-none-eabi, Cortex-M3).
+#[cfg(target_abi = "eabihf")]
+pub type R = f32;
+#[cfg(not(target_abi = "eabihf"))]
+pub type R = piezo_core::fixed::Q16;
+
+/// A constant of the control path (folded at compile time).
+#[inline(always)]
+pub fn c(x: f64) -> R {
+    R::from_f64(x)
+}
+
+/// What the control path needs beyond [`Real`]: code values and printing.
+pub trait Sample: Real + core::fmt::Display {
+    /// A converter code as a signal value (Q16.16 saturates above 32767).
+    fn code_value(code: u32) -> Self;
+}
+
+impl Sample for f32 {
+    #[inline(always)]
+    fn code_value(code: u32) -> Self {
+        code as f32
+    }
+}
+
+impl Sample for piezo_core::fixed::Q16 {
+    #[inline(always)]
+    fn code_value(code: u32) -> Self {
+        Self::from_usize(code as usize)
+    }
+}
+
+/// Recorder size: 4 channels x 1024 frames of R (16 KiB).
 pub const REC_CH: usize = 4;
 pub const REC_N: usize = 1024;
 
-/// Converter scaling and output limits of one axis.
-#[derive(Clone, Copy, Debug)]
-pub struct Io {
-    /// Position per ADC code (um/LSB) and position at code 0 (um).
-    pub um_per_code: f32,
-    pub offset_um: f32,
-    /// DAC codes per volt of actuator command, and the largest code.
-    pub codes_per_volt: f32,
-    pub dac_max: u16,
-    /// Actuator range (V) and slew limit (V per sample).
-    pub u_min: f32,
-    pub u_max: f32,
-    pub slew_per_sample: f32,
-}
+/// Sample rate of the control loop (Hz). Q16.16 holds values below 32768 only, so the
+/// fixed-point build runs at 16 384 Hz (sample period exactly 4 units of 2^-16 s).
+#[cfg(target_abi = "eabihf")]
+pub const SAMPLE_HZ: u32 = 100_000;
+#[cfg(not(target_abi = "eabihf"))]
+pub const SAMPLE_HZ: u32 = 16_384;
 
-impl Io {
-    /// 16-bit ADC over 0..100 um, 12-bit DAC over 0..150 V (amplifier gain 45 V/V at 3.3 V).
-    pub const fn on_chip() -> Self {
-        Self {
-            um_per_code: 100.0 / 65535.0,
-            offset_um: 0.0,
-            codes_per_volt: 4095.0 / 150.0,
-            dac_max: 4095,
-            u_min: 0.0,
-            u_max: 150.0,
-            slew_per_sample: 1.0,
-        }
+/// ADC codes are shifted right by this before scaling: Q16.16 cannot represent 16-bit codes
+/// (the fixed-point build keeps 15 bits, 3 nm over 100 um).
+#[cfg(target_abi = "eabihf")]
+const ADC_SHIFT: u32 = 0;
+#[cfg(not(target_abi = "eabihf"))]
+const ADC_SHIFT: u32 = 1;
+
+/// Largest DAC code (12-bit on-chip DAC).
+pub const DAC_MAX: i32 = 4095;
+
+/// The on-chip converters: 16-bit ADC over 0..100 um, 12-bit DAC over 0..150 V
+/// (amplifier gain 45 V/V at 3.3 V), slew limit 20 V/ms, safe state 0 V.
+pub fn on_chip_config(sample_hz: R) -> Config<R, 1> {
+    let codes = (65_535 >> ADC_SHIFT) as f64;
+    Config {
+        sample_hz,
+        axes: [AxisConfig {
+            sensor: Sensor {
+                um_per_code: c(100.0 / codes),
+                offset_um: c(0.0),
+                code_min: 0,
+                code_max: codes as i32,
+            },
+            open_loop: LinearFf {
+                um_per_volt: c(0.16),
+                offset_um: c(0.0),
+            },
+            limits: OutputLimits {
+                volts_min: c(0.0),
+                volts_max: c(150.0),
+                slew_volts_per_s: c(20_000.0),
+            },
+            dac: DacScale {
+                volts_per_code: c(150.0 / DAC_MAX as f64),
+                volts_at_zero: c(0.0),
+                code_min: 0,
+                code_max: DAC_MAX,
+            },
+            safe_volts: c(0.0),
+        }],
     }
 }
 
-/// Reference generator (stand-in until the core pipeline's generator is wired).
-///
-/// The sine is a rotating phasor (one complex multiply per sample, renormalised): `sinf` and
-/// `cosf` of libm compute in f64, which the single-precision FPU of the M4F/M7 emulates in
-/// software (thousands of instructions per sample).
-#[derive(Clone, Copy, Debug)]
-pub struct Wave {
-    pub shape: Option<Shape>,
-    pub amp_um: f32,
-    pub offset_um: f32,
-    /// Phase in cycles, `[0, 1)`, and its increment per sample.
-    pub phase: f32,
-    pub dphase: f32,
-    /// Angular frequency (rad/s).
-    pub w: f32,
-    /// Phasor `(cos, sin)` of the phase and its rotation per sample.
-    pub cs: (f32, f32),
-    pub rot: (f32, f32),
-}
-
-impl Wave {
-    pub fn hold(y_um: f32) -> Self {
-        Self {
-            shape: None,
-            amp_um: 0.0,
-            offset_um: y_um,
-            phase: 0.0,
-            dphase: 0.0,
-            w: 0.0,
-            cs: (1.0, 0.0),
-            rot: (1.0, 0.0),
-        }
-    }
-
-    /// A periodic waveform starting at phase 0 (init time: uses libm).
-    pub fn periodic(
-        shape: Shape,
-        amp_um: f32,
-        freq_hz: f32,
-        offset_um: f32,
-        sample_hz: f32,
-    ) -> Self {
-        let dphase = freq_hz / sample_hz;
-        let step = 2.0 * core::f32::consts::PI * dphase;
-        Self {
-            shape: Some(shape),
-            amp_um,
-            offset_um,
-            phase: 0.0,
-            dphase,
-            w: 2.0 * core::f32::consts::PI * freq_hz,
-            cs: (1.0, 0.0),
-            rot: (libm::cosf(step), libm::sinf(step)),
-        }
-    }
-
-    #[inline]
-    pub fn next(&mut self) -> Setpoint<f32> {
-        let Some(shape) = self.shape else {
-            return Setpoint::hold(self.offset_um);
-        };
-        self.phase += self.dphase;
-        if self.phase >= 1.0 {
-            self.phase -= 1.0;
-        }
-        let (y, dy, ddy) = match shape {
-            Shape::Sine => {
-                let (c, s) = self.cs;
-                let (rc, rs) = self.rot;
-                let (c, s) = (c * rc - s * rs, s * rc + c * rs);
-                // First-order renormalisation keeps |phasor| = 1 without a sqrt.
-                let k = 1.5 - 0.5 * (c * c + s * s);
-                self.cs = (c * k, s * k);
-                let w = self.w;
-                (s * k, w * c * k, -w * w * s * k)
-            }
-            Shape::Triangle => {
-                let p = self.phase;
-                let slope = 4.0 * self.w / (2.0 * core::f32::consts::PI);
-                if p < 0.25 {
-                    (4.0 * p, slope, 0.0)
-                } else if p < 0.75 {
-                    (2.0 - 4.0 * p, -slope, 0.0)
-                } else {
-                    (4.0 * p - 4.0, slope, 0.0)
-                }
-            }
-            Shape::Square => (if self.phase < 0.5 { 1.0 } else { -1.0 }, 0.0, 0.0),
-        };
-        Setpoint {
-            y_um: self.offset_um + self.amp_um * y,
-            dy: self.amp_um * dy,
-            ddy: self.amp_um * ddy,
-        }
-    }
-}
-
-/// One axis: reference, feedforward, feedback, limits, converter scaling.
+/// One axis: the core pipeline (sensor scaling, reference, feedforward, feedback, limits,
+/// DAC code) plus the names of what is selected.
 pub struct Loop {
-    pub io: Io,
-    pub sample_hz: f32,
-    pub wave: Wave,
-    pub ff: Feedforward<f32>,
-    pub fb: Feedback<f32>,
-    /// Last applied command (V).
-    pub u_applied: f32,
-    /// This period's signals, indexed by [`Signal::index`] (recorder input).
-    pub signals: [f32; Signal::COUNT],
+    pub p: Pipeline<R, 1>,
+    pub sample_hz: R,
+    /// Selected law (`open-loop`, `feedforward` or a law of [`LAWS`]) and feedforward.
+    pub law: &'static str,
+    pub ff: &'static str,
 }
 
 impl Loop {
-    pub fn new(io: Io, sample_hz: f32, fb: Feedback<f32>) -> Self {
+    /// Open loop, holding 0 um, in the safe state's voltage.
+    pub fn new(sample_hz: R) -> Self {
+        let ff = MultiFeedforward::PerAxis([Feedforward::Linear(LinearFf {
+            um_per_volt: c(0.16),
+            offset_um: c(0.0),
+        })]);
+        let p = Pipeline::new(
+            on_chip_config(sample_hz),
+            [Wave::Hold { y_um: c(0.0) }],
+            ff,
+            [Feedback::OpenLoop],
+        )
+        .expect("the on-chip configuration is valid");
         Self {
-            io,
+            p,
             sample_hz,
-            wave: Wave::hold(0.0),
-            ff: Feedforward::Linear(LinearFf {
-                um_per_volt: 0.16,
-                offset_um: 0.0,
-            }),
-            fb,
-            u_applied: 0.0,
-            signals: [0.0; Signal::COUNT],
+            law: "open-loop",
+            ff: "linear",
         }
     }
 
     /// One control period: ADC code in, DAC code out. No panic, bounded, NaN-safe.
-    #[inline]
+    #[inline(always)]
     pub fn step(&mut self, adc_code: u32) -> u16 {
-        let io = self.io;
-        let y_um = adc_code as f32 * io.um_per_code + io.offset_um;
-        let setpoint = self.wave.next();
-        let u_ff = self.ff.compensate(&setpoint);
-        let u = self.fb.update(&LoopSignals {
-            setpoint,
-            y_um,
-            u_ff,
-            u_applied: self.u_applied,
-        });
-        let lo = (self.u_applied - io.slew_per_sample).max(io.u_min);
-        let hi = (self.u_applied + io.slew_per_sample).min(io.u_max);
-        let u = u.clamp_to(lo, hi);
-        self.u_applied = u;
-        let code = dac_code(u, io.codes_per_volt, io.dac_max);
-        self.signals = [
-            setpoint.y_um,
-            y_um,
-            setpoint.y_um - y_um,
-            u_ff,
-            u,
-            adc_code as f32,
-            code as f32,
-        ];
-        code
+        let [code] = self.p.step([(adc_code >> ADC_SHIFT) as i32]);
+        code.clamp(0, DAC_MAX) as u16
     }
 
-    /// Bumpless switch of the feedback law: the new law starts from the applied voltage.
-    pub fn set_feedback(&mut self, mut fb: Feedback<f32>) {
-        let io = LoopSignals {
-            setpoint: Setpoint::hold(self.signals[Signal::RefUm.index()]),
-            y_um: self.signals[Signal::YUm.index()],
-            u_ff: self.signals[Signal::FfVolts.index()],
-            u_applied: self.u_applied,
-        };
-        fb.reset(&io);
-        self.fb = fb;
+    /// This period's signals, indexed by [`Signal::index`] (recorder input).
+    #[inline(always)]
+    pub fn signals(&self, adc_code: u32, dac_code: u16) -> [R; Signal::COUNT] {
+        let st = self.p.state();
+        let (r, y) = (st.trace.setpoint[0].y_um, st.trace.y_um[0]);
+        [
+            r,
+            y,
+            r - y,
+            st.trace.u_ff[0],
+            st.u_applied[0],
+            R::code_value(adc_code),
+            R::code_value(dac_code as u32),
+        ]
     }
-}
 
-/// Volts to a DAC code, saturating (NaN -> 0).
-#[inline(always)]
-pub fn dac_code(u: f32, codes_per_volt: f32, max: u16) -> u16 {
-    (u * codes_per_volt + 0.5).clamp_to(0.0, max as f32) as u16
+    /// Selects `open-loop`, `feedforward` or a feedback law (bumpless).
+    pub fn set_law(
+        &mut self,
+        name: &str,
+        laws: fn(&str, R) -> Option<Feedback<R>>,
+    ) -> Result<(), Error> {
+        match name {
+            "open-loop" => self.p.set_mode(Mode::OpenLoop),
+            "feedforward" => self.p.set_mode(Mode::Feedforward),
+            _ => {
+                // A known law whose configuration this number type cannot hold (ADRC's
+                // gain in Q16.16) is "unsupported", not "unknown".
+                let fb = laws(name, self.sample_hz).ok_or(if LAWS.contains(&name) {
+                    Error::Unsupported
+                } else {
+                    Error::UnknownMode
+                })?;
+                self.p.set_feedback(0, fb).map_err(|_| Error::OutOfRange)?;
+                self.p.set_mode(Mode::ClosedLoop);
+            }
+        }
+        self.law = LAWS
+            .iter()
+            .chain(["feedforward"].iter())
+            .find(|l| **l == name)
+            .copied()
+            .unwrap_or("?");
+        Ok(())
+    }
+
+    /// Selects the feedforward compensator (restarts at the current setpoint).
+    pub fn set_ff(&mut self, name: &str) -> Result<(), Error> {
+        let ff = ff_by_name(name, self.sample_hz).ok_or(Error::UnknownMode)?;
+        self.p.set_feedforward(MultiFeedforward::PerAxis([ff]));
+        self.ff = FFS.iter().find(|f| **f == name).copied().unwrap_or("?");
+        Ok(())
+    }
+
+    /// Rebuilds the pipeline with new limits, starting from the applied voltage (so the
+    /// output does not jump) in the same mode, law and compensator.
+    fn set_limits(&mut self, f: impl FnOnce(&mut OutputLimits<R>)) -> Result<(), Error> {
+        let mut cfg = *self.p.config();
+        let axis = &mut cfg.axes[0];
+        f(&mut axis.limits);
+        let u = self.p.state().u_applied[0];
+        axis.safe_volts = u.clamp_to(axis.limits.volts_min, axis.limits.volts_max);
+        let wave = *self.p.reference(0).ok_or(Error::OutOfRange)?.wave();
+        let mode = self.p.state().mode;
+        let p = Pipeline::new(
+            cfg,
+            [wave],
+            self.p.feedforward().clone(),
+            self.p.feedback().clone(),
+        )
+        .map_err(|_| Error::OutOfRange)?;
+        self.p = p;
+        self.p.set_mode(mode);
+        Ok(())
+    }
 }
 
 /// Min/max/last of a cycle count, and how many samples there were.
@@ -274,15 +270,14 @@ impl Timing {
 /// Everything the control task owns: the loop, the recorder and the timing.
 pub struct Ctl {
     pub lp: Loop,
-    pub rec: Recorder<f32, REC_CH, REC_N>,
+    pub rec: Recorder<R, REC_CH, REC_N>,
     pub timing: Timing,
     /// Feedback laws selectable by `mode` (name, constructor).
-    pub laws: fn(&str, f32) -> Option<Feedback<f32>>,
+    pub laws: fn(&str, R) -> Option<Feedback<R>>,
 }
 
 /// Names of the feedback laws `mode` accepts (the bench iterates over them); they are the
 /// laws' own [`Feedback::name`]s.
-#[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
 pub const LAWS: [&str; 11] = [
     "open-loop",
     "pid",
@@ -299,23 +294,23 @@ pub const LAWS: [&str; 11] = [
 
 /// Stage the laws are tuned for: CBW set 1 of the 000 backup slide, first-order linear part
 /// with pole [`STAGE_POLE_PER_S`], range 0..150 V.
-pub const STAGE_POLE_PER_S: f32 = 2.0 * core::f32::consts::PI * 500.0;
+pub const STAGE_POLE_PER_S: f64 = 2.0 * core::f64::consts::PI * 500.0;
 
 /// The feedback laws of the core, by name, with gains for [`STAGE_POLE_PER_S`].
-pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
-    let dt_s = 1.0 / sample_hz;
+pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
+    let dt_s = c(1.0) / sample_hz;
     let (ff, base) = match name.strip_prefix("ff+") {
         Some(b) => (true, b),
         None => (false, name),
     };
-    let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).ok()?;
+    let model = Cbw::with_n1(c(0.16), c(0.07), c(0.02), c(0.01)).ok()?;
     let hgo = || {
         Hgo::new(
             ObserverModel::Cbw(model),
-            STAGE_POLE_PER_S,
-            2e-4,
-            hgo::K1 as f32,
-            hgo::K2 as f32,
+            c(STAGE_POLE_PER_S),
+            c(2e-4),
+            c(hgo::K1),
+            c(hgo::K2),
             dt_s,
         )
         .ok()
@@ -324,8 +319,8 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
         Robust::new(
             hgo()?,
             RobustConfig {
-                lambda1: 2_000.0,
-                lambda2: 2_000.0,
+                lambda1: c(2_000.0),
+                lambda2: c(2_000.0),
                 feedforward: ff,
                 convergence,
             },
@@ -336,11 +331,11 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
     match base {
         "open-loop" if !ff => Some(Feedback::OpenLoop),
         "pid" => Pid::new(PidConfig {
-            kp: 0.5,
-            ki: 2_000.0,
-            kd: 0.0,
-            tf_s: 1e-4,
-            kb: 1.0,
+            kp: c(0.5),
+            ki: c(2_000.0),
+            kd: c(0.0),
+            tf_s: c(1e-4),
+            kb: c(1.0),
             feedforward: ff,
             dt_s,
         })
@@ -348,14 +343,17 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
         .map(Feedback::Pid),
         "hgo-robust" => robust(Convergence::Exponential),
         "fts" => robust(Convergence::FiniteTime {
-            alpha1: 0.8,
-            alpha2: 0.8,
-            sat_um_per_s: 1e4,
+            alpha1: c(0.8),
+            alpha2: c(0.8),
+            sat_um_per_s: c(1e4),
         }),
         "adrc" => Adrc::new(AdrcConfig {
-            b: 0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S,
-            eps_s: 2e-4,
-            omega_c: 2_000.0,
+            // Plain ADRC: the ESO estimates the whole linear part.
+            a1: c(0.0),
+            a2: c(0.0),
+            b: c(0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S),
+            eps_s: c(2e-4),
+            omega_c: c(2_000.0),
             feedforward: ff,
             dt_s,
         })
@@ -365,10 +363,10 @@ pub fn law_by_name(name: &str, sample_hz: f32) -> Option<Feedback<f32>> {
             hgo()?,
             NmpcConfig {
                 decimation: 10,
-                r: 1e-3,
+                r: c(1e-3),
                 iterations: 2,
-                u_min: 0.0,
-                u_max: 150.0,
+                u_min: c(0.0),
+                u_max: c(150.0),
                 feedforward: ff,
             },
         )
@@ -384,17 +382,17 @@ pub const FFS: [&str; 3] = ["linear", "ims-cbw", "ims-cbw-delayed"];
 
 /// The feedforward compensators, by name: linear scaling, or IMS around the CBW model of
 /// 000 backup slide set 1 (0..150 V).
-pub fn ff_by_name(name: &str, sample_hz: f32) -> Option<Feedforward<f32>> {
+pub fn ff_by_name(name: &str, sample_hz: R) -> Option<Feedforward<R>> {
     let ims = |closure| {
-        let model = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).ok()?;
-        Ims::new(model, closure, 0.0, 150.0, 1.0 / sample_hz)
+        let model = Cbw::with_n1(c(0.16), c(0.07), c(0.02), c(0.01)).ok()?;
+        Ims::new(model, closure, c(0.0), c(150.0), c(1.0) / sample_hz)
             .ok()
             .map(Feedforward::ImsCbw)
     };
     match name {
         "linear" => Some(Feedforward::Linear(LinearFf {
-            um_per_volt: 0.16,
-            offset_um: 0.0,
+            um_per_volt: c(0.16),
+            offset_um: c(0.0),
         })),
         "ims-cbw" => ims(ImsLoop::Solved),
         "ims-cbw-delayed" => ims(ImsLoop::Delayed),
@@ -403,12 +401,24 @@ pub fn ff_by_name(name: &str, sample_hz: f32) -> Option<Feedforward<f32>> {
 }
 
 impl Ctl {
-    pub fn new(io: Io, sample_hz: f32) -> Self {
+    pub fn new(sample_hz: R) -> Self {
         Self {
-            lp: Loop::new(io, sample_hz, Feedback::OpenLoop),
+            lp: Loop::new(sample_hz),
             rec: Recorder::new(),
             timing: Timing::new(),
             laws: law_by_name,
+        }
+    }
+
+    /// Feeds the recorder (only while it captures: the signals cost a few instructions).
+    #[inline(always)]
+    pub fn record(&mut self, adc_code: u32, dac_code: u16) {
+        if matches!(
+            self.rec.state(),
+            recorder::State::Armed | recorder::State::Triggered
+        ) {
+            let s = self.lp.signals(adc_code, dac_code);
+            self.rec.push(&s);
         }
     }
 
@@ -447,26 +457,26 @@ impl Ctl {
                 write!(out, "ok {name} {v}").ok();
             }
             Command::Set(name, v) => {
-                set_param(lp, name, v)?;
+                set_param(lp, name, c(v as f64))?;
                 write!(out, "ok {name} {}", get_param(lp, name)?).ok();
             }
             Command::Mode(name) => {
-                let fb = (self.laws)(name, lp.sample_hz).ok_or(Error::UnknownMode)?;
-                lp.set_feedback(fb);
-                write!(out, "ok mode {}", lp.fb.name()).ok();
+                lp.set_law(name, self.laws)?;
+                write!(out, "ok mode {}", lp.law).ok();
             }
             Command::Feedforward(name) => {
-                lp.ff = ff_by_name(name, lp.sample_hz).ok_or(Error::UnknownMode)?;
-                lp.ff
-                    .reset(&Setpoint::hold(lp.signals[Signal::RefUm.index()]));
-                write!(out, "ok ff {}", lp.ff.name()).ok();
+                lp.set_ff(name)?;
+                write!(out, "ok ff {}", lp.ff).ok();
             }
             Command::WaveOff => {
-                lp.wave = Wave::hold(lp.signals[Signal::RefUm.index()]);
+                let y_um = lp.p.state().trace.setpoint[0].y_um;
+                lp.p.set_wave(0, Wave::Hold { y_um })
+                    .map_err(|_| Error::OutOfRange)?;
                 write!(out, "ok wave off").ok();
             }
             Command::WaveHold(y) => {
-                lp.wave = Wave::hold(y);
+                lp.p.set_wave(0, Wave::Hold { y_um: c(y as f64) })
+                    .map_err(|_| Error::OutOfRange)?;
                 write!(out, "ok wave hold {y}").ok();
             }
             Command::Wave {
@@ -475,16 +485,29 @@ impl Ctl {
                 freq_hz,
                 offset_um,
             } => {
-                if !(freq_hz < 0.5 * lp.sample_hz) {
-                    return Err(Error::OutOfRange);
-                }
-                lp.wave = Wave::periodic(shape, amp_um, freq_hz, offset_um, lp.sample_hz);
-                write!(
-                    out,
-                    "ok wave {} {amp_um} {freq_hz} {offset_um}",
-                    shape.name()
-                )
-                .ok();
+                let (a, f, o) = (c(amp_um as f64), c(freq_hz as f64), c(offset_um as f64));
+                let wave = match shape {
+                    Shape::Sine => Wave::Sine {
+                        offset_um: o,
+                        amplitude_um: a,
+                        freq_hz: f,
+                        phase_turns: c(0.0),
+                    },
+                    Shape::Triangle => Wave::Triangle {
+                        offset_um: o,
+                        amplitude_um: a,
+                        freq_hz: f,
+                        phase_turns: c(0.0),
+                    },
+                    Shape::Square => Wave::Steps {
+                        low_um: o - a,
+                        high_um: o + a,
+                        levels: 2,
+                        freq_hz: f,
+                    },
+                };
+                lp.p.set_wave(0, wave).map_err(|_| Error::OutOfRange)?;
+                write!(out, "ok wave {} {a} {f} {o}", shape.name()).ok();
             }
             Command::Stats => {
                 let t = &self.timing;
@@ -544,17 +567,35 @@ impl Ctl {
                         channel,
                         level,
                         pre,
-                    } => (recorder::Trigger::Rising { channel, level }, pre),
+                    } => (
+                        recorder::Trigger::Rising {
+                            channel,
+                            level: c(level as f64),
+                        },
+                        pre,
+                    ),
                     TriggerCmd::Falling {
                         channel,
                         level,
                         pre,
-                    } => (recorder::Trigger::Falling { channel, level }, pre),
+                    } => (
+                        recorder::Trigger::Falling {
+                            channel,
+                            level: c(level as f64),
+                        },
+                        pre,
+                    ),
                     TriggerCmd::Level {
                         channel,
                         level,
                         pre,
-                    } => (recorder::Trigger::Level { channel, level }, pre),
+                    } => (
+                        recorder::Trigger::Level {
+                            channel,
+                            level: c(level as f64),
+                        },
+                        pre,
+                    ),
                 };
                 self.rec.set_trigger(trigger, pre).map_err(cfg)?;
                 write!(out, "ok").ok();
@@ -581,7 +622,7 @@ impl Ctl {
 pub fn stream_frames(
     start: usize,
     count: usize,
-    mut frame: impl FnMut(usize) -> Option<[f32; REC_CH]>,
+    mut frame: impl FnMut(usize) -> Option<[R; REC_CH]>,
     mut line: impl FnMut(&str),
 ) {
     let mut sent = 0;
@@ -606,67 +647,50 @@ pub fn stream_frames(
     line(r.as_str());
 }
 
-/// Parameter names of `get`/`set`.
-pub const PARAMS: [&str; 7] = [
+/// Parameter names of `get`/`set` (`sample_hz` and the scalings are read-only).
+pub const PARAMS: [&str; 6] = [
     "u_min",
     "u_max",
     "slew",
     "um_per_code",
-    "offset_um",
-    "codes_per_volt",
-    "ff_um_per_volt",
+    "volts_per_code",
+    "sample_hz",
 ];
 
-fn get_param(lp: &Loop, name: &str) -> Result<f32, Error> {
-    let io = &lp.io;
+fn get_param(lp: &Loop, name: &str) -> Result<R, Error> {
+    let cfg = lp.p.config();
+    let a = &cfg.axes[0];
     Ok(match name {
-        "u_min" => io.u_min,
-        "u_max" => io.u_max,
-        "slew" => io.slew_per_sample,
-        "um_per_code" => io.um_per_code,
-        "offset_um" => io.offset_um,
-        "codes_per_volt" => io.codes_per_volt,
-        "ff_um_per_volt" => match &lp.ff {
-            Feedforward::Linear(l) => l.um_per_volt,
-            _ => return Err(Error::Busy),
-        },
+        "u_min" => a.limits.volts_min,
+        "u_max" => a.limits.volts_max,
+        "slew" => a.limits.slew_volts_per_s,
+        "um_per_code" => a.sensor.um_per_code,
+        "volts_per_code" => a.dac.volts_per_code,
+        "sample_hz" => cfg.sample_hz,
         _ => return Err(Error::UnknownParam),
     })
 }
 
-fn set_param(lp: &mut Loop, name: &str, v: f32) -> Result<(), Error> {
-    let io = &mut lp.io;
+fn set_param(lp: &mut Loop, name: &str, v: R) -> Result<(), Error> {
+    let (lo, hi) = {
+        let l = &lp.p.config().axes[0].limits;
+        (l.volts_min, l.volts_max)
+    };
     let check = |ok: bool| if ok { Ok(()) } else { Err(Error::OutOfRange) };
     match name {
         "u_min" => {
-            check(v < io.u_max)?;
-            io.u_min = v;
+            check(v >= c(0.0) && v < hi)?;
+            lp.set_limits(|l| l.volts_min = v)
         }
         "u_max" => {
-            check(v > io.u_min)?;
-            io.u_max = v;
+            check(v > lo && v <= c(150.0))?;
+            lp.set_limits(|l| l.volts_max = v)
         }
         "slew" => {
-            check(v > 0.0)?;
-            io.slew_per_sample = v;
+            check(v > c(0.0))?;
+            lp.set_limits(|l| l.slew_volts_per_s = v)
         }
-        "um_per_code" => {
-            check(v != 0.0)?;
-            io.um_per_code = v;
-        }
-        "offset_um" => io.offset_um = v,
-        "codes_per_volt" => {
-            check(v > 0.0)?;
-            io.codes_per_volt = v;
-        }
-        "ff_um_per_volt" => {
-            check(v > 0.0)?;
-            match &mut lp.ff {
-                Feedforward::Linear(l) => l.um_per_volt = v,
-                _ => return Err(Error::Busy),
-            }
-        }
-        _ => return Err(Error::UnknownParam),
+        "um_per_code" | "volts_per_code" | "sample_hz" => Err(Error::Busy),
+        _ => Err(Error::UnknownParam),
     }
-    Ok(())
 }
