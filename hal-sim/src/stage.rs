@@ -129,6 +129,8 @@ struct Axis {
     creep: Vec<f64>,
     /// Output of the static part + creep (before coupling).
     y_hc: f64,
+    /// Input of the structure at the end of the last step.
+    u_struct: f64,
     /// Structural state: position, velocity.
     x: f64,
     v: f64,
@@ -146,6 +148,9 @@ pub struct Stage {
     coupling: Option<Vec<Vec<f64>>>,
     force: Option<(f64, f64, f64, f64)>, // (um at full force, at_s, freq_hz, stiffness)
     drift: Option<(f64, f64, f64)>,      // (um, tau_s, rate)
+    /// Exponential part of the drift now, and its decay per internal step.
+    drift_exp_um: f64,
+    drift_decay: f64,
     noise_sigma_um: f64,
     /// Delay line of positions at the internal rate, per axis.
     delay: Vec<Vec<f64>>,
@@ -212,6 +217,7 @@ impl Stage {
                 creep: vec![0.0; gains.len()],
                 creep_gain: gains,
                 y_hc: 0.0,
+                u_struct: 0.0,
                 x: 0.0,
                 v: 0.0,
             });
@@ -248,6 +254,8 @@ impl Stage {
                 f.freq_hz,
                 f.stiffness_n_per_um,
             )),
+            drift_exp_um: 0.0,
+            drift_decay: (-h / cfg.drift.tau_s).exp(),
             drift: cfg.drift.enabled.then_some((
                 cfg.drift.um,
                 cfg.drift.tau_s,
@@ -279,6 +287,7 @@ impl Stage {
                 .for_each(|(c, g)| *c = g * y);
             ax.y_hc = y + ax.creep.iter().sum::<f64>();
             ax.x = ax.y_hc;
+            ax.u_struct = ax.y_hc;
             ax.v = 0.0;
         }
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
@@ -312,7 +321,7 @@ impl Stage {
 
     fn drift_um(&self) -> f64 {
         match self.drift {
-            Some((um, tau, rate)) => -um * (-self.t / tau).exp_m1() + rate * self.t,
+            Some((_, _, rate)) => self.drift_exp_um + rate * self.t,
             None => 0.0,
         }
     }
@@ -324,7 +333,11 @@ impl Stage {
             return f64::NAN;
         };
         let n = line.len();
-        let old = line[(self.delay_pos + 1) % n];
+        let next = self.delay_pos + 1;
+        let old = line
+            .get(if next == n { 0 } else { next })
+            .copied()
+            .unwrap_or(f64::NAN);
         let noise = if self.noise_sigma_um > 0.0 {
             self.noise_sigma_um * self.rng.gauss()
         } else {
@@ -379,10 +392,14 @@ impl Stage {
                 }
             }
             let ax = &mut self.axes[i];
+            // The structure sees the mean of its input over the step (trapezoid: second
+            // order in h, where holding either end would be first order).
+            let mid = 0.5 * (ax.u_struct + input);
+            ax.u_struct = input;
             match &self.ad {
                 Some(ad) => {
-                    let (dx, dv) = (ax.x - input, ax.v);
-                    ax.x = input + ad[0][0] * dx + ad[0][1] * dv;
+                    let (dx, dv) = (ax.x - mid, ax.v);
+                    ax.x = mid + ad[0][0] * dx + ad[0][1] * dv;
                     ax.v = ad[1][0] * dx + ad[1][1] * dv;
                 }
                 None => {
@@ -393,11 +410,20 @@ impl Stage {
         }
         self.steps += 1;
         self.t = self.steps as f64 * h;
+        if let Some((um, _, _)) = self.drift {
+            // um * (1 - exp(-t/tau)), advanced without an exp per step.
+            self.drift_exp_um = um - (um - self.drift_exp_um) * self.drift_decay;
+        }
         let drift = self.drift_um();
         let len = self.delay.first().map_or(1, |l| l.len());
-        self.delay_pos = (self.delay_pos + 1) % len;
+        self.delay_pos += 1;
+        if self.delay_pos >= len {
+            self.delay_pos = 0;
+        }
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
-            line[self.delay_pos] = ax.x + drift;
+            if let Some(p) = line.get_mut(self.delay_pos) {
+                *p = ax.x + drift;
+            }
         }
     }
 }

@@ -48,6 +48,7 @@ impl<T: Real> DacScale<T> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Output<T> {
     pub dac: DacScale<T>,
+    codes_per_volt: T,
     code_lo: i32,
     code_hi: i32,
     max_step: i32,
@@ -106,6 +107,7 @@ impl<T: Real> Output<T> {
         }
         Ok(Self {
             dac: *dac,
+            codes_per_volt: T::ONE / dac.volts_per_code,
             code_lo: code_lo as i32,
             code_hi: code_hi as i32,
             max_step: libm::floor(step).min(i32::MAX as f64 / 4.0) as i32,
@@ -131,7 +133,12 @@ impl<T: Real> Output<T> {
     /// lowest code of the range, then slew-limited).
     #[inline]
     pub fn limit(&self, volts: T, prev: i32) -> Limited {
-        let want = self.dac.code(volts, self.code_lo, self.code_hi);
+        let lo = T::from_f64(self.code_lo as f64);
+        let x = ((volts - self.dac.volts_at_zero) * self.codes_per_volt)
+            .clamp_to(lo, T::from_f64(self.code_hi as f64));
+        // x >= lo, so truncation of the shifted value is the floor (no libm call).
+        let want = ((x - lo + T::HALF).to_f64() as i64 + self.code_lo as i64)
+            .clamp(self.code_lo as i64, self.code_hi as i64) as i32;
         let prev = prev.clamp(self.code_lo, self.code_hi);
         let code = want.clamp(
             prev.saturating_sub(self.max_step),

@@ -144,8 +144,7 @@ impl<T: Real> Wave<T> {
                 ..
             } => {
                 let w = T::TWO * T::PI * freq_hz;
-                let arg = T::TWO * T::PI * x;
-                let (s, c) = (arg.sin(), arg.cos());
+                let (s, c) = sin_cos_turns(x);
                 Setpoint {
                     y_um: offset_um + amplitude_um * s,
                     dy: amplitude_um * w * c,
@@ -194,6 +193,44 @@ impl<T: Real> Wave<T> {
                 freq_hz,
             } => catmull_rom(points, len, x, freq_hz),
         }
+    }
+}
+
+/// `(sin, cos)` of `2 pi x` for `x` in `[0, 1)` turns, without libm: octant reduction and
+/// Taylor polynomials to degree 12 on `|phi| <= pi/4` (truncation below 1e-11, so `f64`
+/// keeps 11 digits and `f32` is exact to rounding). libm's `sinf`/`cosf` compute in `f64`,
+/// which a single-precision FPU emulates in software.
+#[inline]
+pub fn sin_cos_turns<T: Real>(x: T) -> (T, T) {
+    let four = T::from_f64(4.0);
+    let q = (x * four + T::HALF).floor();
+    let phi = (x - q / four) * T::TWO * T::PI;
+    let p2 = phi * phi;
+    // sin: phi (1 - p2/6 (1 - p2/20 (1 - p2/42 (1 - p2/72 (1 - p2/110)))))
+    let c = |k: f64| T::from_f64(1.0 / k);
+    let s = phi
+        * (T::ONE
+            - p2 * c(6.0)
+                * (T::ONE
+                    - p2 * c(20.0)
+                        * (T::ONE
+                            - p2 * c(42.0) * (T::ONE - p2 * c(72.0) * (T::ONE - p2 * c(110.0))))));
+    let co = T::ONE
+        - p2 * c(2.0)
+            * (T::ONE
+                - p2 * c(12.0)
+                    * (T::ONE
+                        - p2 * c(30.0)
+                            * (T::ONE
+                                - p2 * c(56.0)
+                                    * (T::ONE - p2 * c(90.0) * (T::ONE - p2 * c(132.0))))));
+    // Quadrant: sin(phi + n pi/2).
+    let n = (q.to_f64() as i64).rem_euclid(4);
+    match n {
+        0 => (s, co),
+        1 => (co, -s),
+        2 => (-s, -co),
+        _ => (-co, s),
     }
 }
 
@@ -354,6 +391,21 @@ mod tests {
         );
         let pts: Vec<f64> = (0..12).map(|k| (k as f64 * 0.7).sin() * 30.0).collect();
         check_derivatives(Wave::table(&pts, 5.0).unwrap(), fs);
+    }
+
+    #[test]
+    fn sin_cos_turns_matches_libm() {
+        for k in 0..10_000 {
+            let x = k as f64 / 10_000.0;
+            let (s, c) = sin_cos_turns(x);
+            let a = 2.0 * std::f64::consts::PI * x;
+            assert!(
+                (s - a.sin()).abs() < 1e-10 && (c - a.cos()).abs() < 1e-10,
+                "{x}"
+            );
+            let (s, c) = sin_cos_turns(x as f32);
+            assert!((s as f64 - a.sin()).abs() < 5e-7 && (c as f64 - a.cos()).abs() < 5e-7);
+        }
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! `piezo fit`: identify a model of the core from a CSV record.
 use crate::ident::fit::resample::Edge;
-use crate::ident::fit::{self, fit_siso, metrics, models, FitOptions, Fitted, Metrics};
+use crate::ident::fit::{fit_siso, metrics, models, FitOptions, Fitted, Metrics};
 use crate::plot::{write_grid, Plot};
 use crate::record::Record;
 use anyhow::{Context, Result};
@@ -143,7 +143,9 @@ fn all_metrics(rec: &Record, sim: &[Vec<f64>]) -> Vec<ChannelMetrics> {
 
 /// Identifies `def` on `train`: one SISO fit, or the two-step multivariable procedure of
 /// 003 sec. IV for multi-axis records (direct pairs first, then couplings on what the
-/// direct models leave, kept where they lower the RMSE by more than 1 %).
+/// direct models leave, kept where they lower the RMSE by more than 1 %). The coupling
+/// models are driven by their own input (a model of the class of `def` per pair), not by
+/// the direct state `h_j` as in 003 eq. (12).
 pub fn identify(
     def: &'static models::ModelDef,
     train: &Record,
@@ -160,45 +162,68 @@ pub fn identify(
             fit: f,
         }]);
     }
-    let mut parts = Vec::new();
-    // Step 1 (003 sec. IV.B): direct hysteresis u_i -> y_i.
-    for i in 0..n.min(k) {
-        if opts.progress {
-            eprintln!("step 1: direct u{} -> y{}", i + 1, i + 1);
-        }
-        let f = fit_siso(def, &train.u[i], &train.y[i], dt, opts)
-            .with_context(|| format!("direct fit u{} -> y{}", i + 1, i + 1))?;
-        parts.push(Part {
-            kind: "direct",
-            input: i,
-            output: i,
-            fit: f,
-        });
-    }
-    // Step 2 (003 sec. IV.C): couplings u_j -> y_i on the direct residual.
-    let direct = simulate(&parts, train, 0)?;
-    for (i, (y, d)) in train.y.iter().zip(&direct).enumerate() {
-        let mut residual: Vec<f64> = y.iter().zip(d).map(|(y, d)| y - d).collect();
-        for j in (0..k).filter(|&j| j != i) {
-            if opts.progress {
-                eprintln!("step 2: coupling u{} -> y{}", j + 1, i + 1);
+    let sim = |f: &Fitted, j: usize| f.simulate(&train.u[j], dt, Edge::Hold);
+    let mut direct: Vec<Option<Fitted>> = (0..n).map(|_| None).collect();
+    let mut couplings: Vec<Vec<(usize, Fitted)>> = (0..n).map(|_| Vec::new()).collect();
+    // Two rounds: the second refits each direct model on what the couplings of the first
+    // leave (a coupled output is not zero while its own input rests).
+    for round in 1..=2 {
+        for i in 0..n {
+            let mut target = train.y[i].clone();
+            for (j, f) in &couplings[i] {
+                for (t, v) in target.iter_mut().zip(sim(f, *j)?) {
+                    *t -= v;
+                }
             }
-            let f = fit_siso(def, &train.u[j], &residual, dt, opts)
-                .with_context(|| format!("coupling fit u{} -> y{}", j + 1, i + 1))?;
-            let c = f.simulate(&train.u[j], dt, Edge::Hold)?;
-            let before = metrics(&residual, &vec![0.0; residual.len()]).rmse;
-            let after = metrics(&residual, &c).rmse;
-            if after < 0.99 * before {
-                for (r, v) in residual.iter_mut().zip(&c) {
+            // Step 1 (003 sec. IV.B): direct hysteresis u_i -> y_i.
+            let mut residual = train.y[i].clone();
+            if i < k {
+                if opts.progress {
+                    eprintln!("round {round}, step 1: direct u{} -> y{}", i + 1, i + 1);
+                }
+                let f = fit_siso(def, &train.u[i], &target, dt, opts)
+                    .with_context(|| format!("direct fit u{} -> y{}", i + 1, i + 1))?;
+                for (r, v) in residual.iter_mut().zip(sim(&f, i)?) {
                     *r -= v;
                 }
-                parts.push(Part {
-                    kind: "coupling",
-                    input: j,
-                    output: i,
-                    fit: f,
-                });
+                direct[i] = Some(f);
             }
+            // Step 2 (003 sec. IV.C): couplings u_j -> y_i on the direct residual.
+            couplings[i].clear();
+            for j in (0..k).filter(|&j| j != i) {
+                if opts.progress {
+                    eprintln!("round {round}, step 2: coupling u{} -> y{}", j + 1, i + 1);
+                }
+                let f = fit_siso(def, &train.u[j], &residual, dt, opts)
+                    .with_context(|| format!("coupling fit u{} -> y{}", j + 1, i + 1))?;
+                let c = sim(&f, j)?;
+                let before = metrics(&residual, &vec![0.0; residual.len()]).rmse;
+                if metrics(&residual, &c).rmse < 0.99 * before {
+                    for (r, v) in residual.iter_mut().zip(&c) {
+                        *r -= v;
+                    }
+                    couplings[i].push((j, f));
+                }
+            }
+        }
+    }
+    let mut parts = Vec::new();
+    for (i, (d, cs)) in direct.into_iter().zip(couplings).enumerate() {
+        if let Some(f) = d {
+            parts.push(Part {
+                kind: "direct",
+                input: i,
+                output: i,
+                fit: f,
+            });
+        }
+        for (j, f) in cs {
+            parts.push(Part {
+                kind: "coupling",
+                input: j,
+                output: i,
+                fit: f,
+            });
         }
     }
     Ok(parts)
@@ -405,6 +430,3 @@ fn print_report(r: &Report) {
     show("train", &r.train_metrics);
     show("valid", &r.valid_metrics);
 }
-
-/// Re-exported so tests can build reports.
-pub use fit::apply_linear;
