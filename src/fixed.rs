@@ -286,6 +286,19 @@ impl Real for Q16 {
         }
     }
     #[inline(always)]
+    fn from_i32(n: i32) -> Self {
+        Self::from_int(n)
+    }
+    #[inline(always)]
+    fn to_i32(self) -> i32 {
+        // Division truncates toward zero, as `f32 as i32` does.
+        self.0 / ONE_RAW
+    }
+    #[inline(always)]
+    fn from_turns(x: u32) -> Self {
+        Self((x >> FRAC) as i32)
+    }
+    #[inline(always)]
     fn abs(self) -> Self {
         Self(self.0.saturating_abs())
     }
@@ -514,6 +527,11 @@ mod tests {
         assert_eq!(q(-2.5).floor().to_f64(), -3.0);
         assert_eq!(q(2.5).floor().to_f64(), 2.0);
         assert_eq!(Q16::from_usize(3).to_f64(), 3.0);
+        assert_eq!(Q16::from_i32(-7).to_f64(), -7.0);
+        assert!(!Q16::from_i32(40_000).is_finite());
+        assert_eq!(q(-2.75).to_i32(), -2);
+        assert_eq!(q(2.75).to_i32(), 2);
+        assert_eq!(Q16::from_turns(3 << 30).to_f64(), 0.75);
         assert_eq!(format!("{}", q(-1.25)), "-1.25000");
         assert_eq!(format!("{}", q(3.0) / q(7.0)), "0.42857");
     }

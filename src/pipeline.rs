@@ -102,6 +102,8 @@ pub enum Fault {
     SensorRange { axis: usize },
     /// The controllers produced NaN or infinity.
     NonFiniteCommand { axis: usize },
+    /// The DAC did not take the last code: it still holds an older one.
+    DacWrite { axis: usize },
 }
 
 /// Event counters (saturating).
@@ -114,6 +116,8 @@ pub struct Counters {
     pub nonfinite_commands: u32,
     /// Samples where the range or slew limit changed a command (any axis).
     pub saturated_samples: u32,
+    /// Failed DAC writes reported by the driver.
+    pub dac_faults: u32,
 }
 
 /// Signals of the last sample, for recording and telemetry.
@@ -279,6 +283,27 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     pub fn set_mode(&mut self, mode: Mode) {
         self.state.mode = mode;
         self.restart();
+    }
+
+    /// The driver reports that the last DAC write of `axis` failed and the converter still
+    /// holds `held_code`. The pipeline takes the held code as applied (so the slew limit of
+    /// the next sample is measured from what the stage really sees) and latches the safe
+    /// state.
+    pub fn dac_write_failed(&mut self, axis: usize, held_code: i32) {
+        let st = &mut self.state;
+        if let (Some(code), Some(u), Some(o)) = (
+            st.code.get_mut(axis),
+            st.u_applied.get_mut(axis),
+            self.output.get(axis),
+        ) {
+            let (lo, hi) = o.code_range();
+            *code = held_code.clamp(lo, hi);
+            *u = o.dac.volts(*code);
+        }
+        st.counters.dac_faults = st.counters.dac_faults.saturating_add(1);
+        if st.fault.is_none() {
+            st.fault = Some(Fault::DacWrite { axis });
+        }
     }
 
     /// Leaves the safe state (a fault latches it) in the current mode, bumplessly.

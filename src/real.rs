@@ -59,6 +59,21 @@ pub trait Real:
     fn from_usize(n: usize) -> Self {
         Self::from_f64(n as f64)
     }
+    /// `n` as a real without going through f64 (soft-float on an SP-only FPU).
+    #[inline(always)]
+    fn from_i32(n: i32) -> Self {
+        Self::from_f64(n as f64)
+    }
+    /// Truncated toward zero, saturating, NaN -> 0 (as `as i32`), without f64.
+    #[inline(always)]
+    fn to_i32(self) -> i32 {
+        self.to_f64() as i32
+    }
+    /// A 32-bit phase accumulator as turns, `x / 2^32`, without f64.
+    #[inline(always)]
+    fn from_turns(x: u32) -> Self {
+        Self::from_f64(x as f64 / 4_294_967_296.0)
+    }
     /// Sign with `0 -> 0` (the `sgn` of the seeds), NaN -> 0.
     #[inline(always)]
     fn sgn(self) -> Self {
@@ -116,7 +131,7 @@ pub trait Real:
 }
 
 macro_rules! real_impl {
-    ($t:ty, $exp:ident, $expm1:ident, $ln:ident, $ln1p:ident, $pow:ident, $sin:ident, $cos:ident, $tanh:ident, $atan2:ident, $floor:ident, $fabs:ident) => {
+    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:ident, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:ident, $fabs:ident) => {
         impl Real for $t {
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
@@ -132,6 +147,23 @@ macro_rules! real_impl {
             #[inline(always)]
             fn to_f64(self) -> f64 {
                 self as f64
+            }
+            #[inline(always)]
+            fn from_usize(n: usize) -> Self {
+                n as $t
+            }
+            #[inline(always)]
+            fn from_i32(n: i32) -> Self {
+                n as $t
+            }
+            #[inline(always)]
+            fn to_i32(self) -> i32 {
+                self as i32
+            }
+            /// Exact: the phase keeps as many bits as the mantissa holds.
+            #[inline(always)]
+            fn from_turns(x: u32) -> Self {
+                (x >> $turn_shift) as $t * (1.0 / (1u64 << (32 - $turn_shift)) as $t)
             }
             #[inline(always)]
             fn abs(self) -> Self {
@@ -163,11 +195,11 @@ macro_rules! real_impl {
             }
             #[inline(always)]
             fn sin(self) -> Self {
-                libm::$sin(self)
+                $sin(self)
             }
             #[inline(always)]
             fn cos(self) -> Self {
-                libm::$cos(self)
+                $cos(self)
             }
             #[inline(always)]
             fn tanh(self) -> Self {
@@ -189,8 +221,62 @@ macro_rules! real_impl {
     };
 }
 
-real_impl!(f32, expf, expm1f, logf, log1pf, powf, sinf, cosf, tanhf, atan2f, floorf, fabsf);
-real_impl!(f64, exp, expm1, log, log1p, pow, sin, cos, tanh, atan2, floor, fabs);
+real_impl!(
+    f32, 8, expf, expm1f, logf, log1pf, powf, sin_f32, cos_f32, tanhf, atan2f, floorf, fabsf
+);
+real_impl!(
+    f64,
+    0,
+    exp,
+    expm1,
+    log,
+    log1p,
+    pow,
+    libm::sin,
+    libm::cos,
+    tanh,
+    atan2,
+    floor,
+    fabs
+);
+
+/// `(sin x, cos x)` in single precision only: libm's `sinf`/`cosf` evaluate in f64, which an
+/// SP-only FPU (Cortex-M4F/M7 `eabihf` builds) emulates in software (~1000 instructions).
+/// Octant reduction with pi/2 split in three parts (exact products for `|x| <= 8192`), then
+/// the minimax polynomials of Cephes `sinf`/`cosf` on `[-pi/4, pi/4]`; error below 2.5e-7
+/// absolute for `|x| <= 100` (tested). Larger or non-finite arguments go to libm.
+#[inline]
+fn sin_cos_f32(x: f32) -> (f32, f32) {
+    if !(libm::fabsf(x) <= 8192.0) {
+        return (libm::sinf(x), libm::cosf(x));
+    }
+    const P1: f32 = 1.570_312_5;
+    const P2: f32 = 4.837_513e-4;
+    const P3: f32 = 7.549_79e-8;
+    let q = x * core::f32::consts::FRAC_2_PI;
+    let j = (q + if q >= 0.0 { 0.5 } else { -0.5 }) as i32;
+    let jf = j as f32;
+    let r = ((x - jf * P1) - jf * P2) - jf * P3;
+    let z = r * r;
+    let s = r + r * z * (-1.666_665_5e-1 + z * (8.332_161e-3 + z * -1.951_529_6e-4));
+    let c = 1.0 - 0.5 * z + z * z * (4.166_664_6e-2 + z * (-1.388_731_6e-3 + z * 2.443_315_7e-5));
+    match j & 3 {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
+#[inline(always)]
+fn sin_f32(x: f32) -> f32 {
+    sin_cos_f32(x).0
+}
+
+#[inline(always)]
+fn cos_f32(x: f32) -> f32 {
+    sin_cos_f32(x).1
+}
 
 trait SqrtImpl {
     fn sqrt_impl(self) -> Self;
@@ -253,6 +339,31 @@ mod tests {
         assert_eq!(0.0f64.sgn(), 0.0);
         assert_eq!((-3.0f32).sgn(), -1.0);
         assert_eq!(f64::NAN.sgn(), 0.0);
+    }
+
+    #[test]
+    fn f32_sin_cos_match_f64() {
+        let mut worst = 0.0f64;
+        for i in -200_000..=200_000 {
+            let x = i as f32 * 5e-4; // [-100, 100]
+            let (s, c) = (x.sin() as f64, x.cos() as f64);
+            let xd = x as f64;
+            worst = worst.max((s - xd.sin()).abs()).max((c - xd.cos()).abs());
+        }
+        assert!(worst < 2.5e-7, "f32 sin/cos error {worst}");
+        assert!(f32::NAN.sin().is_nan());
+        assert!((1e6f32.sin() as f64 - (1e6f64).sin()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn integer_and_phase_conversions() {
+        assert_eq!(<f32 as Real>::from_i32(-70_000), -70_000.0);
+        assert_eq!(2.9f32.to_i32(), 2);
+        assert_eq!((-2.9f64).to_i32(), -2);
+        assert_eq!(f32::NAN.to_i32(), 0);
+        assert_eq!(<f32 as Real>::from_turns(1 << 31), 0.5);
+        assert_eq!(<f64 as Real>::from_turns(1), 1.0 / 4_294_967_296.0);
+        assert_eq!(<f32 as Real>::from_usize(3), 3.0);
     }
 
     #[test]

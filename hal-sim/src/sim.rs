@@ -261,6 +261,8 @@ pub struct Bench<const N: usize> {
     period_ns: f64,
     k: u64,
     dac_volts: Vec<f64>,
+    /// The code each DAC holds (the last successful write).
+    dac_codes: Vec<i32>,
     /// Failed converter transactions (the pipeline sees an invalid code).
     pub bus_errors: u64,
 }
@@ -295,7 +297,8 @@ impl<const N: usize> Bench<N> {
         .map_err(|e| anyhow!("{e}"))?;
         pipeline.set_mode(controller.mode);
         let clock = MockClock::default();
-        let (adcs, dacs) = converters(sc, N, &clock, &pipeline.codes())?;
+        let pipeline_codes = pipeline.codes();
+        let (adcs, dacs) = converters(sc, N, &clock, &pipeline_codes)?;
         let stage = Stage::new(sc)?;
         Ok(Self {
             pipeline,
@@ -309,14 +312,28 @@ impl<const N: usize> Bench<N> {
             period_ns: 1e9 / sc.run.loop_hz,
             k: 0,
             dac_volts: vec![0.0; N],
+            dac_codes: pipeline_codes.to_vec(),
             bus_errors: 0,
         })
+    }
+
+    /// The code each DAC holds now (the last successful write).
+    pub fn dac_codes(&self) -> &[i32] {
+        &self.dac_codes
     }
 
     /// One loop sample.
     #[inline]
     pub fn step(&mut self) -> Sample<N> {
+        self.step_with(&mut NoFault)
+    }
+
+    /// One loop sample with faults injected by `inject` between the converters, the
+    /// pipeline and the stage (the fault campaign's hook).
+    #[inline]
+    pub fn step_with(&mut self, inject: &mut impl Inject<N>) -> Sample<N> {
         let t_s = self.stage.time_s();
+        let k = self.k;
         let mut codes = [i32::MIN; N];
         let mut position_um = [0.0; N];
         for (i, (adc, code)) in self.adcs.iter_mut().zip(codes.iter_mut()).enumerate() {
@@ -329,10 +346,22 @@ impl<const N: usize> Bench<N> {
                 Err(_) => self.bus_errors += 1, // i32::MIN: out of range, pipeline faults
             }
         }
-        let out = self.pipeline.step(codes);
-        for ((dac, code), v) in self.dacs.iter_mut().zip(out).zip(self.dac_volts.iter_mut()) {
-            // The DAC mock is infallible.
-            let _ = dac.driver.set_code(code);
+        inject.adc(k, &mut codes);
+        // A skipped control step (overrun, dropped sample): the DACs hold their codes.
+        if !inject.skip_step(k) {
+            let out = self.pipeline.step(codes);
+            for (i, (dac, code)) in self.dacs.iter_mut().zip(out).enumerate() {
+                let held = &mut self.dac_codes[i];
+                if inject.dac_write_fails(k, i) {
+                    self.pipeline.dac_write_failed(i, *held);
+                } else {
+                    // The DAC mock is infallible.
+                    let _ = dac.driver.set_code(code);
+                    *held = code;
+                }
+            }
+        }
+        for (dac, v) in self.dacs.iter().zip(self.dac_volts.iter_mut()) {
             *v = dac.chip.output_volts();
         }
         self.stage.advance(&self.dac_volts);
@@ -348,6 +377,24 @@ impl<const N: usize> Bench<N> {
         }
     }
 }
+
+/// Fault injection points of [`Bench::step_with`]; every default is "no fault".
+pub trait Inject<const N: usize> {
+    /// Alter the ADC codes of sample `k` before the pipeline sees them.
+    fn adc(&mut self, _k: u64, _codes: &mut [i32; N]) {}
+    /// Skip the control step of sample `k` (the DACs hold).
+    fn skip_step(&mut self, _k: u64) -> bool {
+        false
+    }
+    /// The DAC write of `axis` at sample `k` fails (the converter keeps its old code).
+    fn dac_write_fails(&mut self, _k: u64, _axis: usize) -> bool {
+        false
+    }
+}
+
+/// No faults.
+pub struct NoFault;
+impl<const N: usize> Inject<N> for NoFault {}
 
 /// Tracking metrics of one run (after the settling time).
 #[derive(Debug, Clone, Serialize)]

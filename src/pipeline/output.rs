@@ -30,15 +30,15 @@ impl<T: Real> DacScale<T> {
     /// Volts at `code`.
     #[inline]
     pub fn volts(&self, code: i32) -> T {
-        self.volts_at_zero + self.volts_per_code * T::from_f64(code as f64)
+        self.volts_at_zero + self.volts_per_code * T::from_i32(code)
     }
 
     /// Nearest code to `volts`, clamped into `[lo, hi]` (NaN -> `lo`).
     #[inline]
     fn code(&self, volts: T, lo: i32, hi: i32) -> i32 {
         let x = ((volts - self.volts_at_zero) / self.volts_per_code)
-            .clamp_to(T::from_f64(lo as f64), T::from_f64(hi as f64));
-        let c = (x + T::HALF).floor().to_f64() as i32;
+            .clamp_to(T::from_i32(lo), T::from_i32(hi));
+        let c = (x + T::HALF).floor().to_i32();
         c.clamp(lo, hi)
     }
 }

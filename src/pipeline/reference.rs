@@ -284,7 +284,7 @@ impl<T: Real> WaveGen<T> {
     /// The current setpoint, without advancing.
     #[inline]
     pub fn current(&self) -> Setpoint<T> {
-        self.wave.at(T::from_f64(self.phase as f64 / TURN))
+        self.wave.at(T::from_turns(self.phase))
     }
 
     /// The current setpoint; then advance one sample.

@@ -67,7 +67,7 @@ impl<T: Real> Sensor<T> {
         if code < self.code_min || code > self.code_max {
             None
         } else {
-            Some(self.offset_um + self.um_per_code * T::from_f64(code as f64))
+            Some(self.offset_um + self.um_per_code * T::from_i32(code))
         }
     }
 }
