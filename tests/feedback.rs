@@ -96,6 +96,8 @@ fn adrc(feedforward: bool) -> Feedback<f64> {
     Feedback::Adrc(
         Adrc::new(AdrcConfig {
             b: 0.16 * A * 5000.0,
+            a1: 0.0,
+            a2: 0.0,
             eps_s: 5e-5,
             omega_c: 2000.0,
             feedforward,
@@ -149,7 +151,10 @@ fn robust_law_tracks_10hz_on_nominal_plant() {
     for ff in [false, true] {
         let (rmse, _) = run(&mut robust(ff), cbw(1.0), 10.0, 0.0);
         eprintln!("hgo-robust ff={ff} rmse {rmse:.2e} um");
-        assert!(rmse < 0.01, "ff={ff}: rmse {rmse} um");
+        // Exact model: only f64 rounding is left without feedforward; the (deliberately 5 %
+        // off) linear feedforward leaves a little for the lambda2 correction.
+        let bound = if ff { 0.01 } else { 1e-4 };
+        assert!(rmse < bound, "ff={ff}: rmse {rmse} um");
     }
 }
 

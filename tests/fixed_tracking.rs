@@ -67,6 +67,8 @@ fn law<T: Real>(name: &str) -> Result<Feedback<T>, piezo_core::hysteresis::Param
         )?),
         "ff+adrc" => Feedback::Adrc(Adrc::new(AdrcConfig {
             b: f(0.16 * POLE_PER_S * POLE_PER_S),
+            a1: f(0.0),
+            a2: f(0.0),
             eps_s: f(2e-4),
             omega_c: f(2_000.0),
             feedforward: true,

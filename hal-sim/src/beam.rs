@@ -324,7 +324,7 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
 }
 
 /// Runs the beam scenario (with and without CBW mismatch), writes plots, returns rows.
-pub fn run_scenarios(cfg: &BeamConfig, out: &Path) -> Result<Vec<ManipRow>> {
+pub fn run_scenarios(cfg: &BeamConfig, out: Option<&Path>) -> Result<Vec<ManipRow>> {
     let mut rows = Vec::new();
     let mut plots = Vec::new();
     for mismatch in [true, false] {
@@ -371,7 +371,9 @@ pub fn run_scenarios(cfg: &BeamConfig, out: &Path) -> Result<Vec<ManipRow>> {
                 .line("Luenberger (no NN)", &run.t[s..], &err(&run.luenberger)),
         );
     }
-    write_grid(out.join("beam_observers.svg"), &plots, 2)?;
+    if let Some(out) = out {
+        write_grid(out.join("beam_observers.svg"), &plots, 2)?;
+    }
     Ok(rows)
 }
 

@@ -245,6 +245,9 @@ pub struct ManipRow {
     pub force_err_max_mn: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub force_peak_mn: Option<f64>,
+    /// BLF: largest `|F_fed_back - F_d|` (the error the barrier acts on), mN.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub force_fb_err_max_mn: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub kb_mn: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -254,6 +257,36 @@ pub struct ManipRow {
 }
 
 impl ManipRow {
+    /// One line in the `piezo sim` table layout, extra fields at the end.
+    pub fn table_line(&self) -> String {
+        let mut extra = String::new();
+        if let (Some(r), Some(m)) = (self.force_err_rms_mn, self.force_err_max_mn) {
+            extra += &format!("  force err rms {r:.2} mN max {m:.2} mN");
+        }
+        if let Some(fb) = self.force_fb_err_max_mn {
+            extra += &format!(", fed-back max {fb:.2} mN");
+        }
+        if let Some(kb) = self.kb_mn {
+            extra += &format!(" (k_b {kb} mN)");
+        }
+        if let (Some(f), Some(t)) = (self.identified, self.truth) {
+            extra += &format!(
+                "  k1 {:.2}/{} k3 {:.3}/{} c {:.4}/{} gap {:.3}/{}",
+                f.k1, t.k1, f.k3, t.k3, f.c, t.c, f.gap_um, t.gap_um
+            );
+        }
+        format!(
+            "{:<16} {:<22} {:>10.4} {:>9.3} {:>11.3} {:>10} {:>7}{extra}",
+            self.scenario,
+            self.controller,
+            self.rmse_um,
+            self.rmse_pct,
+            self.max_err_pct,
+            self.saturated_samples,
+            0
+        )
+    }
+
     pub fn new(scenario: &str, controller: &str) -> Self {
         Self {
             scenario: scenario.into(),
@@ -265,6 +298,7 @@ impl ManipRow {
             force_err_rms_mn: None,
             force_err_max_mn: None,
             force_peak_mn: None,
+            force_fb_err_max_mn: None,
             kb_mn: None,
             identified: None,
             truth: None,
@@ -589,7 +623,7 @@ pub struct BlfConfig {
 impl Default for BlfConfig {
     fn default() -> Self {
         Self {
-            kb_mn: 8.0,
+            kb_mn: 3.0,
             lambda: 90.0,
             b_hat: 6.0,
             rate_limit: 1500.0,
@@ -710,9 +744,39 @@ fn tracking(tr: &Traces, skip: usize) -> (f64, f64, f64) {
     (rmse, 100.0 * rmse / range, 100.0 * max / range)
 }
 
-/// Runs the object scenarios (force estimation + characterisation, BLF with measured and
-/// estimated force), writes plots into `out`, returns the table rows.
-pub fn run_scenarios(cfg: &ManipConfig, out: &Path) -> Result<Vec<ManipRow>> {
+/// Names of the manipulation scenarios of `piezo sim` (000 Part V).
+pub const SCENARIOS: [&str; 3] = ["object-characterisation", "blf-force", "beam"];
+
+/// Runs the named manipulation scenarios (all of [`SCENARIOS`] if `names` is empty); plots
+/// go into `out` when given.
+pub fn run_manipulation(names: &[String], out: Option<&Path>) -> Result<Vec<ManipRow>> {
+    for n in names {
+        anyhow::ensure!(
+            SCENARIOS.contains(&n.as_str()),
+            "no manipulation scenario {n} (known: {})",
+            SCENARIOS.join(", ")
+        );
+    }
+    let want = |n: &str| names.is_empty() || names.iter().any(|x| x == n);
+    let cfg = ManipConfig::default();
+    let mut rows = Vec::new();
+    if want(SCENARIOS[0]) {
+        rows.extend(characterisation_scenario(&cfg, out)?);
+    }
+    if want(SCENARIOS[1]) {
+        rows.extend(blf_scenario(&cfg, out)?);
+    }
+    if want(SCENARIOS[2]) {
+        rows.extend(crate::beam::run_scenarios(
+            &crate::beam::BeamConfig::default(),
+            out,
+        )?);
+    }
+    Ok(rows)
+}
+
+/// Force estimation + characterisation: one row, plots into `out`.
+pub fn characterisation_scenario(cfg: &ManipConfig, out: Option<&Path>) -> Result<Vec<ManipRow>> {
     let mut rows = Vec::new();
     let skip = (0.05 * cfg.rate_hz) as usize;
     // 1 + 2 + 3: indentation, force estimation, identification.
@@ -773,18 +837,30 @@ pub fn run_scenarios(cfg: &ManipConfig, out: &Path) -> Result<Vec<ManipRow>> {
                 .collect::<Vec<_>>(),
         ),
     ];
-    write_grid(out.join("object_characterisation.svg"), &plots, 2)?;
-    // 4: BLF force control, measured and estimated force.
+    if let Some(out) = out {
+        write_grid(out.join("object_characterisation.svg"), &plots, 2)?;
+    }
+    Ok(rows)
+}
+
+/// BLF force control with the force sensor and with the ESO estimate: two rows.
+pub fn blf_scenario(cfg: &ManipConfig, out: Option<&Path>) -> Result<Vec<ManipRow>> {
+    let mut rows = Vec::new();
     let bcfg = BlfConfig::default();
     let mut plots = Vec::new();
-    for estimated in [false, true] {
+    // The same law without a barrier (k_b huge: factor ~ 1) is the baseline.
+    let variants = [
+        (false, bcfg, "blf+force-sensor"),
+        (true, bcfg, "blf+force-eso"),
+        (
+            false,
+            BlfConfig { kb_mn: 1e6, ..bcfg },
+            "no-barrier+force-sensor",
+        ),
+    ];
+    for (estimated, bcfg, name) in variants {
         let tr = blf_force(cfg, &bcfg, estimated, 1.5)?;
         let (max_true, max_fb, rms_true) = blf_errors(&tr);
-        let name = if estimated {
-            "blf+force-eso"
-        } else {
-            "blf+force-sensor"
-        };
         let mut row = ManipRow::new("blf-force", name);
         let fr: Vec<f64> = tr
             .force_ref
@@ -797,8 +873,8 @@ pub fn run_scenarios(cfg: &ManipConfig, out: &Path) -> Result<Vec<ManipRow>> {
         row.saturated_samples = tr.saturated;
         row.force_err_rms_mn = Some(rms_true);
         row.force_err_max_mn = Some(max_true);
-        row.kb_mn = Some(bcfg.kb_mn);
-        row.force_peak_mn = Some(max_fb);
+        row.kb_mn = (bcfg.kb_mn < 1e3).then_some(bcfg.kb_mn);
+        row.force_fb_err_max_mn = Some(max_fb);
         row.rmse_pct = 100.0 * rms_true / span.max(1e-12);
         row.max_err_pct = 100.0 * max_true / span.max(1e-12);
         rows.push(row);
@@ -814,8 +890,14 @@ pub fn run_scenarios(cfg: &ManipConfig, out: &Path) -> Result<Vec<ManipRow>> {
             .zip(&tr.force_ref)
             .map(|(f, r)| f - r)
             .collect();
-        let kb = vec![bcfg.kb_mn; tr.t.len()];
-        let nkb = vec![-bcfg.kb_mn; tr.t.len()];
+        // The baseline is drawn against the BLF's bound.
+        let kb_line = if bcfg.kb_mn < 1e3 {
+            bcfg.kb_mn
+        } else {
+            BlfConfig::default().kb_mn
+        };
+        let kb = vec![kb_line; tr.t.len()];
+        let nkb = vec![-kb_line; tr.t.len()];
         plots.push(
             Plot::new(&format!("{name}: force"), "t [s]", "F [mN]")
                 .line("F_d", &tr.t, &tr.force_ref)
@@ -830,7 +912,9 @@ pub fn run_scenarios(cfg: &ManipConfig, out: &Path) -> Result<Vec<ManipRow>> {
                 .line("-k_b", &tr.t, &nkb),
         );
     }
-    write_grid(out.join("blf_force.svg"), &plots, 2)?;
+    if let Some(out) = out {
+        write_grid(out.join("blf_force.svg"), &plots, 2)?;
+    }
     Ok(rows)
 }
 

@@ -240,6 +240,10 @@ pub struct HysteresisCfg {
     pub hc: f64,
     /// Asymmetric static term (um/V^2).
     pub asym_um_per_v2: f64,
+    /// Parameter error of the models the controllers are built with: they see `alpha, beta,
+    /// gamma` (Dahl: `sigma0`) times `1 + model_error` (e.g. +-0.2 for +-20 %); the stage
+    /// runs the values above.
+    pub model_error: f64,
 }
 
 impl Default for HysteresisCfg {
@@ -254,6 +258,7 @@ impl Default for HysteresisCfg {
             n: 1.0,
             hc: 15.0,
             asym_um_per_v2: -2.0e-4,
+            model_error: 0.0,
         }
     }
 }
@@ -543,6 +548,12 @@ impl Scenario {
             finite(v, &format!("stage.hysteresis.{n}"))?;
         }
         positive(h.d, "stage.hysteresis.d")?;
+        if !(h.model_error.is_finite() && h.model_error > -1.0) {
+            bail!(
+                "stage.hysteresis.model_error must be finite and > -1, got {}",
+                h.model_error
+            );
+        }
         let c = &st.creep;
         if c.gains.len() != c.taus_s.len() {
             bail!("stage.creep.gains and stage.creep.taus_s must have the same length");

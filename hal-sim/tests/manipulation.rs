@@ -44,6 +44,14 @@ fn blf_force_error_stays_inside_kb() {
         assert!(max_fb < b.kb_mn, "fed-back error {max_fb} left k_b");
         assert!(max_true < b.kb_mn, "true error {max_true} left k_b");
     }
+    // The barrier is what keeps it inside: the same law without it leaves k_b.
+    let nb = BlfConfig { kb_mn: 1e6, ..b };
+    let (_, max_fb, _) = blf_errors(&blf_force(&cfg, &nb, false, 1.5).unwrap());
+    println!("no barrier: max |Ffb-Fd| {max_fb:.3} mN");
+    assert!(
+        max_fb > b.kb_mn,
+        "baseline {max_fb} stayed inside k_b: the test shows nothing"
+    );
 }
 
 #[test]

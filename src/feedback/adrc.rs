@@ -24,6 +24,11 @@ use crate::signals::LoopSignals;
 pub struct AdrcConfig<T> {
     /// Input gain `b = b0*d_p` (um/(s^2 V)).
     pub b: T,
+    /// Known linear structure `y'' = -a1 y' - a2 y + ...` (1/s, 1/s^2); zeros give the plain
+    /// chain-of-integrators ESO. With them the ESO only has to estimate what the linear
+    /// model leaves over: `-b0 h + delta_y`, bounded by the Dahl model's `b0 h_c`.
+    pub a1: T,
+    pub a2: T,
     /// ESO `epsilon` (s): triple observer pole at `-1/eps`.
     pub eps_s: T,
     /// Closed-loop bandwidth `omega_c` (rad/s): `lambda0 = omega_c^2`, `lambda1 = 2 omega_c`.
@@ -56,10 +61,14 @@ pub struct AdrcState<T> {
 impl<T: Real> Adrc<T> {
     pub fn new(cfg: AdrcConfig<T>) -> Result<Self, ParamError> {
         ensure_finite(
-            &[cfg.b, cfg.eps_s, cfg.omega_c, cfg.dt_s],
+            &[cfg.b, cfg.a1, cfg.a2, cfg.eps_s, cfg.omega_c, cfg.dt_s],
             "ADRC: parameters must be finite",
         )?;
         ensure(cfg.b > T::ZERO, "ADRC: input gain b = b0*d_p > 0")?;
+        ensure(
+            cfg.a1 >= T::ZERO && cfg.a2 >= T::ZERO,
+            "ADRC: a1 >= 0 and a2 >= 0 (stable linear part)",
+        )?;
         ensure(cfg.eps_s > T::ZERO, "ADRC: eps_s > 0")?;
         ensure(cfg.omega_c > T::ZERO, "ADRC: omega_c > 0")?;
         ensure(cfg.dt_s > T::ZERO, "ADRC: dt_s > 0")?;
@@ -120,7 +129,9 @@ impl<T: Real> Adrc<T> {
     fn observe(&mut self, y: T, u_fb: T) {
         let dt = self.cfg.dt_s;
         let z = &mut self.state.z;
-        let acc = z[2] + self.cfg.b * u_fb;
+        // Known linear part at the current estimates (semi-implicit; its poles are far
+        // below the observer's), the rest is the extended state.
+        let acc = z[2] + self.cfg.b * u_fb - self.cfg.a1 * z[1] - self.cfg.a2 * z[0];
         let p0 = z[0] + dt * z[1] + dt * dt * T::HALF * acc;
         let p1 = z[1] + dt * acc;
         let e = y - p0;
@@ -148,7 +159,11 @@ impl<T: Real> Adrc<T> {
         let z = self.state.z;
         let sp = &io.setpoint;
         // 000 eq. (11).
-        let u_fb = (sp.ddy + self.lambda1 * (sp.dy - z[1]) + self.lambda0 * (sp.y_um - z[0])
+        let u_fb = (sp.ddy
+            + self.lambda1 * (sp.dy - z[1])
+            + self.lambda0 * (sp.y_um - z[0])
+            + self.cfg.a1 * z[1]
+            + self.cfg.a2 * z[0]
             - z[2])
             / self.cfg.b;
         let u = ff + u_fb;
@@ -160,7 +175,7 @@ impl<T: Real> Adrc<T> {
         }
     }
 
-    /// At rest at `y` with `u_applied`: `Delta = -b * u_fb`.
+    /// At rest at `y` with `u_applied`: `Delta = a2 y - b u_fb`.
     fn prime(&mut self, io: &LoopSignals<T>) {
         let ff = if self.cfg.feedforward {
             io.u_ff
@@ -168,7 +183,11 @@ impl<T: Real> Adrc<T> {
             T::ZERO
         };
         self.state = AdrcState {
-            z: [io.y_um, T::ZERO, -self.cfg.b * (io.u_applied - ff)],
+            z: [
+                io.y_um,
+                T::ZERO,
+                self.cfg.a2 * io.y_um - self.cfg.b * (io.u_applied - ff),
+            ],
             u_ff_prev: ff,
             fresh: false,
         };
@@ -202,6 +221,8 @@ mod tests {
         for &eps in &[1e-5, 1e-4, 1e-3] {
             let a = Adrc::new(AdrcConfig {
                 b: 1e7,
+                a1: 0.0,
+                a2: 0.0,
                 eps_s: eps,
                 omega_c: 1000.0,
                 feedforward: false,
@@ -224,6 +245,8 @@ mod tests {
         let b = 1e7;
         let mut a = Adrc::new(AdrcConfig {
             b,
+            a1: 0.0,
+            a2: 0.0,
             eps_s: 2e-4,
             omega_c: 1000.0,
             feedforward: false,

@@ -94,11 +94,27 @@ pub struct Hgo<T> {
 }
 
 /// Estimates `x_hat` (um), `h_hat` (um) and the input they correspond to (V).
+///
+/// `h_hat = h + d`: `h` is the part inside the model's loop bound, which the model's
+/// dynamics `f(h, u')` act on; `d` is what the correction pushed beyond the bound (creep,
+/// an external force, model error), held constant by the prediction and drained first by
+/// corrections of the other sign. Without the split a
+/// large lumped disturbance in `h` would be pulled back to the loop bound by `f` at every
+/// input move.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct HgoState<T> {
     pub x: T,
     pub h: T,
+    pub d: T,
     pub u: T,
+}
+
+impl<T: Real> HgoState<T> {
+    /// The lumped estimate `h_hat = h + d` (um) of 000 eq. (6).
+    #[inline]
+    pub fn h_hat(&self) -> T {
+        self.h + self.d
+    }
 }
 
 /// Hurwitz coefficients of `s^2 + k1 s + k2` used by default: a double pole at `-1/eps`.
@@ -178,6 +194,10 @@ impl<T: Real> Hgo<T> {
     pub fn dt_s(&self) -> T {
         self.dt_s
     }
+    /// Exact discretisation of the linear part: `(exp(-a dt), 1 - exp(-a dt))`.
+    pub fn linear_step(&self) -> (T, T) {
+        (self.ad, self.gd)
+    }
     /// Discrete gains `(l1, l2)`.
     pub fn gains(&self) -> (T, T) {
         (self.l1, self.l2)
@@ -192,12 +212,16 @@ impl<T: Real> Hgo<T> {
         ]
     }
 
-    /// Steady state consistent with measurement `y` at input `u`: `x = y`, `h = d_p*u - y`.
+    /// Steady state consistent with measurement `y` at input `u`: `x = y`,
+    /// `h_hat = d_p*u - y`.
     pub fn init(&self, y: T, u: T) -> HgoState<T> {
-        let b = self.model.h_bound() * T::TWO;
+        let b = self.model.h_bound();
+        let h_hat = self.model.d() * u - y;
+        let h = h_hat.clamp_to(-b, b);
         HgoState {
             x: y,
-            h: (self.model.d() * u - y).clamp_to(-b, b),
+            h,
+            d: h_hat - h,
             u,
         }
     }
@@ -208,12 +232,26 @@ impl<T: Real> Hgo<T> {
     pub fn step(&self, s: &mut HgoState<T>, y: T, u: T) {
         // f(h, u') integrated over the input increment (000 eq. 6, second line).
         let h_pred = self.model.advance_h(s.h, s.u, u - s.u);
-        let x_pred = self.ad * s.x + self.gd * (self.model.d() * u - h_pred);
+        let x_pred = self.ad * s.x + self.gd * (self.model.d() * u - h_pred - s.d);
         let e = y - x_pred;
         s.x = x_pred + self.l1 * e;
-        s.h = h_pred + self.l2 * e;
+        // The correction drains `d` first, so `d` holds only what `h` cannot.
+        let mut corr = self.l2 * e;
+        if s.d * corr < T::ZERO {
+            if corr.abs() <= s.d.abs() {
+                s.d += corr;
+                corr = T::ZERO;
+            } else {
+                corr += s.d;
+                s.d = T::ZERO;
+            }
+        }
+        let h = h_pred + corr;
+        let b = self.model.h_bound();
+        s.h = h.clamp_to(-b, b);
+        s.d += h - s.h;
         s.u = u;
-        if !(s.x.is_finite() && s.h.is_finite()) {
+        if !(s.x.is_finite() && s.h.is_finite() && s.d.is_finite()) {
             *s = self.init(y, u);
         }
     }
@@ -247,8 +285,12 @@ impl<T: Real> Hgo<T> {
     /// position noise the loop adds. Returns the smallest `eps >= dt` (one observer time
     /// constant per sample; below that the poles approach dead-beat and the continuous
     /// design has no meaning left) whose `h_hat` noise is at most `h_noise_budget_um` for
-    /// `noise_rms_um` of white sensor noise, capped at `eps_max = 0.1/a`. Bisection on
-    /// `ln(eps)`, 48 iterations.
+    /// `noise_rms_um` of white sensor noise, capped at `eps_max = min(1000 dt, 2/a)`: an
+    /// observer slower than half the linear pole lags the plant the law inverts (on the
+    /// simulated stage the loop goes unstable near `eps = 4/a`), and one slower than
+    /// `1000 dt` no longer tracks the hysteresis of a 10 Hz scan. Past the cap the noise
+    /// budget is exceeded rather than the loop destabilised. Bisection on `ln(eps)`,
+    /// 48 iterations.
     pub fn epsilon_for(
         model: ObserverModel<T>,
         a_per_s: T,
@@ -265,7 +307,10 @@ impl<T: Real> Hgo<T> {
             "HGO epsilon: noise_rms_um >= 0 and h_noise_budget_um > 0",
         )?;
         let eps_min = dt_s;
-        let eps_max = (T::from_f64(0.1) / a_per_s).max(T::from_f64(20.0) * dt_s);
+        let eps_max = (T::from_f64(1000.0) * dt_s).min(T::TWO / a_per_s);
+        if !(eps_max > eps_min) {
+            return Ok(eps_min);
+        }
         let ok = |eps: T| -> Result<bool, ParamError> {
             let g = Self::with_eps(model, a_per_s, eps, dt_s)?.h_noise_gain();
             Ok(g * noise_rms_um <= h_noise_budget_um)
@@ -370,6 +415,7 @@ mod tests {
         let mut est = HgoState {
             x: 5.0,
             h: -2.0,
+            d: 0.0,
             u: 0.0,
         };
         let mut err_h = f64::MAX;
@@ -378,10 +424,11 @@ mod tests {
             // Plant: hysteresis jumps with the held input, then the exact linear step.
             plant_step(&m, &mut plant, &mut x, u, a, dt);
             o.step(&mut est, x, u);
-            err_h = (est.h - plant.h).abs();
+            err_h = (est.h_hat() - plant.h).abs();
         }
         assert!((est.x - x).abs() < 1e-9, "x {} vs {}", est.x, x);
         assert!(err_h < 1e-9, "h error {err_h}");
+        assert!(est.d.abs() < 1e-9, "no disturbance to lump: {est:?}");
     }
 
     pub(crate) fn plant_step(
@@ -415,7 +462,8 @@ mod tests {
         // Wrong start, constant input, 1 s at 100 kHz: stays finite and converges.
         let mut est = HgoState {
             x: 30.0f32,
-            h: 3.0,
+            h: 2.0,
+            d: 1.0,
             u: 50.0,
         };
         for _ in 0..100_000 {
@@ -423,7 +471,7 @@ mod tests {
             assert!(est.x.is_finite() && est.h.is_finite());
         }
         assert!((est.x - 5.0).abs() < 1e-3, "{est:?}");
-        assert!((est.h - (0.16 * 50.0 - 5.0)).abs() < 1e-2, "{est:?}");
+        assert!((est.h_hat() - (0.16 * 50.0 - 5.0)).abs() < 1e-2, "{est:?}");
     }
 
     #[test]

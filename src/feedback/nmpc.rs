@@ -137,6 +137,7 @@ impl<T: Real> Nmpc<T> {
         let lo = m.d() / T::from_f64(20.0);
         let mut x = self.state.obs.x;
         let mut h = self.state.obs.h;
+        let dist = self.state.obs.d;
         let mut u0 = u_prev;
         let mut y = [T::ZERO; HORIZON];
         let mut dvdu = [T::ZERO; HORIZON];
@@ -144,7 +145,7 @@ impl<T: Real> Nmpc<T> {
             let du = u - u0;
             h = m.advance_h(h, u0, du);
             *gk = (m.d() - m.slope(h, du.sgn())).max(lo);
-            x = self.ad * x + self.gd * (m.d() * u - h);
+            x = self.ad * x + self.gd * (m.d() * u - h - dist);
             *yk = x;
             u0 = u;
         }

@@ -133,11 +133,11 @@ impl<T: Real> Output<T> {
     /// lowest code of the range, then slew-limited).
     #[inline]
     pub fn limit(&self, volts: T, prev: i32) -> Limited {
-        let lo = T::from_f64(self.code_lo as f64);
+        let lo = T::from_i32(self.code_lo);
         let x = ((volts - self.dac.volts_at_zero) * self.codes_per_volt)
-            .clamp_to(lo, T::from_f64(self.code_hi as f64));
+            .clamp_to(lo, T::from_i32(self.code_hi));
         // x >= lo, so truncation of the shifted value is the floor (no libm call).
-        let want = ((x - lo + T::HALF).to_f64() as i64 + self.code_lo as i64)
+        let want = ((x - lo + T::HALF).to_i32() as i64 + self.code_lo as i64)
             .clamp(self.code_lo as i64, self.code_hi as i64) as i32;
         let prev = prev.clamp(self.code_lo, self.code_hi);
         let code = want.clamp(

@@ -225,7 +225,7 @@ pub fn sin_cos_turns<T: Real>(x: T) -> (T, T) {
                                 - p2 * c(56.0)
                                     * (T::ONE - p2 * c(90.0) * (T::ONE - p2 * c(132.0))))));
     // Quadrant: sin(phi + n pi/2).
-    let n = (q.to_f64() as i64).rem_euclid(4);
+    let n = q.to_i32().rem_euclid(4);
     match n {
         0 => (s, co),
         1 => (co, -s),

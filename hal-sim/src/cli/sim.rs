@@ -101,7 +101,24 @@ pub fn select_controllers(names: &[String]) -> Result<Vec<Entry>> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let scenarios = select_scenarios(&args)?;
+    // Manipulation scenarios (000 Part V, hal_sim::object) are selected by name like the
+    // built-ins and run with their own observers and laws; all of them run by default.
+    let (manip, rest): (Vec<String>, Vec<String>) = args
+        .scenarios
+        .iter()
+        .cloned()
+        .partition(|s| crate::object::SCENARIOS.contains(&s.as_str()));
+    let only_manip = !manip.is_empty() && rest.is_empty();
+    let run_manip = !manip.is_empty() || (args.scenarios.is_empty() && args.controllers.is_empty());
+    let args = Args {
+        scenarios: rest,
+        ..args
+    };
+    let scenarios = if only_manip {
+        Vec::new()
+    } else {
+        select_scenarios(&args)?
+    };
     let controllers = select_controllers(&args.controllers)?;
     if args.list {
         println!("scenarios:");
@@ -114,6 +131,10 @@ pub fn run(args: Args) -> Result<()> {
         println!("controllers:");
         for c in &controllers {
             println!("  {:<16} {}", c.name, c.about);
+        }
+        println!("manipulation scenarios (own observers and laws):");
+        for s in crate::object::SCENARIOS {
+            println!("  {s}");
         }
         return Ok(());
     }
@@ -157,8 +178,20 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let runs: Vec<&RunResult> = results.iter().map(|(r, _)| r).collect();
+    let manip_rows = if run_manip {
+        crate::object::run_manipulation(&manip, args.out.as_deref())?
+    } else {
+        Vec::new()
+    };
+    let mut all: Vec<serde_json::Value> = runs
+        .iter()
+        .map(serde_json::to_value)
+        .collect::<Result<_, _>>()?;
+    for m in &manip_rows {
+        all.push(serde_json::to_value(m)?);
+    }
     if args.json {
-        println!("{}", serde_json::to_string(&Runs { runs: &runs })?);
+        println!("{}", serde_json::to_string(&Runs { runs: &all })?);
     } else {
         println!(
             "{:<16} {:<22} {:>10} {:>9} {:>11} {:>10} {:>7}",
@@ -176,10 +209,13 @@ pub fn run(args: Args) -> Result<()> {
                 r.sensor_faults + r.nonfinite_commands
             );
         }
+        for m in &manip_rows {
+            println!("{}", m.table_line());
+        }
     }
     if let Some(dir) = &args.out {
         let path = dir.join("summary.json");
-        std::fs::write(&path, serde_json::to_string_pretty(&Runs { runs: &runs })?)
+        std::fs::write(&path, serde_json::to_string_pretty(&Runs { runs: &all })?)
             .with_context(|| format!("cannot write {}", path.display()))?;
         if !args.json {
             println!("wrote {}", dir.display());
@@ -188,10 +224,11 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// The `--json` document: `{"runs":[...]}`, fields in [`RunResult`] order.
+/// The `--json` document: `{"runs":[...]}`, fields in [`RunResult`] order (manipulation rows:
+/// the same leading fields, then their own).
 #[derive(serde::Serialize)]
 struct Runs<'a> {
-    runs: &'a [&'a RunResult],
+    runs: &'a [serde_json::Value],
 }
 
 fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {

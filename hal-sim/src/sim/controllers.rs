@@ -51,6 +51,55 @@ pub fn registry() -> Vec<Entry> {
             two_axis: Some(open_loop::<2>),
         },
         // FEEDFORWARD and FEEDBACK: add entries here.
+        // FEEDBACK (000 Part III-IV laws, builders in `fb` below):
+        Entry {
+            name: "pid",
+            about: "PI on the position error, back-calculation anti-windup from the applied voltage, notch on the resonance",
+            one_axis: |s| fb::pid::<1>(s, false),
+            two_axis: Some(|s| fb::pid::<2>(s, false)),
+        },
+        Entry {
+            name: "ff+pid",
+            about: "linear feedforward + the same PI",
+            one_axis: |s| fb::pid::<1>(s, true),
+            two_axis: Some(|s| fb::pid::<2>(s, true)),
+        },
+        Entry {
+            name: "hgo-robust",
+            about: "HGO (000 eq. 6) + robust virtual-hysteresis law (000 eq. 7-8), notch",
+            one_axis: |s| fb::robust::<1>(s, false, false),
+            two_axis: Some(|s| fb::robust::<2>(s, false, false)),
+        },
+        Entry {
+            name: "ff+hgo-robust",
+            about: "linear feedforward + HGO robust law (feedforward increments replace the law's own)",
+            one_axis: |s| fb::robust::<1>(s, true, false),
+            two_axis: Some(|s| fb::robust::<2>(s, true, false)),
+        },
+        Entry {
+            name: "fts",
+            about: "HGO + finite-time virtual-hysteresis law (000 Part IV), stage's BW model (GBW on GBW stages)",
+            one_axis: |s| fb::robust::<1>(s, false, true),
+            two_axis: Some(|s| fb::robust::<2>(s, false, true)),
+        },
+        Entry {
+            name: "adrc",
+            about: "extended-state observer + ADRC (000 eq. 10-11) on the second-order structure",
+            one_axis: |s| fb::adrc::<1>(s, false),
+            two_axis: Some(|s| fb::adrc::<2>(s, false)),
+        },
+        Entry {
+            name: "ff+adrc",
+            about: "linear feedforward + ESO/ADRC on what it leaves",
+            one_axis: |s| fb::adrc::<1>(s, true),
+            two_axis: Some(|s| fb::adrc::<2>(s, true)),
+        },
+        Entry {
+            name: "nmpc",
+            about: "HGO + NMPC, hysteresis model as predictor (000 Part IV), 10 kHz, horizon 8",
+            one_axis: |s| fb::nmpc::<1>(s, false),
+            two_axis: Some(|s| fb::nmpc::<2>(s, false)),
+        },
     ];
     v.extend(feedforward::entries());
     v
@@ -78,4 +127,216 @@ pub fn open_loop<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
         feedback: core::array::from_fn(|_| Feedback::OpenLoop),
         mode: Mode::OpenLoop,
     })
+}
+
+/// FEEDBACK's builders: the laws of 000 Part III-IV (`piezo_core::feedback`) tuned for the
+/// nominal stage. Gains come from the stage description (amplifier bandwidth, resonance,
+/// delay, sensor noise); the constants below were chosen on `sine-10hz` at 30 um amplitude
+/// (see the FEEDBACK report) and are the same for every scenario.
+pub mod fb {
+    use super::{linear_ff, Controller, R};
+    use crate::scenario::HysteresisModel;
+    use crate::sim::StageInfo;
+    use anyhow::{anyhow, Result};
+    use piezo_core::feedback::{
+        Adrc, AdrcConfig, Biquad, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
+        PidConfig, Robust, RobustConfig,
+    };
+    use piezo_core::feedforward::MultiFeedforward;
+    use piezo_core::hysteresis::{Cbw, Dahl, Gbw, ParamError};
+    use piezo_core::pipeline::Mode;
+    use std::f64::consts::PI;
+
+    /// Allowed RMS of the HGO's `h_hat` from sensor noise (um): with the default 5 nm sensor
+    /// this gives `eps` near 60 us, with 10x noise the helper's cap `2/a` ([`Hgo::epsilon_for`]).
+    pub const H_NOISE_BUDGET_UM: f64 = 0.0014;
+    /// Closed-loop rates of the robust law (000 eq. 7-8), Hz.
+    pub const LAMBDA1_HZ: f64 = 600.0;
+    pub const LAMBDA2_HZ: f64 = 3000.0;
+    /// Notch quality on the resonance (higher: less phase lag at the scan frequency).
+    pub const NOTCH_Q: f64 = 4.0;
+
+    fn perr(p: ParamError) -> anyhow::Error {
+        anyhow!("{p}")
+    }
+
+    /// The controllers' hysteresis model: the stage's family and parameters, with the
+    /// scenario's `model_error`; `gbw` asks for a GBW when the stage family allows it.
+    pub fn model(s: &StageInfo) -> Result<ObserverModel<R>> {
+        let h = s.hysteresis();
+        let k = 1.0 + h.model_error;
+        let (d, al, be, ga, n) = (
+            h.d as R,
+            (h.alpha * k) as R,
+            (h.beta * k) as R,
+            (h.gamma * k) as R,
+            h.n as R,
+        );
+        Ok(match h.model {
+            HysteresisModel::Cbw => ObserverModel::Cbw(Cbw::new(d, al, be, ga, n).map_err(perr)?),
+            HysteresisModel::Gbw => {
+                ObserverModel::Gbw(Gbw::new(d, al, (h.a * k) as R, be, ga, n).map_err(perr)?)
+            }
+            HysteresisModel::Dahl => {
+                ObserverModel::Dahl(Dahl::new(d, al, h.hc as R, n).map_err(perr)?)
+            }
+            // No hysteresis: a CBW with a negligible loop.
+            HysteresisModel::None => {
+                ObserverModel::Cbw(Cbw::new(d, 1e-6, 1e-3, 0.0, 1.0).map_err(perr)?)
+            }
+        })
+    }
+
+    /// First-order pole (1/s) with the low-frequency lag of amplifier, structure,
+    /// measurement delay and half a sample: the `-A` of 000 eq. (2), normalised.
+    pub fn pole(s: &StageInfo) -> f64 {
+        let st = &s.scenario.stage;
+        let mut lag = 0.5 / s.loop_hz() + 1.0 / (2.0 * PI * st.amplifier.bandwidth_hz);
+        if st.resonance.enabled {
+            lag += 2.0 * st.resonance.zeta / (2.0 * PI * st.resonance.freq_hz);
+        }
+        if st.delay.enabled {
+            lag += st.delay.seconds;
+        }
+        1.0 / lag
+    }
+
+    /// Sensor noise the observer is designed for (um RMS).
+    fn noise_um(s: &StageInfo) -> f64 {
+        let n = &s.scenario.stage.noise;
+        if n.enabled {
+            n.sigma_um
+        } else {
+            0.0
+        }
+    }
+
+    /// Notch on the measured position at the stage resonance.
+    pub fn notch(s: &StageInfo) -> Result<Option<Biquad<R>>> {
+        let r = &s.scenario.stage.resonance;
+        if !r.enabled {
+            return Ok(None);
+        }
+        Biquad::notch(r.freq_hz as R, NOTCH_Q as R, s.loop_hz() as R)
+            .map(Some)
+            .map_err(perr)
+    }
+
+    fn wrap<const N: usize>(s: &StageInfo, mut law: Feedback<R>) -> Result<Controller<N>> {
+        law.set_measurement_filter(notch(s)?);
+        Ok(Controller {
+            feedforward: MultiFeedforward::PerAxis(linear_ff(s)),
+            feedback: core::array::from_fn(|_| law.clone()),
+            mode: Mode::ClosedLoop,
+        })
+    }
+
+    fn dt(s: &StageInfo) -> f64 {
+        1.0 / s.loop_hz()
+    }
+
+    /// The HGO with `eps` from the sensor noise ([`Hgo::epsilon_for`]).
+    pub fn hgo(s: &StageInfo) -> Result<Hgo<R>> {
+        let m = model(s)?;
+        let a = pole(s) as R;
+        let eps = Hgo::epsilon_for(m, a, dt(s) as R, noise_um(s) as R, H_NOISE_BUDGET_UM as R)
+            .map_err(perr)?;
+        Hgo::with_eps(m, a, eps, dt(s) as R).map_err(perr)
+    }
+
+    /// PI(D): integral action with crossover 250 Hz on the calibrated gain (the stage is
+    /// quasi-static below its resonance), proportional zero on the lag pole.
+    pub fn pid<const N: usize>(s: &StageInfo, feedforward: bool) -> Result<Controller<N>> {
+        let wc = 2.0 * PI * 250.0;
+        let ki = wc / s.linear.um_per_volt;
+        let law = Pid::new(PidConfig {
+            kp: (ki / pole(s)) as R,
+            ki: ki as R,
+            kd: 0.0,
+            tf_s: 1e-4,
+            kb: 1.0,
+            feedforward,
+            dt_s: dt(s) as R,
+        })
+        .map_err(perr)?;
+        wrap(s, Feedback::Pid(law))
+    }
+
+    /// HGO + robust law (000 eq. 6-8); `finite_time`: the finite-time variant (000 Part IV).
+    pub fn robust<const N: usize>(
+        s: &StageInfo,
+        feedforward: bool,
+        finite_time: bool,
+    ) -> Result<Controller<N>> {
+        let (l1, l2) = (2.0 * PI * LAMBDA1_HZ, 2.0 * PI * LAMBDA2_HZ);
+        let (lambda1, lambda2, convergence) = if finite_time {
+            // k sig(e)^0.8: the same rate as the exponential law at ~0.03 um error.
+            (
+                0.3 * l1,
+                l2,
+                Convergence::FiniteTime {
+                    alpha1: 0.8,
+                    alpha2: 0.8,
+                    sat_um_per_s: 1e5,
+                },
+            )
+        } else {
+            (l1, l2, Convergence::Exponential)
+        };
+        let law = Robust::new(
+            hgo(s)?,
+            RobustConfig {
+                lambda1: lambda1 as R,
+                lambda2: lambda2 as R,
+                feedforward,
+                convergence,
+            },
+        )
+        .map_err(perr)?;
+        wrap(s, Feedback::Robust(law))
+    }
+
+    /// ESO + ADRC (000 eq. 10-11) on the structure's second-order model.
+    pub fn adrc<const N: usize>(s: &StageInfo, feedforward: bool) -> Result<Controller<N>> {
+        let r = &s.scenario.stage.resonance;
+        let (w2, a1) = if r.enabled {
+            let w = 2.0 * PI * r.freq_hz;
+            (w * w, 2.0 * r.zeta * w)
+        } else {
+            (pole(s).powi(2), 2.0 * pole(s))
+        };
+        let law = Adrc::new(AdrcConfig {
+            b: (s.linear.um_per_volt * w2) as R,
+            a1: a1 as R,
+            a2: w2 as R,
+            eps_s: 2e-5,
+            omega_c: (2.0 * PI * 600.0) as R,
+            feedforward,
+            dt_s: dt(s) as R,
+        })
+        .map_err(perr)?;
+        wrap(s, Feedback::Adrc(law))
+    }
+
+    /// HGO + NMPC at a tenth of the loop rate, horizon 8 moves (0.8 ms at 100 kHz).
+    pub fn nmpc<const N: usize>(s: &StageInfo, feedforward: bool) -> Result<Controller<N>> {
+        let (lo, hi) = s.volts_range();
+        let m = model(s)?;
+        // The prediction holds each move for 10 samples: a slower observer (eps 100 us) keeps
+        // its noise out of the plan.
+        let hgo = Hgo::with_eps(m, pole(s) as R, 1e-4, dt(s) as R).map_err(perr)?;
+        let law = Nmpc::new(
+            hgo,
+            NmpcConfig {
+                decimation: 10,
+                r: 1.0,
+                iterations: 2,
+                u_min: lo as R,
+                u_max: hi as R,
+                feedforward,
+            },
+        )
+        .map_err(perr)?;
+        wrap(s, Feedback::Nmpc(law))
+    }
 }

@@ -348,6 +348,9 @@ pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
             sat_um_per_s: c(1e4),
         }),
         "adrc" => Adrc::new(AdrcConfig {
+            // Plain ADRC: the ESO estimates the whole linear part.
+            a1: c(0.0),
+            a2: c(0.0),
             b: c(0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S),
             eps_s: c(2e-4),
             omega_c: c(2_000.0),
