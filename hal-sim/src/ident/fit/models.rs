@@ -4,7 +4,7 @@
 //! loop (one dynamic call per simulation, none per sample). Bounds come from the record's
 //! scales so one registry serves volts-and-micrometres and newtons-and-metres alike.
 
-use piezo_core::hysteresis::structural::{Hold, StructuralBw};
+use piezo_core::hysteresis::structural::{Hold, Integrator, StructuralBw};
 use piezo_core::hysteresis::{
     AbwAbs, AbwU, Cbw, Dahl, Dpi, Gbw, Hysteresis, Mbw002, MbwRlm, ParamError, Pi, Ppi, Wpmbw,
 };
@@ -381,7 +381,17 @@ pub fn structural(p: &[f64], substeps: usize) -> Result<StructuralBw<f64>, Param
 
 fn sim_structural(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
     // The caller upsamples the input; one RK4 step per (upsampled) sample.
-    let m = structural(p, 1)?;
+    run_structural(&structural(p, 1)?, u, dt, y);
+    Ok(())
+}
+
+fn sim_structural_newmark(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+    let m = structural(p, 1)?.with_integrator(Integrator::Newmark);
+    run_structural(&m, u, dt, y);
+    Ok(())
+}
+
+fn run_structural(m: &StructuralBw<f64>, u: &[f64], dt: f64, y: &mut [f64]) {
     // From rest at the first input sample; the first output is the initial condition.
     let mut s = m.init(u.first().copied().unwrap_or(0.0));
     if let Some(y0) = y.first_mut() {
@@ -390,7 +400,6 @@ fn sim_structural(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), Pa
     for (yi, &ui) in y.iter_mut().zip(u).skip(1) {
         *yi = m.step(&mut s, ui, dt);
     }
-    Ok(())
 }
 
 impl core::fmt::Debug for ModelDef {
@@ -508,6 +517,13 @@ pub static MODELS: &[ModelDef] = &[
         about: "structural Bouc-Wen oscillator, force in, displacement out (003 eq. 1; Bouc-Wen benchmark)",
         params: structural_specs,
         simulate: sim_structural,
+        dynamic: true,
+    },
+    ModelDef {
+        name: "structural-bw-newmark",
+        about: "structural Bouc-Wen integrated by Newmark average acceleration, as the benchmark generator",
+        params: structural_specs,
+        simulate: sim_structural_newmark,
         dynamic: true,
     },
 ];
