@@ -130,7 +130,9 @@ impl AdcChip {
         if x.is_nan() {
             return lo;
         }
-        (x.round().clamp(lo as f64, hi as f64)) as i32
+        // Round half up without a libm call: shift to positive, truncate.
+        let x = x.clamp(lo as f64 - 1.0, hi as f64 + 1.0) - lo as f64 + 0.5;
+        ((x as i64) + lo as i64).clamp(lo as i64, hi as i64) as i32
     }
 }
 
