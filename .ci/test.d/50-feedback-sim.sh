@@ -8,7 +8,7 @@ cargo build --release -q -p hal-sim --bin piezo
 out=$(target/release/piezo sim --json --amplitude-um 30 \
   --scenario sine-1hz --scenario sine-10hz --scenario sine-50hz --scenario force-37pct \
   --scenario sine-10hz-model+20pct --scenario sine-10hz-model-20pct --scenario sine-10hz-noise10x)
-runs=$(echo "$out" | grep -o '{"scenario[^}]*}')
+runs=$(echo "$out" | grep -o '{[^{}]*}')
 n=$(echo "$runs" | wc -l)
 [ "$n" -ge 7 ] || { echo "expected runs, got: $out"; exit 1; }
 field() { echo "$1" | sed -E "s/.*\"$2\":\"?([^,\"}]*).*/\1/"; }
