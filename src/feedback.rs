@@ -10,6 +10,12 @@
 //!   command (it restarts bumplessly instead);
 //! * accepts the feedforward `io.u_ff` (each law's `feedforward` flag says how it is used);
 //! * can filter the measurement through a [`Biquad`] (notch on the stage resonance).
+//!
+//! Laws: PID ([`Pid`]); HGO (000 eq. 6, [`Hgo`]) + robust virtual-hysteresis law
+//! (000 eq. 7-8) or its finite-time variant (000 Part IV), both [`Robust`]; ESO + ADRC
+//! (000 eq. 10-11, [`Adrc`]); HGO + NMPC with the hysteresis model as predictor
+//! (000 Part IV, [`Nmpc`]). The barrier-Lyapunov force law (000 eq. 12) is a force loop,
+//! not a position law, and lives with the object model in `crate::manipulation`.
 
 pub mod adrc;
 pub mod biquad;

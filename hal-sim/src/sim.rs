@@ -415,6 +415,9 @@ pub struct RunResult {
     pub nonfinite_commands: u64,
     pub bus_errors: u64,
     pub axes: usize,
+    /// Range of the voltage the pipeline applied (after its limits) over the whole run (V).
+    pub volts_min: f64,
+    pub volts_max: f64,
 }
 
 /// Recorded time series (decimated to at most `MAX_ROWS` rows).
@@ -485,8 +488,13 @@ fn run_bench<const N: usize>(
     let (mut rmin, mut rmax) = ([f64::INFINITY; N], [f64::NEG_INFINITY; N]);
     let progress = n >= 5_000_000;
     let sat0 = bench.pipeline.state().counters.saturated_samples;
+    let (mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY);
     for k in 0..n {
         let s = bench.step();
+        for &v in bench.pipeline.state().u_applied.iter() {
+            vmin = vmin.min(v as f64);
+            vmax = vmax.max(v as f64);
+        }
         if k >= settle {
             for i in 0..N {
                 let e = s.reference_um[i] - s.position_um[i];
@@ -532,6 +540,8 @@ fn run_bench<const N: usize>(
             nonfinite_commands: c.nonfinite_commands as u64,
             bus_errors: bench.bus_errors,
             axes: N,
+            volts_min: vmin,
+            volts_max: vmax,
         },
         rec,
     ))

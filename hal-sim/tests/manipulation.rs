@@ -79,3 +79,68 @@ fn hgo_and_nno_track_the_control_point() {
     // The network must earn its keep against the same observer without learning.
     assert!(n_rms < 0.9 * l_rms, "NNO {n_rms} vs no learning {l_rms}");
 }
+
+/// The firmware runs the observers in f32: same measurements, same bounds.
+#[test]
+fn observers_work_in_f32() {
+    use hal_sim::beam::{beam_input, nominal_cbw, observer_model, BeamConfig, BeamPlant};
+    use hal_sim::object::Gauss;
+    use piezo_core::hysteresis::Cbw;
+    use piezo_core::manipulation::beam::ModalModel;
+    use piezo_core::manipulation::{ForceEso, Hgo, StageDynamics, VoltageInput};
+
+    // Force ESO on the recorded indentation.
+    let cfg = ManipConfig::default();
+    let tr = indentation(&cfg, 1.0).unwrap();
+    let cbw32 = Cbw::<f32>::with_n1(0.16, 0.07, 0.02, 0.01).unwrap();
+    let inp = VoltageInput::<f32>::new(0.0, cfg.u_play_volts as f32, 1e-4).unwrap();
+    let st = StageDynamics {
+        natural_hz: 800.0f32,
+        damping_ratio: 0.15,
+        stiffness_mn_per_um: 200.0,
+    };
+    let eso = ForceEso::new(cbw32, st, cfg.observer_hz as f32, inp, 10_000.0).unwrap();
+    let mut es = eso.init(0.0, 0.0);
+    let (mut e2, mut n) = (0.0, 0);
+    for k in 0..tr.t.len() {
+        let f = eso.update(&mut es, tr.y_meas[k] as f32, tr.u_meas[k] as f32) as f64;
+        if k >= 500 {
+            e2 += (f - tr.force[k]).powi(2);
+            n += 1;
+        }
+    }
+    let rms = (e2 / n as f64).sqrt();
+    let (_, _, peak) = force_errors(&tr, 500);
+    println!("f32 force ESO rms {rms:.3} mN (peak {peak:.1} mN)");
+    assert!(rms < 0.015 * peak, "f32 ESO rms {rms}");
+
+    // HGO on the beam: f32 and f64 give the same control-point estimate.
+    let bc = BeamConfig::default();
+    let m = observer_model(&bc);
+    let mf: ModalModel<f32, 4> = ModalModel {
+        a: m.a.map(|r| r.map(|v| v as f32)),
+        b: m.b.map(|v| v as f32),
+        c_tip: m.c_tip.map(|v| v as f32),
+        c_out: m.c_out.map(|v| v as f32),
+    };
+    let eps = 1.0 / (std::f64::consts::TAU * bc.hgo_hz);
+    let h32: Hgo<f32, 5> = Hgo::new(&mf, cbw32, eps as f32, inp, 10_000.0).unwrap();
+    let inp64 = VoltageInput::<f64>::new(0.0, bc.u_play_volts, 1e-4).unwrap();
+    let h64: Hgo<f64, 5> = Hgo::new(&m, nominal_cbw(), eps, inp64, 10_000.0).unwrap();
+    let plant = BeamPlant::new(&bc).unwrap();
+    let mut ps = plant.init();
+    let (mut s32, mut s64) = (h32.init(0.0), h64.init(0.0));
+    let mut g = Gauss::new(5);
+    let mut worst: f64 = 0.0;
+    for k in 0..8000 {
+        let u = beam_input(k as f64 * 1e-4);
+        plant.step(&mut ps, u, 1e-4);
+        let y = plant.deflection(&ps, 1.0) + g.sample(0.005);
+        let um = u + g.sample(0.02);
+        let a = h32.update(&mut s32, y as f32, um as f32) as f64;
+        let b = h64.update(&mut s64, y, um);
+        worst = worst.max((a - b).abs());
+    }
+    println!("HGO f32 vs f64: max difference {worst:.2e} um");
+    assert!(worst < 2e-3, "f32 HGO departs from f64 by {worst} um");
+}

@@ -1,9 +1,176 @@
-//! `piezo diagnose`.
-use anyhow::Result;
+//! `piezo diagnose`: what does the classical Bouc-Wen model miss on this stage?
+//!
+//! ```text
+//! piezo diagnose --train A.csv --valid B.csv [--json] [--predict OUT.csv] [--out DIR]
+//! piezo diagnose --train A.csv --split 0.5        # one record: first half fits, second validates
+//! ```
+use anyhow::{Context, Result};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use crate::ident::diagnose::{self, Diagnosis, Options, Signals};
+use crate::record::Record;
 
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yk`); all parameters are fitted on it.
+    #[arg(long)]
+    pub train: PathBuf,
+    /// Validation record, ideally with a different excitation; gains are measured on it.
+    #[arg(long, conflicts_with = "split")]
+    pub valid: Option<PathBuf>,
+    /// Without --valid: split the training record at this fraction of its samples (first
+    /// part fits, the rest validates).
+    #[arg(long)]
+    pub split: Option<f64>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Write `t, y_base, y_ext` (suffixed per output for several outputs) on the validation
+    /// samples to this CSV.
+    #[arg(long)]
+    pub predict: Option<PathBuf>,
+    /// Write plots (loops before/after, residual against the cause's signal) into this folder.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
 
-pub fn run(_args: Args) -> Result<()> {
-    anyhow::bail!("piezo diagnose is not implemented yet")
+fn read(path: &PathBuf) -> Result<Signals> {
+    let r = Record::read(path)?;
+    Signals::new(r.t, r.u, r.y).with_context(|| format!("record {}", path.display()))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let whole = read(&args.train)?;
+    let (train, valid, split_note) = match (&args.valid, args.split) {
+        (Some(v), None) => (whole, read(v)?, None),
+        (None, split) => {
+            let f = split.unwrap_or(0.5);
+            anyhow::ensure!(
+                f.is_finite() && (0.1..=0.9).contains(&f),
+                "--split must be within 0.1..0.9, got {f}"
+            );
+            let k = (whole.len() as f64 * f) as usize;
+            let note = format!(
+                "no --valid: samples 0..{k} of {} fit, {k}..{} validate (the model runs through the first part to reach them)",
+                args.train.display(),
+                whole.len()
+            );
+            (whole.slice(0, k), whole.with_warmup(k), Some(note))
+        }
+        (Some(_), Some(_)) => anyhow::bail!("--split and --valid exclude each other"),
+    };
+    let d = diagnose::diagnose(&train, &valid, &Options::default())?;
+    let mut plots = Vec::new();
+    if let Some(dir) = &args.out {
+        plots = diagnose::plots::write(dir, &d, &valid)?;
+    }
+    if let Some(path) = &args.predict {
+        write_predict(path, &d, &valid)?;
+    }
+    if args.json {
+        let mut j = d.json();
+        if let Some(note) = &split_note {
+            j["split"] = serde_json::json!(note);
+        }
+        j["plots"] = serde_json::json!(plots
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>());
+        println!("{}", serde_json::to_string_pretty(&j)?);
+    } else {
+        print!("{}", summary(&d, split_note.as_deref()));
+        for p in &plots {
+            println!("plot: {}", p.display());
+        }
+        if let Some(p) = &args.predict {
+            println!("predictions: {}", p.display());
+        }
+    }
+    Ok(())
+}
+
+/// The report for a person.
+pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
+    let mut s = String::new();
+    if let Some(n) = split_note {
+        let _ = writeln!(s, "split: {n}");
+    }
+    let _ = writeln!(
+        s,
+        "base {}: rmse train {:.4}, valid {:.4} (noise about {:.4})",
+        d.base.causes.label(),
+        d.base.rmse_train,
+        d.base_valid,
+        d.noise_rms
+    );
+    for c in &d.candidates {
+        let _ = writeln!(
+            s,
+            "  round {} {:<14} valid {:.4}  gain {:+6.1} %  evidence R2 {:.2}{}",
+            c.round,
+            c.cause.name(),
+            c.rmse_valid,
+            100.0 * c.gain,
+            c.evidence.r2,
+            if c.significant { "  *" } else { "" }
+        );
+    }
+    if d.findings.is_empty() {
+        let _ = writeln!(
+            s,
+            "cause: none (no extension gains on the validation record)"
+        );
+    }
+    for f in &d.findings {
+        let _ = writeln!(
+            s,
+            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %); {}",
+            f.cause.name(),
+            f.round,
+            f.rmse_valid_before,
+            f.rmse_valid,
+            100.0 * f.gain,
+            f.evidence.text
+        );
+    }
+    let _ = writeln!(
+        s,
+        "extended {}: rmse train {:.4}, valid {:.4}; gain {:.1} %",
+        d.extended.causes.label(),
+        d.extended.rmse_train,
+        d.extended_valid,
+        100.0 * d.gain()
+    );
+    s
+}
+
+fn write_predict(path: &PathBuf, d: &Diagnosis, valid: &Signals) -> Result<()> {
+    let base = d.base.predict(valid);
+    let ext = d.extended.predict(valid);
+    let valid = &valid.scored();
+    let n_out = valid.y.len();
+    let suffix = |i: usize| {
+        if n_out == 1 {
+            String::new()
+        } else {
+            (i + 1).to_string()
+        }
+    };
+    let mut text = String::from("t");
+    for i in 0..n_out {
+        let _ = write!(text, ",y_base{0},y_ext{0}", suffix(i));
+    }
+    text.push('\n');
+    for k in 0..valid.len() {
+        let _ = write!(text, "{}", valid.t[k]);
+        for i in 0..n_out {
+            let _ = write!(text, ",{},{}", base[i][k], ext[i][k]);
+        }
+        text.push('\n');
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
 }

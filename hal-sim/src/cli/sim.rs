@@ -183,13 +183,11 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         Vec::new()
     };
-    let mut all: Vec<serde_json::Value> = runs
+    let all: Vec<Row> = runs
         .iter()
-        .map(serde_json::to_value)
-        .collect::<Result<_, _>>()?;
-    for m in &manip_rows {
-        all.push(serde_json::to_value(m)?);
-    }
+        .map(|r| Row::Tracking(r))
+        .chain(manip_rows.iter().map(Row::Manipulation))
+        .collect();
     if args.json {
         println!("{}", serde_json::to_string(&Runs { runs: &all })?);
     } else {
@@ -228,7 +226,15 @@ pub fn run(args: Args) -> Result<()> {
 /// the same leading fields, then their own).
 #[derive(serde::Serialize)]
 struct Runs<'a> {
-    runs: &'a [serde_json::Value],
+    runs: &'a [Row<'a>],
+}
+
+/// One run in the JSON document, fields in their struct order.
+#[derive(serde::Serialize)]
+#[serde(untagged)]
+enum Row<'a> {
+    Tracking(&'a RunResult),
+    Manipulation(&'a crate::object::ManipRow),
 }
 
 fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {

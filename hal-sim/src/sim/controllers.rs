@@ -6,6 +6,8 @@
 //! The builder sees the nominal stage ([`StageInfo`]): the scenario's parameters and a
 //! linear calibration measured on the stage.
 
+mod feedforward;
+
 use super::StageInfo;
 use anyhow::Result;
 use piezo_core::feedback::Feedback;
@@ -41,7 +43,7 @@ pub struct Entry {
 
 /// Every controller, in table order.
 pub fn registry() -> Vec<Entry> {
-    vec![
+    let mut v = vec![
         Entry {
             name: "open-loop",
             about: "linear scaling of the reference (calibrated gain and offset), no model, no feedback",
@@ -98,7 +100,9 @@ pub fn registry() -> Vec<Entry> {
             one_axis: |s| fb::nmpc::<1>(s, false),
             two_axis: Some(|s| fb::nmpc::<2>(s, false)),
         },
-    ]
+    ];
+    v.extend(feedforward::entries());
+    v
 }
 
 /// Looks a controller up by name.

@@ -1,0 +1,5 @@
+#!/usr/bin/env bash
+# piezo diagnose: the hidden-cause suite with 5 seeds per cause, pairs and `none`, in release
+# (the dev-profile `cargo test` runs 2 seeds per cause).
+set -euo pipefail
+DIAGNOSE_SEEDS=5 cargo test --release -p hal-sim --test diagnose -- --nocapture

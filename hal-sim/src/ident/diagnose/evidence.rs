@@ -1,0 +1,386 @@
+//! Residual signatures: what the residual of the current model correlates with, per cause.
+//!
+//! Each cause has a few signature signals built from the record and the current model's
+//! output; the statistic is the fraction of the residual's variance they explain (R² of a
+//! least-squares fit with a constant). Noise alone explains about `p/N` (p signals, N
+//! samples), so a real effect stands out even when it is small.
+
+use serde::Serialize;
+
+use super::model::{effective_input, least_squares, lowpass, own_input, Cause, Shape};
+use super::Signals;
+
+/// The evidence for one cause on one record.
+#[derive(Debug, Clone, Serialize)]
+pub struct Evidence {
+    /// The signal the residual was tested against.
+    pub signal: String,
+    /// Fraction of the residual variance the signal explains (0..1).
+    pub r2: f64,
+    /// One sentence for a person.
+    pub text: String,
+}
+
+/// Central difference scaled by `1/dt`.
+pub fn derivative(x: &[f64], dt: f64) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|k| {
+            let a = x[k.saturating_sub(1)];
+            let b = x[(k + 1).min(n - 1)];
+            let span = (k + 1).min(n - 1) - k.saturating_sub(1);
+            if span == 0 {
+                0.0
+            } else {
+                (b - a) / (span as f64 * dt)
+            }
+        })
+        .collect()
+}
+
+/// R² of `r` on `sig` plus a constant.
+pub fn explained(r: &[f64], sig: &[Vec<f64>]) -> f64 {
+    let n = r.len();
+    if n < 3 {
+        return 0.0;
+    }
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let var: f64 = r.iter().map(|v| (v - mean) * (v - mean)).sum();
+    if var.is_nan() || var <= 0.0 {
+        return 0.0;
+    }
+    let mut cols: Vec<Vec<f64>> = sig.to_vec();
+    cols.push(vec![1.0; n]);
+    let b = least_squares(&cols, r);
+    let mut sse = 0.0;
+    for k in 0..n {
+        let fit: f64 = cols.iter().zip(&b).map(|(c, b)| c[k] * b).sum();
+        sse += (r[k] - fit) * (r[k] - fit);
+    }
+    (1.0 - sse / var).clamp(0.0, 1.0)
+}
+
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    if n < 2.0 {
+        return 0.0;
+    }
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    let c = sab / (saa * sbb).sqrt();
+    if c.is_finite() {
+        c
+    } else {
+        0.0
+    }
+}
+
+fn quantile(x: &[f64], q: f64) -> f64 {
+    let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+fn rms_where(r: &[f64], mask: impl Fn(usize) -> bool) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for (k, v) in r.iter().enumerate() {
+        if mask(k) {
+            s += v * v;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        0.0
+    } else {
+        (s / n as f64).sqrt()
+    }
+}
+
+/// The signal a person should plot the residual against for `cause` (x axis label, values).
+pub fn signal(
+    data: &Signals,
+    i: usize,
+    cause: Option<Cause>,
+    y_model: &[f64],
+) -> (String, Vec<f64>) {
+    let a = own_input(i, data.u.len());
+    let u = &data.u[a];
+    let dt = data.dt();
+    match cause {
+        Some(Cause::Dynamics) | Some(Cause::SlewLimit) => {
+            ("input rate du/dt [V/s]".into(), derivative(u, dt))
+        }
+        Some(Cause::Delay) => ("model output rate [um/s]".into(), derivative(y_model, dt)),
+        Some(Cause::Creep) => (
+            "input low-passed (500 ms) minus input [V]".into(),
+            lowpass(u, 0.5, dt)
+                .iter()
+                .zip(u)
+                .map(|(l, u)| l - u)
+                .collect(),
+        ),
+        Some(Cause::Drift) => ("time [s]".into(), data.t.clone()),
+        Some(Cause::CrossCoupling) => {
+            let j = if a == 0 { 1 } else { 0 };
+            match data.u.get(j) {
+                Some(uj) => (format!("other axis' input u{} [V]", j + 1), uj.clone()),
+                None => ("input u [V]".into(), u.clone()),
+            }
+        }
+        _ => ("input u [V]".into(), u.clone()),
+    }
+}
+
+/// Evidence for `cause` in residual `r = y - y_model` of output `i` on `data`.
+pub fn evidence(data: &Signals, i: usize, cause: Cause, r: &[f64], y_model: &[f64]) -> Evidence {
+    let a = own_input(i, data.u.len());
+    let u = &data.u[a];
+    let dt = data.dt();
+    let n = r.len();
+    match cause {
+        Cause::Dynamics => {
+            let yd = derivative(y_model, dt);
+            let ydd = derivative(&yd, dt);
+            let r2 = explained(r, &[yd, ydd]);
+            let rate = derivative(u, dt);
+            let slow = lowpass(&rate, 1.0 / (2.0 * std::f64::consts::PI * 10.0), dt);
+            let fast: Vec<f64> = rate.iter().zip(&slow).map(|(a, b)| a - b).collect();
+            let (c_slow, c_fast) = (corr(r, &slow), corr(r, &fast));
+            Evidence {
+                signal: "input rate by band, model output rate and acceleration".into(),
+                r2,
+                text: format!(
+                    "residual follows the input rate (loop rotation): corr {c_slow:+.2} with du/dt below 10 Hz, {c_fast:+.2} above; rate and acceleration of the model output explain {:.0} % of it",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::Delay => {
+            let yd = derivative(y_model, dt);
+            let r2 = explained(r, std::slice::from_ref(&yd));
+            let var: f64 = yd.iter().map(|v| v * v).sum();
+            let lag = if var > 0.0 {
+                -r.iter().zip(&yd).map(|(a, b)| a * b).sum::<f64>() / var
+            } else {
+                0.0
+            };
+            Evidence {
+                signal: "model output rate".into(),
+                r2,
+                text: format!(
+                    "residual is proportional to minus the model's rate (a lag of {:.2} ms); explains {:.0} %",
+                    lag * 1e3,
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::Creep => {
+            let sig: Vec<Vec<f64>> = [0.05, 0.5, 2.5]
+                .iter()
+                .map(|&tau| {
+                    lowpass(u, tau, dt)
+                        .iter()
+                        .zip(u)
+                        .map(|(l, u)| l - u)
+                        .collect()
+                })
+                .collect();
+            let r2 = explained(r, &sig);
+            Evidence {
+                signal: "input low-passed minus input (time since the last input change)".into(),
+                r2,
+                text: format!(
+                    "residual relaxes after input changes (time constants 50 ms to 2.5 s explain {:.0} %)",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::Saturation => {
+            let (lo, hi) = (quantile(u, 0.0), quantile(u, 1.0));
+            let band = 0.1 * (hi - lo);
+            let sig = vec![
+                u.iter().map(|v| (v - (hi - band)).max(0.0)).collect(),
+                u.iter().map(|v| ((lo + band) - v).max(0.0)).collect(),
+            ];
+            let r2 = explained(r, &sig);
+            let near = |k: usize| u[k] > hi - band || u[k] < lo + band;
+            let (e_near, e_mid) = (rms_where(r, near), rms_where(r, |k| !near(k)));
+            Evidence {
+                signal: "|u| near the rails".into(),
+                r2,
+                text: format!(
+                    "residual rms {e_near:.3} where u is within 10 % of its extremes vs {e_mid:.3} elsewhere; explains {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::SlewLimit => {
+            let rate = derivative(u, dt);
+            let abs: Vec<f64> = rate.iter().map(|v| v.abs()).collect();
+            let sig: Vec<Vec<f64>> = [0.5, 0.8, 0.95]
+                .iter()
+                .map(|&q| {
+                    let limit = quantile(&abs, q).max(1e-12);
+                    let shape = Shape {
+                        slew_v_per_s: limit,
+                        ..no_shape()
+                    };
+                    effective_input(u, dt, &shape)
+                        .iter()
+                        .zip(u)
+                        .map(|(v, u)| u - v)
+                        .collect()
+                })
+                .collect();
+            let r2 = explained(r, &sig);
+            let fast_at = quantile(&abs, 0.9);
+            let fast = |k: usize| abs[k] > fast_at;
+            let (e_fast, e_slow) = (rms_where(r, fast), rms_where(r, |k| !fast(k)));
+            Evidence {
+                signal: "lag of a slew-limited input".into(),
+                r2,
+                text: format!(
+                    "residual rms {e_fast:.3} where |du/dt| is in its top 10 % vs {e_slow:.3} elsewhere; a slew-limited input's lag explains {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::Asymmetry => {
+            let (lo, hi) = (quantile(u, 0.0), quantile(u, 1.0));
+            let mid = 0.5 * (lo + hi);
+            let half = (0.5 * (hi - lo)).max(1e-12);
+            let w: Vec<f64> = u.iter().map(|v| (v - mid) / half).collect();
+            let sig = vec![
+                w.iter().map(|w| w * w).collect(),
+                w.iter().map(|w| w * w * w).collect(),
+            ];
+            let r2 = explained(r, &sig);
+            Evidence {
+                signal: "u^2, u^3".into(),
+                r2,
+                text: format!(
+                    "residual is an even/odd polynomial of the input (asymmetric loop): u^2 and u^3 explain {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::CrossCoupling => {
+            let sig: Vec<Vec<f64>> = data
+                .u
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != a)
+                .map(|(_, uj)| uj.clone())
+                .collect();
+            let r2 = explained(r, &sig);
+            let c = sig.first().map_or(0.0, |s| corr(r, s));
+            Evidence {
+                signal: "other axes' inputs".into(),
+                r2,
+                text: format!(
+                    "residual of y{} follows the other axis' input (corr {c:+.2}); explains {:.0} %",
+                    i + 1,
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::Drift => {
+            let r2 = explained(r, std::slice::from_ref(&data.t));
+            let t_mean = data.t.iter().sum::<f64>() / n.max(1) as f64;
+            let r_mean = r.iter().sum::<f64>() / n.max(1) as f64;
+            let (mut stt, mut str_) = (0.0, 0.0);
+            for (t, v) in data.t.iter().zip(r) {
+                stt += (t - t_mean) * (t - t_mean);
+                str_ += (t - t_mean) * (v - r_mean);
+            }
+            let slope = if stt > 0.0 { str_ / stt } else { 0.0 };
+            Evidence {
+                signal: "time".into(),
+                r2,
+                text: format!(
+                    "residual trends in time ({slope:+.4} per s); time explains {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
+    }
+}
+
+/// A shape with no input-side effect.
+pub fn no_shape() -> Shape {
+    Shape {
+        beta: 1.0,
+        gamma: 0.0,
+        delay_s: 0.0,
+        rail_lo_v: f64::NEG_INFINITY,
+        rail_hi_v: f64::INFINITY,
+        slew_v_per_s: f64::INFINITY,
+        wn_hz: f64::INFINITY,
+        zeta: 1.0,
+    }
+}
+
+/// Noise rms of a record from second differences (median based, so the signal's own
+/// curvature and rare jumps barely count).
+pub fn noise_rms(y: &[f64]) -> f64 {
+    if y.len() < 5 {
+        return 0.0;
+    }
+    let d2: Vec<f64> = y
+        .windows(3)
+        .map(|w| (w[0] - 2.0 * w[1] + w[2]).abs())
+        .collect();
+    // For white noise, second differences have variance 6 sigma^2; median |N(0,1)| = 0.6745.
+    quantile(&d2, 0.5) / 0.6745 / 6f64.sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn explained_is_one_for_exact_and_small_for_unrelated() {
+        let x: Vec<f64> = (0..2000).map(|k| (k as f64 * 0.01).sin()).collect();
+        let r: Vec<f64> = x.iter().map(|v| 3.0 * v + 1.0).collect();
+        assert!(explained(&r, std::slice::from_ref(&x)) > 0.999_999);
+        let mut s = 1u64;
+        let noise: Vec<f64> = (0..2000)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            })
+            .collect();
+        assert!(explained(&noise, &[x]) < 0.01);
+    }
+
+    #[test]
+    fn noise_estimate_ignores_smooth_signal() {
+        let mut s = 7u64;
+        let y: Vec<f64> = (0..20000)
+            .map(|k| {
+                // sum of 12 uniforms: close to Gaussian with unit variance
+                let mut g = -6.0;
+                for _ in 0..12 {
+                    s = s
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    g += (s >> 11) as f64 / (1u64 << 53) as f64;
+                }
+                10.0 * (k as f64 * 1e-3).sin() + 0.1 * g
+            })
+            .collect();
+        let sigma = noise_rms(&y);
+        assert!((sigma - 0.1).abs() < 0.01, "{sigma}");
+    }
+}

@@ -1,0 +1,706 @@
+//! The diagnosis model: classical Bouc-Wen plus optional extensions, one per cause.
+//!
+//! Per output `i`, driven by its own input `v` (after the input-side extensions):
+//! `y = G(s)[d*v - alpha*g(v) + extras] + y0 + drift*t`, where `g` is the CBW hysteresis
+//! with unit `alpha` (000 eq. 1-2 with `alpha = 1`; `h = alpha*g` because `dh/du` is
+//! homogeneous in `(alpha, h)`), `G(s)` the optional linear dynamics (004 eq. 8, second
+//! order, unit DC gain). Everything outside `g`, the input transforms and `G` enters
+//! linearly, so the linear coefficients are solved by least squares for every trial of the
+//! few nonlinear ones (variable projection): the search space stays 2 to 6 dimensional.
+
+use piezo_core::hysteresis::{Cbw, Hysteresis};
+use serde::Serialize;
+
+use super::Signals;
+
+/// A cause the base model may miss; each has one model extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Cause {
+    /// Linear dynamics after the hysteresis (004 eq. 8): loop rotation with rate (001).
+    Dynamics,
+    /// Asymmetric loop: output polynomial in the input and input-weighted hysteresis.
+    Asymmetry,
+    /// First-order creep elements in parallel (time constants 20 ms to seconds).
+    Creep,
+    /// Pure input delay.
+    Delay,
+    /// Amplifier rail: input clipped.
+    Saturation,
+    /// Amplifier slew-rate limit on the input.
+    SlewLimit,
+    /// Multi-axis: the other axes' inputs reach this output.
+    CrossCoupling,
+    /// Slow linear drift in time.
+    Drift,
+}
+
+impl Cause {
+    pub const ALL: [Cause; 8] = [
+        Cause::Dynamics,
+        Cause::Asymmetry,
+        Cause::Creep,
+        Cause::Delay,
+        Cause::Saturation,
+        Cause::SlewLimit,
+        Cause::CrossCoupling,
+        Cause::Drift,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Cause::Dynamics => "dynamics",
+            Cause::Asymmetry => "asymmetry",
+            Cause::Creep => "creep",
+            Cause::Delay => "delay",
+            Cause::Saturation => "saturation",
+            Cause::SlewLimit => "slew-limit",
+            Cause::CrossCoupling => "cross-coupling",
+            Cause::Drift => "drift",
+        }
+    }
+
+    pub fn from_name(s: &str) -> Option<Cause> {
+        Cause::ALL.into_iter().find(|c| c.name() == s)
+    }
+
+    fn bit(self) -> u16 {
+        1 << (self as u16)
+    }
+}
+
+/// A set of causes (the extensions a model has).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Causes(u16);
+
+impl Causes {
+    pub fn has(self, c: Cause) -> bool {
+        self.0 & c.bit() != 0
+    }
+    pub fn with(self, c: Cause) -> Self {
+        Self(self.0 | c.bit())
+    }
+    pub fn iter(self) -> impl Iterator<Item = Cause> {
+        Cause::ALL.into_iter().filter(move |c| self.has(*c))
+    }
+    /// `cbw+dynamics+drift`.
+    pub fn label(self) -> String {
+        let mut s = String::from("cbw");
+        for c in self.iter() {
+            s.push('+');
+            s.push_str(c.name());
+        }
+        s
+    }
+}
+
+/// The nonlinear parameters of one output's model, in physical units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Shape {
+    /// CBW `beta` (1/V).
+    pub beta: f64,
+    /// CBW `gamma` (1/V).
+    pub gamma: f64,
+    /// Input delay (s).
+    pub delay_s: f64,
+    /// Lower amplifier rail (V).
+    pub rail_lo_v: f64,
+    /// Upper amplifier rail (V).
+    pub rail_hi_v: f64,
+    /// Slew-rate limit (V/s).
+    pub slew_v_per_s: f64,
+    /// Natural frequency of `G` (Hz).
+    pub wn_hz: f64,
+    /// Damping ratio of `G`.
+    pub zeta: f64,
+}
+
+/// What the search coordinates are scaled by: the training input of this output.
+#[derive(Debug, Clone, Copy)]
+pub struct Scales {
+    pub u_lo: f64,
+    pub u_hi: f64,
+    pub rate_max: f64,
+    pub dt: f64,
+    pub duration_s: f64,
+}
+
+impl Scales {
+    pub fn of(t: &[f64], u: &[f64]) -> Self {
+        let (lo, hi) = min_max(u);
+        let dt = if t.len() > 1 {
+            (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64
+        } else {
+            1.0
+        };
+        let rate_max = u
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs() / dt)
+            .fold(0.0, f64::max);
+        Self {
+            u_lo: lo,
+            u_hi: hi,
+            rate_max: rate_max.max(1e-12),
+            dt,
+            duration_s: dt * t.len() as f64,
+        }
+    }
+    pub fn span(&self) -> f64 {
+        (self.u_hi - self.u_lo).max(1e-12)
+    }
+    /// Largest delay searched: a tenth of the record, at most 50 ms.
+    fn max_delay_s(&self) -> f64 {
+        (0.1 * self.duration_s).min(0.05)
+    }
+    fn max_wn_hz(&self) -> f64 {
+        0.4 / self.dt
+    }
+}
+
+/// Search coordinates of [`Shape`] for a cause set (unbounded; mapped by clamping).
+/// The CBW shape is `ln((beta + gamma) * span)` and `ln((beta - gamma) / (beta + gamma))`,
+/// which covers 004 eq. (3) exactly (`gamma < 0` when the second exceeds 0).
+#[derive(Debug, Clone, Copy)]
+pub struct Coords {
+    pub causes: Causes,
+    pub scales: Scales,
+}
+
+impl Coords {
+    pub fn dim(&self) -> usize {
+        let c = self.causes;
+        2 + usize::from(c.has(Cause::Delay))
+            + 2 * usize::from(c.has(Cause::Saturation))
+            + usize::from(c.has(Cause::SlewLimit))
+            + 2 * usize::from(c.has(Cause::Dynamics))
+    }
+
+    /// Shape from coordinates; every coordinate is clamped into its valid range.
+    pub fn shape(&self, x: &[f64]) -> Shape {
+        self.shape_and_excess(x).0
+    }
+
+    /// Shape, and how far (squared, in coordinate units) `x` lies outside the valid ranges:
+    /// the search adds it as a penalty so a clamped coordinate is never a flat plateau.
+    pub fn shape_and_excess(&self, x: &[f64]) -> (Shape, f64) {
+        let s = &self.scales;
+        let span = s.span();
+        let mut it = x.iter().copied();
+        let mut excess = 0.0;
+        let mut next = |lo: f64, hi: f64| {
+            let v = it.next().unwrap_or(0.0);
+            let c = v.clamp(lo, hi);
+            excess += (v - c) * (v - c);
+            c
+        };
+        // Below 1 the loop does not saturate within the input span: CBW degenerates into a
+        // quadratic in u whose unclosed minor loops ratchet from cycle to cycle.
+        let a = next(0.0, 8.0).exp() / span;
+        let r = next(-12.0, 5.0).exp();
+        let mut shape = Shape {
+            beta: 0.5 * a * (1.0 + r),
+            gamma: 0.5 * a * (1.0 - r),
+            delay_s: 0.0,
+            rail_lo_v: f64::NEG_INFINITY,
+            rail_hi_v: f64::INFINITY,
+            slew_v_per_s: f64::INFINITY,
+            wn_hz: f64::INFINITY,
+            zeta: 1.0,
+        };
+        let c = self.causes;
+        if c.has(Cause::Delay) {
+            shape.delay_s = next(0.0, s.max_delay_s() / s.dt) * s.dt;
+        }
+        if c.has(Cause::Saturation) {
+            // A rail at the extreme of the training input was never hit: no rail on that
+            // side, or the validation input beyond that extreme would be clipped on no evidence.
+            let (lo, hi) = (next(0.0, 0.45), next(0.0, 0.45));
+            if lo > RAIL_UNSEEN {
+                shape.rail_lo_v = s.u_lo + span * lo;
+            }
+            if hi > RAIL_UNSEEN {
+                shape.rail_hi_v = s.u_hi - span * hi;
+            }
+        }
+        if c.has(Cause::SlewLimit) {
+            shape.slew_v_per_s = s.rate_max * next(-8.0, 0.3).exp();
+        }
+        if c.has(Cause::Dynamics) {
+            shape.wn_hz = next(0.2f64.ln(), s.max_wn_hz().ln()).exp();
+            shape.zeta = next(-3.0, 1.6).exp();
+        }
+        (shape, excess)
+    }
+
+    /// Coordinates of a shape (inverse of [`Coords::shape`] inside the ranges).
+    pub fn coords(&self, shape: &Shape) -> Vec<f64> {
+        let s = &self.scales;
+        let span = s.span();
+        let a = (shape.beta + shape.gamma).max(1e-300);
+        let r = ((shape.beta - shape.gamma) / a).max(1e-300);
+        let mut x = vec![(a * span).ln(), r.ln()];
+        let c = self.causes;
+        if c.has(Cause::Delay) {
+            x.push(shape.delay_s / s.dt);
+        }
+        if c.has(Cause::Saturation) {
+            let frac = |v: f64| {
+                if v.is_finite() {
+                    v.clamp(0.0, 0.45)
+                } else {
+                    0.0
+                }
+            };
+            x.push(frac((shape.rail_lo_v - s.u_lo) / span));
+            x.push(frac((s.u_hi - shape.rail_hi_v) / span));
+        }
+        if c.has(Cause::SlewLimit) {
+            x.push((shape.slew_v_per_s / s.rate_max).min(1.35).ln());
+        }
+        if c.has(Cause::Dynamics) {
+            x.push(shape.wn_hz.min(s.max_wn_hz()).ln());
+            x.push(shape.zeta.ln());
+        }
+        x
+    }
+
+    /// Initial simplex steps per coordinate.
+    pub fn steps(&self) -> Vec<f64> {
+        let mut v = vec![0.5, 0.8];
+        let c = self.causes;
+        if c.has(Cause::Delay) {
+            v.push(2.0);
+        }
+        if c.has(Cause::Saturation) {
+            v.extend([0.03, 0.03]);
+        }
+        if c.has(Cause::SlewLimit) {
+            v.push(0.3);
+        }
+        if c.has(Cause::Dynamics) {
+            v.extend([0.4, 0.4]);
+        }
+        v
+    }
+}
+
+/// Rails closer than this (fraction of the span) to the training input's extremes count as
+/// never hit.
+const RAIL_UNSEEN: f64 = 2e-3;
+
+/// Fixed creep time constants for a record of `duration_s` sampled at `dt`.
+pub fn creep_taus(duration_s: f64, dt: f64) -> Vec<f64> {
+    [0.02, 0.1, 0.5, 2.5]
+        .into_iter()
+        .filter(|&tau| tau >= 20.0 * dt && tau <= 0.5 * duration_s)
+        .collect()
+}
+
+/// One output's model: nonlinear shape and linear coefficients (column order of
+/// [`regressors`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OutputModel {
+    pub shape: Shape,
+    /// Coefficient names, in column order.
+    pub names: Vec<String>,
+    pub coef: Vec<f64>,
+}
+
+/// Index of the input that drives output `i`.
+pub fn own_input(i: usize, n_inputs: usize) -> usize {
+    if i < n_inputs {
+        i
+    } else {
+        0
+    }
+}
+
+/// Delay (linear interpolation), slew limit, then rails: the input the actuator sees.
+pub fn effective_input(u: &[f64], dt: f64, shape: &Shape) -> Vec<f64> {
+    let n = u.len();
+    let mut v: Vec<f64> = if shape.delay_s > 0.0 && n > 0 {
+        let d = shape.delay_s / dt;
+        let whole = d.floor() as usize;
+        let frac = d - d.floor();
+        (0..n)
+            .map(|k| {
+                if k < whole + 1 {
+                    // before the record: the input rested at its first value
+                    let a = k.checked_sub(whole).map_or(u[0], |j| u[j]);
+                    return a + frac * (u[0] - a);
+                }
+                let a = u[k - whole];
+                let b = u[k - whole - 1];
+                a + frac * (b - a)
+            })
+            .collect()
+    } else {
+        u.to_vec()
+    };
+    if shape.slew_v_per_s.is_finite() {
+        let step = shape.slew_v_per_s * dt;
+        let mut prev = v.first().copied().unwrap_or(0.0);
+        for x in v.iter_mut() {
+            prev += (*x - prev).clamp(-step, step);
+            *x = prev;
+        }
+    }
+    if shape.rail_lo_v.is_finite() || shape.rail_hi_v.is_finite() {
+        for x in v.iter_mut() {
+            *x = x.clamp(shape.rail_lo_v, shape.rail_hi_v.max(shape.rail_lo_v));
+        }
+    }
+    v
+}
+
+/// CBW hysteresis variable with unit `alpha`, from rest at the first input.
+pub fn hysteresis(v: &[f64], beta: f64, gamma: f64) -> Vec<f64> {
+    let Ok(m) = Cbw::with_n1(0.0, 1.0, beta, gamma) else {
+        return vec![0.0; v.len()];
+    };
+    let mut s = m.init(v.first().copied().unwrap_or(0.0));
+    // y = d*u - h with d = 0: the model returns -h.
+    v.iter().map(|&x| -m.step(&mut s, x, 0.0)).collect()
+}
+
+/// First-order low-pass with time constant `tau_s`, starting at rest.
+pub fn lowpass(x: &[f64], tau_s: f64, dt: f64) -> Vec<f64> {
+    let a = (-dt / tau_s).exp();
+    let mut s = x.first().copied().unwrap_or(0.0);
+    x.iter()
+        .map(|&v| {
+            s = a * s + (1.0 - a) * v;
+            s
+        })
+        .collect()
+}
+
+/// Second-order low-pass with unit DC gain (004 eq. 8 with n = 2, m = 0), Tustin,
+/// starting at rest at the first sample.
+pub fn dynamics(x: &mut [f64], wn_hz: f64, zeta: f64, dt: f64) {
+    if !wn_hz.is_finite() || x.is_empty() {
+        return;
+    }
+    let wn = 2.0 * std::f64::consts::PI * wn_hz;
+    let k = 2.0 / dt;
+    let a0 = k * k + 2.0 * zeta * wn * k + wn * wn;
+    let b0 = wn * wn / a0;
+    let a1 = (2.0 * wn * wn - 2.0 * k * k) / a0;
+    let a2 = (k * k - 2.0 * zeta * wn * k + wn * wn) / a0;
+    let (mut x1, mut x2) = (x[0], x[0]);
+    let (mut y1, mut y2) = (x[0], x[0]);
+    for v in x.iter_mut() {
+        let x0 = *v;
+        let y = b0 * (x0 + 2.0 * x1 + x2) - a1 * y1 - a2 * y2;
+        x2 = x1;
+        x1 = x0;
+        y2 = y1;
+        y1 = y;
+        *v = y;
+    }
+}
+
+/// Normalised input `w = (v - mid)/half` for the asymmetry polynomial.
+fn normalised(v: &[f64], s: &Scales) -> Vec<f64> {
+    let mid = 0.5 * (s.u_hi + s.u_lo);
+    let half = 0.5 * s.span();
+    v.iter().map(|x| (x - mid) / half).collect()
+}
+
+/// The regressor columns of output `i` and their names.
+pub fn regressors(
+    data: &Signals,
+    i: usize,
+    causes: Causes,
+    shape: &Shape,
+    scales: &Scales,
+    taus: &[f64],
+) -> (Vec<&'static str>, Vec<Vec<f64>>) {
+    let dt = data.dt();
+    let a = own_input(i, data.u.len());
+    let v = effective_input(&data.u[a], dt, shape);
+    let g = hysteresis(&v, shape.beta, shape.gamma);
+    let mut names = vec!["d", "alpha"];
+    let mut cols = Vec::with_capacity(12);
+    if causes.has(Cause::Asymmetry) {
+        let w = normalised(&v, scales);
+        cols.push(w.iter().map(|w| w * w).collect());
+        cols.push(w.iter().map(|w| w * w * w).collect());
+        cols.push(w.iter().zip(&g).map(|(w, g)| -w * g).collect());
+        names.extend(["asym_u2", "asym_u3", "asym_wh"]);
+    }
+    if causes.has(Cause::Creep) {
+        const NAMES: [&str; 4] = ["creep_20ms", "creep_100ms", "creep_500ms", "creep_2500ms"];
+        for &tau in taus {
+            cols.push(lowpass(&v, tau, dt));
+            let k = [0.02, 0.1, 0.5, 2.5]
+                .iter()
+                .position(|&t| t == tau)
+                .unwrap_or(0);
+            names.push(NAMES[k]);
+        }
+    }
+    if causes.has(Cause::CrossCoupling) {
+        const NAMES: [&str; 8] = [
+            "couple_u1",
+            "couple_u2",
+            "couple_u3",
+            "couple_u4",
+            "couple_u5",
+            "couple_u6",
+            "couple_u7",
+            "couple_u8",
+        ];
+        for (j, uj) in data.u.iter().enumerate().take(8) {
+            if j == a {
+                continue;
+            }
+            cols.push(effective_input(uj, dt, shape));
+            names.push(NAMES[j]);
+        }
+    }
+    let mut all = vec![v, g.into_iter().map(|g| -g).collect::<Vec<_>>()];
+    all.extend(cols);
+    if causes.has(Cause::Dynamics) {
+        for c in all.iter_mut() {
+            dynamics(c, shape.wn_hz, shape.zeta, dt);
+        }
+    }
+    all.push(vec![1.0; data.t.len()]);
+    names.push("y0");
+    if causes.has(Cause::Drift) {
+        all.push(data.t.clone());
+        names.push("drift_per_s");
+    }
+    (names, all)
+}
+
+/// `y = sum coef_k * col_k`.
+pub fn combine(cols: &[Vec<f64>], coef: &[f64]) -> Vec<f64> {
+    let n = cols.first().map_or(0, Vec::len);
+    let mut y = vec![0.0; n];
+    for (c, &b) in cols.iter().zip(coef) {
+        for (y, x) in y.iter_mut().zip(c) {
+            *y += b * x;
+        }
+    }
+    y
+}
+
+/// Least squares `min |X b - y|` by normal equations on scaled columns with a tiny ridge.
+pub fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
+    let p = cols.len();
+    let scale: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let s = dot(c, c).sqrt();
+            if s > 0.0 && s.is_finite() {
+                1.0 / s
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut a = vec![0.0; p * p];
+    let mut b = vec![0.0; p];
+    for r in 0..p {
+        for c in 0..=r {
+            let v = dot(&cols[r], &cols[c]) * scale[r] * scale[c];
+            a[r * p + c] = v;
+            a[c * p + r] = v;
+        }
+        b[r] = dot(&cols[r], y) * scale[r];
+    }
+    let mut ridge = 1e-12;
+    for _ in 0..8 {
+        if let Some(x) = cholesky_solve(&a, &b, p, ridge) {
+            return x.iter().zip(&scale).map(|(x, s)| x * s).collect();
+        }
+        ridge *= 100.0;
+    }
+    vec![0.0; p]
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    // Four accumulators so the loop vectorises.
+    let mut acc = [0.0; 4];
+    let (ac, ar) = a.split_at(a.len() - a.len() % 4);
+    let (bc, br) = b.split_at(ac.len().min(b.len()));
+    for (x, y) in ac.chunks_exact(4).zip(bc.chunks_exact(4)) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    let tail: f64 = ar.iter().zip(br).map(|(x, y)| x * y).sum();
+    acc[0] + acc[1] + acc[2] + acc[3] + tail
+}
+
+fn cholesky_solve(a: &[f64], b: &[f64], p: usize, ridge: f64) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; p * p];
+    for r in 0..p {
+        for c in 0..=r {
+            let mut s = a[r * p + c];
+            if r == c {
+                s += ridge;
+            }
+            for k in 0..c {
+                s -= l[r * p + k] * l[c * p + k];
+            }
+            if r == c {
+                if s.is_nan() || s <= 0.0 {
+                    return None;
+                }
+                l[r * p + r] = s.sqrt();
+            } else {
+                l[r * p + c] = s / l[c * p + c];
+            }
+        }
+    }
+    let mut z = vec![0.0; p];
+    for r in 0..p {
+        let mut s = b[r];
+        for k in 0..r {
+            s -= l[r * p + k] * z[k];
+        }
+        z[r] = s / l[r * p + r];
+    }
+    let mut x = vec![0.0; p];
+    for r in (0..p).rev() {
+        let mut s = z[r];
+        for k in r + 1..p {
+            s -= l[k * p + r] * x[k];
+        }
+        x[r] = s / l[r * p + r];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+pub fn rmse(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    if n == 0 {
+        return f64::NAN;
+    }
+    let s: f64 = a.iter().zip(b).map(|(a, b)| (a - b) * (a - b)).sum();
+    (s / n as f64).sqrt()
+}
+
+pub fn min_max(x: &[f64]) -> (f64, f64) {
+    x.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        })
+}
+
+/// Fits the linear coefficients of output `i` for a given shape; returns the model and its
+/// training RMSE.
+pub fn fit_linear(
+    data: &Signals,
+    i: usize,
+    causes: Causes,
+    shape: &Shape,
+    scales: &Scales,
+    taus: &[f64],
+) -> (OutputModel, f64) {
+    let (names, cols) = regressors(data, i, causes, shape, scales, taus);
+    let coef = least_squares(&cols, &data.y[i]);
+    let y = combine(&cols, &coef);
+    let e = rmse(&y, &data.y[i]);
+    let model = OutputModel {
+        shape: *shape,
+        names: names.into_iter().map(String::from).collect(),
+        coef,
+    };
+    (model, if e.is_finite() { e } else { f64::INFINITY })
+}
+
+/// Output `i` of `model` on `data`.
+pub fn predict(
+    data: &Signals,
+    i: usize,
+    causes: Causes,
+    model: &OutputModel,
+    scales: &Scales,
+    taus: &[f64],
+) -> Vec<f64> {
+    let (_, cols) = regressors(data, i, causes, &model.shape, scales, taus);
+    combine(&cols, &model.coef)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn least_squares_recovers_coefficients() {
+        let x1: Vec<f64> = (0..500).map(|k| (k as f64 * 0.1).sin()).collect();
+        let x2: Vec<f64> = (0..500).map(|k| k as f64 * 1e3).collect();
+        let y: Vec<f64> = x1
+            .iter()
+            .zip(&x2)
+            .map(|(a, b)| 2.0 * a - 3e-4 * b)
+            .collect();
+        let c = least_squares(&[x1, x2], &y);
+        assert!(
+            (c[0] - 2.0).abs() < 1e-9 && (c[1] + 3e-4).abs() < 1e-12,
+            "{c:?}"
+        );
+    }
+
+    #[test]
+    fn coords_round_trip() {
+        let scales = Scales {
+            u_lo: -10.0,
+            u_hi: 90.0,
+            rate_max: 500.0,
+            dt: 1e-3,
+            duration_s: 4.0,
+        };
+        let causes = Causes::default()
+            .with(Cause::Delay)
+            .with(Cause::Saturation)
+            .with(Cause::SlewLimit)
+            .with(Cause::Dynamics);
+        let c = Coords { causes, scales };
+        let shape = Shape {
+            beta: 0.03,
+            gamma: 0.01,
+            delay_s: 0.004,
+            rail_lo_v: -5.0,
+            rail_hi_v: 80.0,
+            slew_v_per_s: 200.0,
+            wn_hz: 120.0,
+            zeta: 0.3,
+        };
+        let back = c.shape(&c.coords(&shape));
+        for (a, b) in [
+            (back.beta, shape.beta),
+            (back.gamma, shape.gamma),
+            (back.delay_s, shape.delay_s),
+            (back.rail_lo_v, shape.rail_lo_v),
+            (back.rail_hi_v, shape.rail_hi_v),
+            (back.slew_v_per_s, shape.slew_v_per_s),
+            (back.wn_hz, shape.wn_hz),
+            (back.zeta, shape.zeta),
+        ] {
+            assert!((a - b).abs() < 1e-9 * b.abs().max(1.0), "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn dynamics_has_unit_dc_gain_and_delay_shifts() {
+        let mut x = vec![1.0; 10];
+        x.extend(vec![2.0; 4000]);
+        dynamics(&mut x, 50.0, 0.5, 1e-3);
+        assert!((x[x.len() - 1] - 2.0).abs() < 1e-9);
+        let u: Vec<f64> = (0..100).map(|k| k as f64).collect();
+        let mut shape = Coords {
+            causes: Causes::default(),
+            scales: Scales::of(&u, &u),
+        }
+        .shape(&[0.0, 0.0]);
+        shape.delay_s = 2.5e-3;
+        let v = effective_input(&u, 1e-3, &shape);
+        assert!((v[50] - 47.5).abs() < 1e-12, "{}", v[50]);
+        assert_eq!(v[0], 0.0);
+    }
+}
