@@ -297,7 +297,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             self.output.get(axis),
         ) {
             let (lo, hi) = o.code_range();
-            *code = held_code.clamp(lo, hi);
+            *code = held_code.max(lo).min(hi);
             *u = o.dac.volts(*code);
         }
         st.counters.dac_faults = st.counters.dac_faults.saturating_add(1);

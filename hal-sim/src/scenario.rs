@@ -152,6 +152,10 @@ impl Default for Reference {
 pub struct StageConfig {
     /// Number of axes (1..=3).
     pub axes: usize,
+    /// Position of the relaxed stage at 0 V (um): where the sensor's zero is. The default
+    /// puts the major loop over 0-150 V at about 0-100 um (the remanent displacement after
+    /// a descent to 0 V and the creep lift the loop by ~16 um above the relaxed state).
+    pub zero_um: f64,
     pub amplifier: Amplifier,
     pub hysteresis: HysteresisCfg,
     pub creep: Creep,
@@ -167,6 +171,7 @@ impl Default for StageConfig {
     fn default() -> Self {
         Self {
             axes: 1,
+            zero_um: -16.5,
             amplifier: Amplifier::default(),
             hysteresis: HysteresisCfg::default(),
             creep: Creep::default(),
@@ -250,14 +255,14 @@ impl Default for HysteresisCfg {
     fn default() -> Self {
         Self {
             model: HysteresisModel::Cbw,
-            d: 0.9,
+            d: 0.93,
             alpha: 0.3,
             beta: 0.012,
             gamma: 0.004,
             a: 1.0,
             n: 1.0,
             hc: 15.0,
-            asym_um_per_v2: -2.0e-4,
+            asym_um_per_v2: -4.0e-4,
             model_error: 0.0,
         }
     }
@@ -420,7 +425,7 @@ pub struct Converters {
 impl Default for Converters {
     fn default() -> Self {
         Self {
-            sensor_volts_per_um: 0.09,
+            sensor_volts_per_um: 0.07,
             sensor_center_um: 50.0,
             adc_bits: 20,
             adc_vref: 5.0,
@@ -523,6 +528,7 @@ impl Scenario {
         if self.is_scan() && st.axes != 2 {
             bail!("reference.wave = raster/lissajous needs stage.axes = 2");
         }
+        finite(st.zero_um, "stage.zero_um")?;
         let a = &st.amplifier;
         positive(a.gain, "stage.amplifier.gain")?;
         finite(a.offset_volts, "stage.amplifier.offset_volts")?;

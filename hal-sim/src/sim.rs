@@ -52,8 +52,9 @@ impl StageInfo<'_> {
     }
 }
 
-/// Least-squares line of position against piezo voltage over a slow (1 Hz, 2 periods)
-/// full-range sine on the noise-free stage.
+/// Two-point (end-point) calibration, what a user does first: the line through the
+/// positions at the two ends of the voltage range, read on a slow (1 Hz, 2 periods)
+/// full-range sine on the noise-free stage (the major loop's corners).
 pub fn calibrate(sc: &Scenario) -> Result<LinearFf<f64>> {
     let mut quiet = sc.clone();
     quiet.stage.noise.enabled = false;
@@ -67,7 +68,7 @@ pub fn calibrate(sc: &Scenario) -> Result<LinearFf<f64>> {
     let a = &sc.stage.amplifier;
     let dac = |v: f64| (v - a.offset_volts) / a.gain;
     let n = 20_000;
-    let (mut su, mut sy, mut suu, mut suy, mut m) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut u_lo, mut y_lo, mut u_hi, mut y_hi) = (f64::INFINITY, 0.0, f64::NEG_INFINITY, 0.0);
     let ax = vec![0.0; st.axes()];
     for k in 0..n {
         let ph = 2.0 * std::f64::consts::PI * k as f64 / 10_000.0;
@@ -77,15 +78,16 @@ pub fn calibrate(sc: &Scenario) -> Result<LinearFf<f64>> {
         st.advance(&d);
         if k >= n / 2 {
             let (u, y) = (st.piezo_volts(0), st.position_um(0));
-            su += u;
-            sy += y;
-            suu += u * u;
-            suy += u * y;
-            m += 1.0;
+            if u < u_lo {
+                (u_lo, y_lo) = (u, y);
+            }
+            if u > u_hi {
+                (u_hi, y_hi) = (u, y);
+            }
         }
     }
-    let slope = (m * suy - su * sy) / (m * suu - su * su);
-    let offset = (sy - slope * su) / m;
+    let slope = (y_hi - y_lo) / (u_hi - u_lo);
+    let offset = y_lo - slope * u_lo;
     anyhow::ensure!(
         slope.is_finite() && slope != 0.0 && offset.is_finite(),
         "calibration sweep gave no usable gain"

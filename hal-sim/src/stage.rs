@@ -167,6 +167,7 @@ pub struct Stage {
     t: f64,
     steps: u64,
     exact_hysteresis: bool,
+    zero_um: f64,
 }
 
 /// Most internal steps per loop period.
@@ -290,6 +291,7 @@ impl Stage {
             t: 0.0,
             steps: 0,
             exact_hysteresis: false,
+            zero_um: cfg.zero_um,
         };
         // Rest at the amplifier's output for 0 V in.
         let zero = vec![0.0; st.axes.len()];
@@ -313,8 +315,9 @@ impl Stage {
             ax.u_struct = ax.y_hc;
             ax.v = 0.0;
         }
+        let off = self.drift_um();
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
-            line.iter_mut().for_each(|p| *p = ax.x);
+            line.iter_mut().for_each(|p| *p = ax.x + off);
         }
     }
 
@@ -342,11 +345,13 @@ impl Stage {
         self.axes.get(axis).map_or(f64::NAN, |a| a.x) + self.drift_um()
     }
 
+    /// Sensor zero plus thermal drift (um).
     fn drift_um(&self) -> f64 {
-        match self.drift {
-            Some((_, _, rate)) => self.drift_exp_um + rate * self.t,
-            None => 0.0,
-        }
+        self.zero_um
+            + match self.drift {
+                Some((_, _, rate)) => self.drift_exp_um + rate * self.t,
+                None => 0.0,
+            }
     }
 
     /// What the position sensor reads now (um): delayed position, drift, noise.
@@ -508,6 +513,7 @@ mod tests {
         s.stage.drift.enabled = false;
         s.stage.noise.enabled = false;
         s.stage.delay.enabled = false;
+        s.stage.zero_um = 0.0;
         s.run.loop_hz = 10_000.0;
         s
     }

@@ -145,7 +145,7 @@ impl<SPI: SpiDevice, LDAC: OutputPin> Ad5791<SPI, LDAC> {
     #[inline]
     pub fn write_code(&mut self, code: i32) -> Result<(), Error<SPI::Error, LDAC::Error>> {
         let (lo, hi) = self.config.code_range();
-        self.write_register(REG_DAC, code.clamp(lo, hi) as u32 & DATA_MASK)
+        self.write_register(REG_DAC, code.max(lo).min(hi) as u32 & DATA_MASK)
     }
 
     /// LDAC pulse: the DAC output takes the register value.

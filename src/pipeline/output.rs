@@ -39,7 +39,7 @@ impl<T: Real> DacScale<T> {
         let x = ((volts - self.volts_at_zero) / self.volts_per_code)
             .clamp_to(T::from_i32(lo), T::from_i32(hi));
         let c = (x + T::HALF).floor().to_i32();
-        c.clamp(lo, hi)
+        c.max(lo).min(hi) // not `clamp`: no panic path when lo > hi
     }
 }
 
@@ -138,12 +138,13 @@ impl<T: Real> Output<T> {
             .clamp_to(lo, T::from_i32(self.code_hi));
         // x >= lo, so truncation of the shifted value is the floor (no libm call).
         let want = ((x - lo + T::HALF).to_i32() as i64 + self.code_lo as i64)
-            .clamp(self.code_lo as i64, self.code_hi as i64) as i32;
-        let prev = prev.clamp(self.code_lo, self.code_hi);
-        let code = want.clamp(
-            prev.saturating_sub(self.max_step),
-            prev.saturating_add(self.max_step),
-        );
+            .max(self.code_lo as i64)
+            .min(self.code_hi as i64) as i32;
+        // max/min, not `clamp`: `clamp` asserts lo <= hi, a panic path in the ISR.
+        let prev = prev.max(self.code_lo).min(self.code_hi);
+        let code = want
+            .max(prev.saturating_sub(self.max_step))
+            .min(prev.saturating_add(self.max_step));
         let exact = (volts - self.dac.volts(want)).abs() <= self.dac.volts_per_code;
         Limited {
             code,

@@ -13,17 +13,19 @@
 pub use crate::control::SAMPLE_HZ;
 /// Core clock (Hz): DWT cycle counts are in these cycles.
 pub const SYSCLK_HZ: u32 = 400_000_000;
+/// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
+pub const WATCHDOG_MS: u32 = 10;
 
 #[rtic::app(device = stm32h7xx_hal::pac, peripherals = true, dispatchers = [SAI1, SAI2])]
 mod app {
-    use super::{SAMPLE_HZ, SYSCLK_HZ};
+    use super::{SAMPLE_HZ, SYSCLK_HZ, WATCHDOG_MS};
     use crate::control::{c, stream_frames, Ctl};
     use cortex_m::peripheral::DWT;
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
     use rtic_monotonics::systick::prelude::*;
     use stm32h7xx_hal::{
-        adc, delay::Delay, pac, prelude::*, rcc::rec::AdcClkSel, serial, timer::Timer,
-        traits::DacOut,
+        adc, delay::Delay, independent_watchdog::IndependentWatchdog, pac, prelude::*,
+        rcc::rec::AdcClkSel, serial, timer::Timer, traits::DacOut,
     };
 
     systick_monotonic!(Mono, 1_000);
@@ -44,6 +46,7 @@ mod app {
         tx: serial::Tx<pac::USART3>,
         line: LineBuffer,
         period_cycles: u32,
+        watchdog: IndependentWatchdog,
     }
 
     #[init]
@@ -106,6 +109,12 @@ mod app {
         let syst = delay.free();
         Mono::start(syst, SYSCLK_HZ);
 
+        // Independent watchdog (LSI clock, survives a main-clock failure): only a control
+        // period that met its deadline feeds it, so a stalled or overrunning loop resets
+        // the MCU, whose DAC then comes up at its safe code.
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.start(stm32h7xx_hal::time::MilliSeconds::from_ticks(WATCHDOG_MS));
+
         // TIM2 last: from here on samples arrive.
         let mut timer = dp
             .TIM2
@@ -127,6 +136,7 @@ mod app {
                 tx,
                 line: LineBuffer::new(),
                 period_cycles: SYSCLK_HZ / SAMPLE_HZ,
+                watchdog,
             },
         )
     }
@@ -143,7 +153,7 @@ mod app {
     }
 
     /// The control period: sample in, step, DAC out. Highest priority.
-    #[task(binds = ADC1_2, priority = 3, shared = [ctl], local = [adc, dac, period_cycles])]
+    #[task(binds = ADC1_2, priority = 3, shared = [ctl], local = [adc, dac, period_cycles, watchdog])]
     fn sample(mut cx: sample::Context) {
         let t0 = DWT::cycle_count();
         let regs = cx.local.adc.inner();
@@ -155,6 +165,7 @@ mod app {
         let code = regs.dr.read().bits();
         let period = *cx.local.period_cycles;
         let dac = cx.local.dac;
+        let watchdog = cx.local.watchdog;
         cx.shared.ctl.lock(|ctl| {
             let t1 = DWT::cycle_count();
             let dac_code = ctl.lp.step(code);
@@ -167,6 +178,8 @@ mod app {
             t.isr.record(isr);
             if overrun || isr > period {
                 t.overruns = t.overruns.wrapping_add(1);
+            } else {
+                watchdog.feed();
             }
         });
     }

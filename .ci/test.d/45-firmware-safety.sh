@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Firmware static checks (no heap linked; no panic path reachable from the control
+# interrupt; worst-case stack per handler from -Z emit-stack-sizes). Needs nightly;
+# skipped with a message where none is installed.
+set -euo pipefail
+if ! rustup run nightly rustc --version >/dev/null 2>&1; then
+  echo "firmware safety: skipped, no nightly toolchain on this machine"
+  exit 0
+fi
+rustup target add thumbv7em-none-eabihf --toolchain nightly >/dev/null
+python3 .ci/firmware-safety.py
