@@ -457,11 +457,13 @@ impl Record {
     }
 }
 
-/// The shared data folder: `$PIEZO_DATA` or `/work/shared/data`.
+/// The shared data folder: `$PIEZO_DATA`, else `shared/data` beside the repository.
 pub fn data_dir() -> std::path::PathBuf {
     std::env::var_os("PIEZO_DATA")
         .map(Into::into)
-        .unwrap_or_else(|| "/work/shared/data".into())
+        .unwrap_or_else(|| {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
+        })
 }
 
 /// Shortens user text quoted in an error.
