@@ -139,7 +139,8 @@ impl Default for Reference {
             wave: WaveKind::Sine,
             freq_hz: 10.0,
             amplitude_um: 40.0,
-            offset_um: 50.0,
+            // Centre of the default stage's major loop (about 16-118 um over 0-150 V).
+            offset_um: 65.0,
             levels: 5,
             freq2_hz: 3.0,
         }
@@ -152,9 +153,10 @@ impl Default for Reference {
 pub struct StageConfig {
     /// Number of axes (1..=3).
     pub axes: usize,
-    /// Position of the relaxed stage at 0 V (um): where the sensor's zero is. The default
-    /// puts the major loop over 0-150 V at about 0-100 um (the remanent displacement after
-    /// a descent to 0 V and the creep lift the loop by ~16 um above the relaxed state).
+    /// Position of the relaxed stage at 0 V (um): where the sensor's zero is. With 0 the
+    /// major loop over 0-150 V spans about 16-118 um (remanent displacement after a descent
+    /// to 0 V, creep); -16.5 puts it at 0-100 um (the model-based compensators do not know
+    /// this offset).
     pub zero_um: f64,
     pub amplifier: Amplifier,
     pub hysteresis: HysteresisCfg,
@@ -171,7 +173,7 @@ impl Default for StageConfig {
     fn default() -> Self {
         Self {
             axes: 1,
-            zero_um: -16.5,
+            zero_um: 0.0,
             amplifier: Amplifier::default(),
             hysteresis: HysteresisCfg::default(),
             creep: Creep::default(),
