@@ -555,28 +555,29 @@ fn assemble(
 /// Extends `current` by `cause` and refits every output from its current shape.
 fn extend(current: &Fitted, cause: Option<Cause>, tiers: &Tiers, opt: &Options) -> Fitted {
     let causes = cause.map_or(current.causes, |c| current.causes.with(c));
+    let mut scales = current.scales.clone();
+    if cause == Some(Cause::Creep) {
+        // Creep of the current model's static displacement `d*v - alpha*g`.
+        for (s, m) in scales.iter_mut().zip(&current.outputs) {
+            let coef = |n: &str| m.names.iter().position(|x| x == n).map(|k| m.coef[k]);
+            if let (Some(d), Some(a)) = (coef("d"), coef("alpha")) {
+                let rho = a / d;
+                s.creep_rho = if rho.is_finite() {
+                    rho.clamp(-2.0, 2.0)
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
     let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
         .into_par_iter()
         .map(|i| {
-            let st = starts(cause, &current.outputs[i].shape, &current.scales[i]);
-            fit_output(
-                tiers,
-                i,
-                causes,
-                &st,
-                &current.scales[i],
-                &current.taus,
-                opt,
-            )
+            let st = starts(cause, &current.outputs[i].shape, &scales[i]);
+            fit_output(tiers, i, causes, &st, &scales[i], &current.taus, opt)
         })
         .collect();
-    assemble(
-        causes,
-        outputs,
-        current.scales.clone(),
-        current.taus.clone(),
-        tiers.full,
-    )
+    assemble(causes, outputs, scales, current.taus.clone(), tiers.full)
 }
 
 /// `current` refitted without `cause`, from its current shapes.
@@ -661,7 +662,13 @@ fn ablate(f: &Fitted, causes: Causes, cause: Cause, tiers: &Tiers) -> Fitted {
             fit_linear(tiers.full, i, causes, &shape, &f.scales[i], &f.taus)
         })
         .collect();
-    assemble(causes, outputs, f.scales.clone(), f.taus.clone(), tiers.full)
+    assemble(
+        causes,
+        outputs,
+        f.scales.clone(),
+        f.taus.clone(),
+        tiers.full,
+    )
 }
 
 /// Evidence for `cause` in the residual of `y_model` on `valid`; the output with the

@@ -126,6 +126,9 @@ pub struct Scales {
     pub rate_max: f64,
     pub dt: f64,
     pub duration_s: f64,
+    /// Creep acts on `v - creep_rho * g`: the static displacement's shape, `alpha/d` of the
+    /// model the creep was added to (0: on the voltage alone).
+    pub creep_rho: f64,
 }
 
 impl Scales {
@@ -146,6 +149,7 @@ impl Scales {
             rate_max: rate_max.max(1e-12),
             dt,
             duration_s: dt * t.len() as f64,
+            creep_rho: 0.0,
         }
     }
     pub fn span(&self) -> f64 {
@@ -463,12 +467,16 @@ pub fn regressors(
             "creep_2000ms",
             "creep_5000ms",
         ];
+        // Creep follows the displacement (hysteresis included), not only the voltage.
+        let rho = scales.creep_rho;
+        let src: Vec<f64> = if rho != 0.0 {
+            v.iter().zip(&g).map(|(v, g)| v - rho * g).collect()
+        } else {
+            v.clone()
+        };
         for &tau in taus {
-            cols.push(lowpass(&v, tau, dt));
-            let k = CREEP_TAUS_S
-                .iter()
-                .position(|&t| t == tau)
-                .unwrap_or(0);
+            cols.push(lowpass(&src, tau, dt));
+            let k = CREEP_TAUS_S.iter().position(|&t| t == tau).unwrap_or(0);
             names.push(NAMES[k]);
         }
     }
@@ -706,6 +714,7 @@ mod tests {
             rate_max: 500.0,
             dt: 1e-3,
             duration_s: 4.0,
+            creep_rho: 0.0,
         };
         let causes = Causes::default()
             .with(Cause::Delay)
