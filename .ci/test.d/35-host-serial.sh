@@ -99,8 +99,9 @@ awk -F, '
     if (n != 1024) { print "expected 1024 rows"; bad = 1 }
     # 10.24 ms hold a full period of the 100 Hz sine: the reference spans 5..15 um.
     if (rmin > 5.05 || rmax < 14.95) { print "reference does not span the sine"; bad = 1 }
-    # The loop tracks: the error is small against the 10 um peak-to-peak stroke.
-    if (!(rms < 2)) { print "tracking error too large"; bad = 1 }
+    # The loop follows the sine: RMS error below half the 5 um amplitude (a stage that
+    # stays put gives 3.5 um).
+    if (!(rms < 2.5)) { print "tracking error too large"; bad = 1 }
     exit bad
   }' "$work/rec.csv" || fail "free-running capture"
 
