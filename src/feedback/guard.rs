@@ -1,5 +1,6 @@
-//! Input sanitising shared by every law: a non-finite input holds its last finite value, and
-//! magnitudes are bounded so no product in a law can overflow to infinity. The optional
+//! Input sanitising shared by every law: an input that is non-finite or beyond
+//! [`INPUT_BOUND`] holds its last accepted value, so no product in a law can overflow to
+//! infinity. The optional
 //! measurement filter (e.g. a notch on the stage resonance) sits here too, so it serves every
 //! law the same way.
 
@@ -21,11 +22,15 @@ pub struct InputGuard<T> {
     settled: bool,
 }
 
+/// `x` if it is within the bound, else the last accepted value: one compare covers NaN,
+/// the infinities and absurd magnitudes alike (a value beyond `INPUT_BOUND` is as unusable
+/// as a NaN; holding beats clamping it to the bound, which would be a jump).
 #[inline(always)]
 fn hold<T: Real>(x: T, prev: T) -> T {
-    let b = T::from_f64(INPUT_BOUND);
-    if x.is_finite() {
-        x.clamp_to(-b, b)
+    // Strict: in fixed point the bound saturates to the largest value, which stands for
+    // infinity there (`is_finite` is false for it).
+    if x.abs() < T::from_f64(INPUT_BOUND) {
+        x
     } else {
         prev
     }

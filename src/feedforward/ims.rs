@@ -125,8 +125,7 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
         let sigma = if h0 == T::ZERO { s } else { h0.sgn() };
         let k = beta * s + gamma * sigma;
         let (mut du, mut dh, mut it) = cbw_piece(d, alpha - k * h0, k, r, tol)?;
-        let h1 = h0 + dh;
-        if h0 != T::ZERO && h1.sgn() == -sigma {
+        if h0 * (h0 + dh) < T::ZERO {
             // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
             // moving in direction s, where sgn(h) = s.
             let du0 = if k == T::ZERO {
