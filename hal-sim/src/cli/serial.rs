@@ -144,7 +144,7 @@ pub fn select_line(signals: &[Signal]) -> Result<String, SerialError> {
 
 /// Every protocol error, for mapping a reply's code back to its meaning. The match below
 /// fails to compile when the firmware gains an error the host does not list.
-pub const ERRORS: [command::Error; 13] = {
+pub const ERRORS: [command::Error; 14] = {
     use command::Error::*;
     [
         LineTooLong,
@@ -160,6 +160,7 @@ pub const ERRORS: [command::Error; 13] = {
         BadKeyword,
         Busy,
         Unsupported,
+        TooManyDigits,
     ]
 };
 
@@ -169,7 +170,7 @@ fn errors_are_listed(e: command::Error) {
     match e {
         LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
         | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
-        | Busy | Unsupported => {}
+        | Busy | Unsupported | TooManyDigits => {}
     }
 }
 
