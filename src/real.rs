@@ -131,7 +131,7 @@ pub trait Real:
 }
 
 macro_rules! real_impl {
-    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:path, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:path, $fabs:ident) => {
+    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:path, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:path, $fabs:path) => {
         impl Real for $t {
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
@@ -167,7 +167,7 @@ macro_rules! real_impl {
             }
             #[inline(always)]
             fn abs(self) -> Self {
-                libm::$fabs(self)
+                $fabs(self)
             }
             #[inline(always)]
             fn sqrt(self) -> Self {
@@ -222,7 +222,8 @@ macro_rules! real_impl {
 }
 
 real_impl!(
-    f32, 8, expf, expm1_f32, logf, log1pf, powf, sin_f32, cos_f32, tanhf, atan2f, floor_f32, fabsf
+    f32, 8, expf, expm1_f32, logf, log1pf, powf, sin_f32, cos_f32, tanhf, atan2f, floor_f32,
+    abs_f32
 );
 real_impl!(
     f64,
@@ -237,26 +238,33 @@ real_impl!(
     tanh,
     atan2,
     libm::floor,
-    fabs
+    libm::fabs
 );
 
 /// `exp(x) - 1` in single precision. The models' exact input-domain steps need it with
 /// `|x| = k*du` tiny at high sample rates (1e-3 at 100 kHz), where libm's `expm1f` (~100
-/// instructions, range reduction for any `x`) is mostly overhead: for `|x| <= 1/4` the Taylor
-/// polynomial of degree 8 (remainder below `x^9/9! < 1e-11` relative to `x`, well below half
-/// an ulp) in Horner form; elsewhere libm.
+/// instructions, range reduction for any `x`) is mostly overhead: Taylor polynomials in
+/// Horner form, degree 5 for `|x| <= 1/32` and 8 for `|x| <= 1/4` (remainders below
+/// `5e-11` relative to `x` in both, far below half an ulp); elsewhere libm.
 #[inline]
 fn expm1_f32(x: f32) -> f32 {
-    if libm::fabsf(x) <= 0.25 {
-        const C: [f32; 7] = [
-            1.0 / 2.0,
-            1.0 / 6.0,
-            1.0 / 24.0,
-            1.0 / 120.0,
-            1.0 / 720.0,
-            1.0 / 5040.0,
-            1.0 / 40320.0,
-        ];
+    const C: [f32; 7] = [
+        1.0 / 2.0,
+        1.0 / 6.0,
+        1.0 / 24.0,
+        1.0 / 120.0,
+        1.0 / 720.0,
+        1.0 / 5040.0,
+        1.0 / 40320.0,
+    ];
+    let a = x.abs();
+    if a <= 1.0 / 32.0 {
+        // The per-sample case: degree 5 leaves x^5/720 < 5e-11 relative.
+        let p = C[2] + x * C[3];
+        let p = C[1] + x * p;
+        let p = C[0] + x * p;
+        x + (x * x) * p
+    } else if a <= 0.25 {
         let p = C[5] + x * C[6];
         let p = C[4] + x * p;
         let p = C[3] + x * p;
@@ -269,13 +277,20 @@ fn expm1_f32(x: f32) -> f32 {
     }
 }
 
+/// `|x|` in single precision: core's `abs` is the FPU's `vabs.f32` (one instruction);
+/// libm's `fabsf` clears the sign bit in a core register (three, with the moves).
+#[inline(always)]
+fn abs_f32(x: f32) -> f32 {
+    x.abs()
+}
+
 /// `floor(x)` in single precision without libm's bit manipulation: below `2^23` in
 /// magnitude the truncating conversion is exact and one compare fixes negative
 /// non-integers; larger, infinite and NaN values are returned as they are (all of them are
 /// their own floor).
 #[inline(always)]
 fn floor_f32(x: f32) -> f32 {
-    if libm::fabsf(x) < 8_388_608.0 {
+    if x.abs() < 8_388_608.0 {
         let t = x as i32 as f32;
         if t > x {
             t - 1.0
@@ -294,7 +309,7 @@ fn floor_f32(x: f32) -> f32 {
 /// absolute for `|x| <= 100` (tested). Larger or non-finite arguments go to libm.
 #[inline]
 fn sin_cos_f32(x: f32) -> (f32, f32) {
-    if !(libm::fabsf(x) <= 8192.0) {
+    if !(x.abs() <= 8192.0) {
         return (libm::sinf(x), libm::cosf(x));
     }
     const P1: f32 = 1.570_312_5;

@@ -408,3 +408,25 @@ fn silent_closing_and_babbling_peers_are_clear_errors() {
     assert!(matches!(e, SerialError::Firmware { code: None, .. }), "{e}");
     let _ = TcpStream::connect(&babbler_addr);
 }
+
+#[test]
+fn a_trigger_that_never_fires_times_out_and_does_not_block_the_next_capture() {
+    let addr = spawn_firmware();
+    let args = |trigger: &str, wait_s: f64| RecordArgs {
+        signals: vec!["ref_um".into()],
+        trigger: trigger.into(),
+        pre: 0,
+        wait_s,
+        no_arm: false,
+        out: tmp("never.csv"),
+        svg: None,
+    };
+    let e = run(&addr, Action::Record(args("rise:ref_um:1000", 0.3))).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("still armed after 0.3 s (trigger `rise:ref_um:1000` never fired?)"),
+        "{e}"
+    );
+    let out = run(&addr, Action::Record(args("now", 10.0))).unwrap();
+    assert!(out.contains("recorded 1024 frames"), "{out}");
+}

@@ -1,6 +1,5 @@
-//! Input sanitising shared by every law: an input that is non-finite or beyond
-//! [`INPUT_BOUND`] holds its last accepted value, so no product in a law can overflow to
-//! infinity. The optional
+//! Input sanitising shared by every law: a non-finite input holds its last finite value, and
+//! magnitudes are bounded so no product in a law can overflow to infinity. The optional
 //! measurement filter (e.g. a notch on the stage resonance) sits here too, so it serves every
 //! law the same way.
 
@@ -22,15 +21,16 @@ pub struct InputGuard<T> {
     settled: bool,
 }
 
-/// `x` if it is within the bound, else the last accepted value: one compare covers NaN,
-/// the infinities and absurd magnitudes alike (a value beyond `INPUT_BOUND` is as unusable
-/// as a NaN; holding beats clamping it to the bound, which would be a jump).
+/// `x` clamped into the bound, or the last accepted value if `x` is not finite. The usual
+/// case first: one compare accepts a value inside the bound (strict: in fixed point the
+/// bound saturates to the largest value, which stands for infinity there).
 #[inline(always)]
 fn hold<T: Real>(x: T, prev: T) -> T {
-    // Strict: in fixed point the bound saturates to the largest value, which stands for
-    // infinity there (`is_finite` is false for it).
-    if x.abs() < T::from_f64(INPUT_BOUND) {
+    let b = T::from_f64(INPUT_BOUND);
+    if x.abs() < b {
         x
+    } else if x.is_finite() {
+        x.clamp_to(-b, b)
     } else {
         prev
     }
@@ -76,5 +76,28 @@ pub fn finite_or<T: Real>(x: T, fallback: T) -> T {
         x
     } else {
         fallback
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clamps_large_and_holds_non_finite() {
+        let mut g = InputGuard::<f32>::default();
+        let mut io = LoopSignals::default();
+        io.setpoint.ddy = 2e6; // a 100 Hz, 5 um sine: beyond the bound, still usable
+        io.y_um = 3.0;
+        let c = g.clean(&io);
+        assert_eq!(c.setpoint.ddy, INPUT_BOUND as f32);
+        assert_eq!(c.y_um, 3.0);
+        io.setpoint.ddy = -5.0;
+        io.y_um = f32::NAN;
+        io.u_ff = f32::INFINITY;
+        let c = g.clean(&io);
+        assert_eq!(c.setpoint.ddy, -5.0);
+        assert_eq!(c.y_um, 3.0);
+        assert_eq!(c.u_ff, 0.0);
     }
 }

@@ -54,6 +54,10 @@ impl<T: Real> ObserverModel<T> {
     #[inline]
     pub fn slope(&self, h: T, s: T) -> T {
         match self {
+            // n = 1: `beta s sgn(h) |h| = beta s h`, exactly (no sign tests).
+            ObserverModel::Cbw(m) if m.n() == T::ONE => {
+                m.alpha() - m.gamma() * h.abs() - m.beta() * s * h
+            }
             ObserverModel::Cbw(m) => m.slope(h, s),
             ObserverModel::Gbw(m) => m.slope(h, s),
             ObserverModel::Dahl(m) => m.slope(h, s),
@@ -92,12 +96,13 @@ pub(crate) fn cbw_n1_piece<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
     if m.n() != T::ONE {
         return None;
     }
-    let s = du.sgn();
-    if s == T::ZERO {
+    let up = du > T::ZERO;
+    if !(up || du < T::ZERO) {
         return Some(h); // no move (NaN du is refused by the callers)
     }
-    let sigma = if h == T::ZERO { s } else { h.sgn() };
-    let k = m.beta() * s + m.gamma() * sigma;
+    // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as selects.
+    let h_up = if h == T::ZERO { up } else { h > T::ZERO };
+    let k = if up { m.beta() } else { -m.beta() } + if h_up { m.gamma() } else { -m.gamma() };
     let x = k * du;
     let em = (-x).exp_m1();
     let phi = if x == T::ZERO { T::ONE } else { -em / x };
@@ -291,7 +296,9 @@ impl<T: Real> Hgo<T> {
         s.h = h.clamp_to(-b, b);
         s.d += h - s.h;
         s.u = u;
-        if !(s.x.is_finite() && s.h.is_finite() && s.d.is_finite()) {
+        // One test for the three: a sum of finite values is finite (or overflowed, which
+        // is as bad).
+        if !(s.x + s.h + s.d).is_finite() {
             *s = self.init(y, u);
         }
     }

@@ -108,8 +108,10 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
         let (d, alpha, beta, gamma) = (self.d(), self.alpha(), self.beta(), self.gamma());
         let h0 = state.h;
         let r = y_ref - (d * state.u - h0);
-        let s = r.sgn();
-        if s == T::ZERO {
+        // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) as selects, not `sgn`
+        // products: this runs every sample.
+        let up = r > T::ZERO;
+        if !(up || r < T::ZERO) {
             // Already there (or NaN: the caller holds the output).
             return if r == T::ZERO {
                 Some(Inverted {
@@ -122,8 +124,10 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
                 None
             };
         }
-        let sigma = if h0 == T::ZERO { s } else { h0.sgn() };
-        let k = beta * s + gamma * sigma;
+        let s = if up { T::ONE } else { -T::ONE };
+        let beta_s = if up { beta } else { -beta };
+        let h_up = if h0 == T::ZERO { up } else { h0 > T::ZERO };
+        let k = beta_s + if h_up { gamma } else { -gamma };
         let (mut du, mut dh, mut it) = cbw_piece(d, alpha - k * h0, k, r, tol)?;
         if h0 * (h0 + dh) < T::ZERO {
             // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0

@@ -1344,6 +1344,8 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
             })?;
             signals.push(s);
         }
+        // A capture left armed (an interrupted session) would refuse the new selection.
+        c.send(&Command::Rec(RecCmd::Stop))?;
         let line = select_line(&signals)?;
         let r = c.raw(&line)?;
         let channels = parse_rec_sel(&r.details).map_err(|why| SerialError::BadReply {
