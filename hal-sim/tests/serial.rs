@@ -457,15 +457,30 @@ fn the_binary_speaks_over_a_serial_port() {
         .output()
         .unwrap();
     assert!(out.status.success(), "{out:?}");
+    // Numbers as the executor's number type prints them (150, 150.00000 in Q16.16).
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 3, "{stdout}");
+    assert_eq!(lines[0], "ok pong");
     assert_eq!(
-        String::from_utf8_lossy(&out.stdout),
-        "ok pong\nok u_max 150.00000\nok mode open-loop\n"
+        lines[1].strip_prefix("ok u_max ").map(|v| v.parse::<f64>()),
+        Some(Ok(150.0)),
+        "{stdout}"
     );
+    assert_eq!(lines[2], "ok mode open-loop");
     let out = Process::new(piezo)
         .args(["serial", "--port", &name, "wave", "hold", "12.5um"])
         .output()
         .unwrap();
     assert!(out.status.success(), "{out:?}");
-    assert_eq!(String::from_utf8_lossy(&out.stdout), "ok wave hold 12.5\n");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        stdout
+            .trim()
+            .strip_prefix("ok wave hold ")
+            .map(|v| v.parse::<f64>()),
+        Some(Ok(12.5)),
+        "{stdout}"
+    );
     drop(slave);
 }
