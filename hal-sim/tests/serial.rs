@@ -85,34 +85,42 @@ impl Fake {
     }
 }
 
-/// Serves connections one after another on one firmware state, like a UART that stays up
-/// while host programs come and go. Each connection first gets boot noise.
+/// Serves one connection (TCP stream or serial port) until it closes: boot noise first,
+/// then one reply per command line.
+fn serve(s: &mut (impl Read + Write), fake: &mut Fake) {
+    s.write_all(b"bench: table\n\xff\xfegarbage\nready\nhalf a li")
+        .ok();
+    let mut lb = LineBuffer::new();
+    let mut buf = [0u8; 512];
+    loop {
+        let n = match s.read(&mut buf) {
+            Ok(0) => return,
+            Ok(n) => n,
+            // A serial port's read timeout: keep listening.
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
+            Err(_) => return,
+        };
+        let mut out = Vec::new();
+        for &b in &buf[..n] {
+            if let Some(line) = lb.push(b) {
+                fake.answer(line, &mut out);
+            }
+        }
+        if s.write_all(&out).is_err() {
+            return;
+        }
+    }
+}
+
+/// Serves TCP connections one after another on one firmware state, like a UART that stays
+/// up while host programs come and go.
 fn spawn_firmware() -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     thread::spawn(move || {
         let mut fake = Fake::new();
-        for stream in listener.incoming() {
-            let Ok(mut s) = stream else { continue };
-            s.write_all(b"bench: table\n\xff\xfegarbage\nready\nhalf a li")
-                .ok();
-            let mut lb = LineBuffer::new();
-            let mut buf = [0u8; 512];
-            'conn: loop {
-                let n = match s.read(&mut buf) {
-                    Ok(0) | Err(_) => break 'conn,
-                    Ok(n) => n,
-                };
-                let mut out = Vec::new();
-                for &b in &buf[..n] {
-                    if let Some(line) = lb.push(b) {
-                        fake.answer(line, &mut out);
-                    }
-                }
-                if s.write_all(&out).is_err() {
-                    break 'conn;
-                }
-            }
+        for mut s in listener.incoming().flatten() {
+            serve(&mut s, &mut fake);
         }
     });
     addr
@@ -429,4 +437,50 @@ fn a_trigger_that_never_fires_times_out_and_does_not_block_the_next_capture() {
     );
     let out = run(&addr, Action::Record(args("now", 10.0))).unwrap();
     assert!(out.contains("recorded 1024 frames"), "{out}");
+}
+
+/// `--port`: the binary opens the slave side of a pseudo-terminal, the fake firmware answers
+/// on the master side (the same code path as a USB-serial adapter or the ST-LINK VCP).
+#[test]
+fn the_binary_speaks_over_a_serial_port() {
+    use serialport::SerialPort;
+    let (mut master, slave) = serialport::TTYPort::pair().expect("pseudo-terminal pair");
+    let name = slave.name().expect("slave name");
+    thread::spawn(move || {
+        let mut fake = Fake::new();
+        serve(&mut master, &mut fake);
+    });
+    let piezo = env!("CARGO_BIN_EXE_piezo");
+    let out = Process::new(piezo)
+        .args(["serial", "--port", &name, "--baud", "115200", "--"])
+        .args(["ping", "get u_max", "mode open-loop"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    // Numbers as the executor's number type prints them (150, 150.00000 in Q16.16).
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 3, "{stdout}");
+    assert_eq!(lines[0], "ok pong");
+    assert_eq!(
+        lines[1].strip_prefix("ok u_max ").map(|v| v.parse::<f64>()),
+        Some(Ok(150.0)),
+        "{stdout}"
+    );
+    assert_eq!(lines[2], "ok mode open-loop");
+    let out = Process::new(piezo)
+        .args(["serial", "--port", &name, "wave", "hold", "12.5um"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        stdout
+            .trim()
+            .strip_prefix("ok wave hold ")
+            .map(|v| v.parse::<f64>()),
+        Some(Ok(12.5)),
+        "{stdout}"
+    );
+    drop(slave);
 }
