@@ -42,7 +42,7 @@ fn run(seed: u64, hidden: &[Cause]) -> Result<(), String> {
         if d.gain() != 0.0 {
             return Err(format!("seed {seed}: none but gain {}", d.gain()));
         }
-    } else if !(d.gain() > 0.0) {
+    } else if d.gain().is_nan() || d.gain() <= 0.0 {
         return Err(format!("seed {seed}: no validated gain ({})", d.gain()));
     }
     Ok(())

@@ -97,8 +97,10 @@ impl Hidden {
             "duration must be within 0.5..600 s, got {duration_s}"
         );
         let mut r = Rng::new(seed.wrapping_mul(0x2545_F491).wrapping_add(0xD1A6));
-        let mut s = Scenario::default();
-        s.name = format!("hidden-{seed}");
+        let mut s = Scenario {
+            name: format!("hidden-{seed}"),
+            ..Default::default()
+        };
         s.run.loop_hz = rate_hz;
         // Fine internal steps: the stage's structure sees its input averaged over one step,
         // a lag of half a step that a fitted delay would pick up.
