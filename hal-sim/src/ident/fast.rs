@@ -125,7 +125,8 @@ fn cross_zero(h: f64, du: f64, k_toward: f64, k_away: f64) -> f64 {
     } else {
         (k_toward * a).ln_1p() / k_toward
     };
-    if !(to_zero < m) {
+    // (also when to_zero is NaN)
+    if to_zero.partial_cmp(&m) != Some(core::cmp::Ordering::Less) {
         return 0.0;
     }
     let r = m - to_zero;
