@@ -111,9 +111,9 @@ pub mod spi {
                         *b = self.exchange(0)?;
                         Ok(())
                     }),
-                    Operation::Write(buf) => buf
-                        .iter()
-                        .try_for_each(|&b| self.exchange(b).map(|_| ())),
+                    Operation::Write(buf) => {
+                        buf.iter().try_for_each(|&b| self.exchange(b).map(|_| ()))
+                    }
                     Operation::Transfer(read, write) => {
                         // Words beyond `write` are zeros; words beyond `read` are dropped.
                         let n = read.len().max(write.len());
@@ -130,7 +130,9 @@ pub mod spi {
                         Ok(())
                     }),
                     Operation::DelayNs(ns) => {
-                        cortex_m::asm::delay(ns.saturating_mul(super::SYSCLK_HZ / 1_000_000) / 1000);
+                        cortex_m::asm::delay(
+                            ns.saturating_mul(super::SYSCLK_HZ / 1_000_000) / 1000,
+                        );
                         Ok(())
                     }
                 };
@@ -254,7 +256,8 @@ pub mod io {
             let tim = self.timer.inner();
             // CC1OF: a CNV edge came while the previous one was still pending.
             let overrun = tim.sr.read().cc1of().bit_is_set();
-            tim.sr.modify(|_, w| w.cc1if().clear_bit().cc1of().clear_bit());
+            tim.sr
+                .modify(|_, w| w.cc1if().clear_bit().cc1of().clear_bit());
             (self.adc.read().unwrap_or(i32::MIN), overrun)
         }
 
@@ -391,7 +394,8 @@ mod app {
             let _cnv = gpioa.pa0.into_alternate::<1>();
             let mut adc = Adc::new(SpiDev::new(adc_bus, HardwarePin), HardwarePin, ADC_CONFIG)
                 .unwrap_or_else(|_| panic!("AD4020 driver"));
-            adc.init().unwrap_or_else(|_| panic!("AD4020 does not answer"));
+            adc.init()
+                .unwrap_or_else(|_| panic!("AD4020 does not answer"));
             let sync = Gpio(gpioe.pe4.into_push_pull_output());
             let ldac = Gpio(gpioe.pe3.into_push_pull_output());
             let mut dac = Dac::new(SpiDev::new(dac_bus, sync), ldac, DAC_CONFIG)

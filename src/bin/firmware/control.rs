@@ -57,17 +57,29 @@ const FIXED: bool = cfg!(not(any(target_abi = "eabihf", not(target_os = "none"))
 pub const SPI_CONVERTERS: bool = cfg!(any(feature = "spi-converters", feature = "board-qemu"));
 
 /// The position ADC's configuration (SPI converters).
-#[cfg_attr(not(any(feature = "spi-converters", feature = "board-qemu")), allow(dead_code))]
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
 pub const ADC_CONFIG: Ad4000Config = Ad4000Config::AD4020;
 /// The DAC's configuration (SPI converters).
-#[cfg_attr(not(any(feature = "spi-converters", feature = "board-qemu")), allow(dead_code))]
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
 pub const DAC_CONFIG: Ad5791Config = Ad5791Config::DEFAULT;
 /// The firmware's position ADC driver on a board's SPI device and CNV pin: the type
 /// hal-sim runs on its mock chip (`hal_sim::sim::SimAdc`).
-#[cfg_attr(not(any(feature = "spi-converters", feature = "board-qemu")), allow(dead_code))]
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
 pub type PositionAdc<SPI, CNV> = piezo_core::drivers::FirmwareAdc<SPI, CNV>;
 /// The firmware's DAC driver on a board's SPI device and LDAC pin (`hal_sim::sim::SimDac`).
-#[cfg_attr(not(any(feature = "spi-converters", feature = "board-qemu")), allow(dead_code))]
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
 pub type ActuatorDac<SPI, LDAC> = piezo_core::drivers::FirmwareDac<SPI, LDAC>;
 
 /// Bits of a converter code.
@@ -86,15 +98,20 @@ pub const DAC_MAX: i32 = (1 << DAC_KEEP) - 1;
 #[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
 pub const DAC_FULL: i32 = (1 << DAC_BITS) - 1;
 
+/// Span and centre of the SPI ADC's full scale (um): -10..110 um, so the stage at rest
+/// (0 um) and at full stroke stays inside the sensor window.
+pub const SPI_SPAN_UM: f64 = 120.0;
+pub const SPI_CENTER_UM: f64 = 50.0;
+
 /// The converters over the stage: ADC over 0..100 um (on-chip straight binary from 0 um;
-/// SPI two's complement centred on 50 um, a clipped code is out of range), DAC over
+/// SPI two's complement over [`SPI_SPAN_UM`], a clipped code is out of range), DAC over
 /// 0..150 V (amplifier gain 45 V/V at 3.3 V on-chip), slew limit 20 V/ms, safe state 0 V.
 pub fn converter_config(sample_hz: R) -> Config<R, 1> {
     let sensor = if SPI_CONVERTERS {
         let half = 1i32 << (ADC_KEEP - 1);
         Sensor {
-            um_per_code: c(100.0 / (2 * half) as f64),
-            offset_um: c(50.0),
+            um_per_code: c(SPI_SPAN_UM / (2 * half) as f64),
+            offset_um: c(SPI_CENTER_UM),
             code_min: -half + 1,
             code_max: half - 2,
         }
