@@ -234,10 +234,10 @@ fn typed_commands_drive_the_firmware_executor() {
 
     let out = run(&addr, Action::Status).unwrap();
     for want in [
-        "u_max         140",
-        "sample_hz     100000",
-        "control step  min 40",
-        "recorder      idle",
+        "u_max           140",
+        "sample_hz       100000",
+        "control step    min 40",
+        "recorder        idle",
     ] {
         assert!(out.contains(want), "{want:?} missing in\n{out}");
     }

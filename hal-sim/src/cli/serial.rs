@@ -1101,7 +1101,7 @@ fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Result
     };
     writeln!(
         out,
-        "control step  min {}{} max {}{} last {}{}",
+        "control step    min {}{} max {}{} last {}{}",
         s.step_min,
         us(s.step_min),
         s.step_max,
@@ -1111,7 +1111,7 @@ fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Result
     )?;
     writeln!(
         out,
-        "interrupt     min {}{} max {}{} last {}{}",
+        "interrupt       min {}{} max {}{} last {}{}",
         s.isr_min,
         us(s.isr_min),
         s.isr_max,
@@ -1128,7 +1128,7 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
     c.send(&Command::Ping)?;
     writeln!(
         out,
-        "link          ok ({:.1} ms round trip)",
+        "link            ok ({:.1} ms round trip)",
         t.elapsed().as_secs_f64() * 1e3
     )?;
     // The parameter list comes from the firmware (`help` ends with `params: <names>`).
@@ -1140,7 +1140,7 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
         .unwrap_or_default();
     for p in &params {
         let v = get_param(c, p)?;
-        writeln!(out, "{p:<13} {v}")?;
+        writeln!(out, "{p:<15} {v}")?;
     }
     let r = c.send(&Command::Stats)?;
     let s = parse_stats(&r.details).map_err(|why| SerialError::BadReply {
@@ -1155,7 +1155,7 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
         line: r.reply_line(),
         why,
     })?;
-    writeln!(out, "recorder      {state}, {n} frames")?;
+    writeln!(out, "recorder        {state}, {n} frames")?;
     Ok(())
 }
 
