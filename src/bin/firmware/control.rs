@@ -185,7 +185,10 @@ impl Loop {
     #[inline(always)]
     pub fn step(&mut self, adc_code: i32) -> i32 {
         let [code] = self.p.step([adc_code >> ADC_SHIFT]);
-        code.max(0).min(DAC_MAX) << DAC_SHIFT
+        // max/min, not clamp: clamp asserts min <= max (a panic path in the handler).
+        #[allow(clippy::manual_clamp)]
+        let code = code.max(0).min(DAC_MAX);
+        code << DAC_SHIFT
     }
 
     /// The DAC write of this period failed; the converter still holds `held_code` (its own
