@@ -53,7 +53,7 @@ pub enum Feedback<T: Real> {
 
 impl<T: Real> Feedback<T> {
     /// One control step.
-    #[inline]
+    #[inline(always)]
     pub fn update(&mut self, io: &LoopSignals<T>) -> T {
         match self {
             Feedback::OpenLoop => {

@@ -219,7 +219,7 @@ impl<T: Real, const N: usize> MultiFeedforward<T, N> {
     }
 
     /// Voltages (V) that should bring every axis to its setpoint.
-    #[inline]
+    #[inline(always)]
     pub fn compensate(&mut self, sp: &[Setpoint<T>; N]) -> [T; N] {
         match self {
             MultiFeedforward::PerAxis(ff) => {

@@ -131,7 +131,7 @@ pub trait Real:
 }
 
 macro_rules! real_impl {
-    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:ident, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:ident, $fabs:ident) => {
+    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:path, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:path, $fabs:path) => {
         impl Real for $t {
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
@@ -167,7 +167,7 @@ macro_rules! real_impl {
             }
             #[inline(always)]
             fn abs(self) -> Self {
-                libm::$fabs(self)
+                $fabs(self)
             }
             #[inline(always)]
             fn sqrt(self) -> Self {
@@ -179,7 +179,7 @@ macro_rules! real_impl {
             }
             #[inline(always)]
             fn exp_m1(self) -> Self {
-                libm::$expm1(self)
+                $expm1(self)
             }
             #[inline(always)]
             fn ln(self) -> Self {
@@ -211,7 +211,7 @@ macro_rules! real_impl {
             }
             #[inline(always)]
             fn floor(self) -> Self {
-                libm::$floor(self)
+                $floor(self)
             }
             #[inline(always)]
             fn is_finite(self) -> bool {
@@ -222,13 +222,14 @@ macro_rules! real_impl {
 }
 
 real_impl!(
-    f32, 8, expf, expm1f, logf, log1pf, powf, sin_f32, cos_f32, tanhf, atan2f, floorf, fabsf
+    f32, 8, expf, expm1_f32, logf, log1pf, powf, sin_f32, cos_f32, tanhf, atan2f, floor_f32,
+    abs_f32
 );
 real_impl!(
     f64,
     0,
     exp,
-    expm1,
+    libm::expm1,
     log,
     log1p,
     pow,
@@ -236,9 +237,70 @@ real_impl!(
     libm::cos,
     tanh,
     atan2,
-    floor,
-    fabs
+    libm::floor,
+    libm::fabs
 );
+
+/// `exp(x) - 1` in single precision. The models' exact input-domain steps need it with
+/// `|x| = k*du` tiny at high sample rates (1e-3 at 100 kHz), where libm's `expm1f` (~100
+/// instructions, range reduction for any `x`) is mostly overhead: Taylor polynomials in
+/// Horner form, degree 5 for `|x| <= 1/32` and 8 for `|x| <= 1/4` (remainders below
+/// `5e-11` relative to `x` in both, far below half an ulp); elsewhere libm.
+#[inline]
+fn expm1_f32(x: f32) -> f32 {
+    const C: [f32; 7] = [
+        1.0 / 2.0,
+        1.0 / 6.0,
+        1.0 / 24.0,
+        1.0 / 120.0,
+        1.0 / 720.0,
+        1.0 / 5040.0,
+        1.0 / 40320.0,
+    ];
+    let a = x.abs();
+    if a <= 1.0 / 32.0 {
+        // The per-sample case: degree 5 leaves x^5/720 < 5e-11 relative.
+        let p = C[2] + x * C[3];
+        let p = C[1] + x * p;
+        let p = C[0] + x * p;
+        x + (x * x) * p
+    } else if a <= 0.25 {
+        let p = C[5] + x * C[6];
+        let p = C[4] + x * p;
+        let p = C[3] + x * p;
+        let p = C[2] + x * p;
+        let p = C[1] + x * p;
+        let p = C[0] + x * p;
+        x + (x * x) * p
+    } else {
+        libm::expm1f(x)
+    }
+}
+
+/// `|x|` in single precision: core's `abs` is the FPU's `vabs.f32` (one instruction);
+/// libm's `fabsf` clears the sign bit in a core register (three, with the moves).
+#[inline(always)]
+fn abs_f32(x: f32) -> f32 {
+    x.abs()
+}
+
+/// `floor(x)` in single precision without libm's bit manipulation: below `2^23` in
+/// magnitude the truncating conversion is exact and one compare fixes negative
+/// non-integers; larger, infinite and NaN values are returned as they are (all of them are
+/// their own floor).
+#[inline(always)]
+fn floor_f32(x: f32) -> f32 {
+    if x.abs() < 8_388_608.0 {
+        let t = x as i32 as f32;
+        if t > x {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x
+    }
+}
 
 /// `(sin x, cos x)` in single precision only: libm's `sinf`/`cosf` evaluate in f64, which an
 /// SP-only FPU (Cortex-M4F/M7 `eabihf` builds) emulates in software (~1000 instructions).
@@ -247,7 +309,7 @@ real_impl!(
 /// absolute for `|x| <= 100` (tested). Larger or non-finite arguments go to libm.
 #[inline]
 fn sin_cos_f32(x: f32) -> (f32, f32) {
-    if !(libm::fabsf(x) <= 8192.0) {
+    if !(x.abs() <= 8192.0) {
         return (libm::sinf(x), libm::cosf(x));
     }
     const P1: f32 = 1.570_312_5;
@@ -353,6 +415,39 @@ mod tests {
         assert!(worst < 2.5e-7, "f32 sin/cos error {worst}");
         assert!(f32::NAN.sin().is_nan());
         assert!((1e6f32.sin() as f64 - (1e6f64).sin()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn f32_expm1_and_floor_match_f64() {
+        let mut worst = 0.0f64;
+        for i in -100_000..=100_000 {
+            let x = i as f32 * 3e-6; // [-0.3, 0.3], across the polynomial's edge
+            let want = (x as f64).exp_m1();
+            let got = x.exp_m1() as f64;
+            worst = worst.max((got - want).abs() / want.abs().max(1e-30));
+        }
+        assert!(worst < 2.5e-7, "f32 exp_m1 relative error {worst}");
+        assert_eq!(0.0f32.exp_m1(), 0.0);
+        assert!(f32::NAN.exp_m1().is_nan());
+        assert_eq!((-1e3f32).exp_m1(), -1.0);
+        for &x in &[
+            -2.5f32,
+            -2.0,
+            -0.5,
+            -0.0,
+            0.0,
+            0.5,
+            2.0,
+            2.5,
+            8_388_607.5,
+            -8_388_607.5,
+            1e9,
+            -1e9,
+        ] {
+            assert_eq!(x.floor(), libm::floorf(x), "{x}");
+        }
+        assert!(f32::NAN.floor().is_nan());
+        assert_eq!(f32::NEG_INFINITY.floor(), f32::NEG_INFINITY);
     }
 
     #[test]

@@ -21,10 +21,15 @@ pub struct InputGuard<T> {
     settled: bool,
 }
 
+/// `x` clamped into the bound, or the last accepted value if `x` is not finite. The usual
+/// case first: one compare accepts a value inside the bound (strict: in fixed point the
+/// bound saturates to the largest value, which stands for infinity there).
 #[inline(always)]
 fn hold<T: Real>(x: T, prev: T) -> T {
     let b = T::from_f64(INPUT_BOUND);
-    if x.is_finite() {
+    if x.abs() < b {
+        x
+    } else if x.is_finite() {
         x.clamp_to(-b, b)
     } else {
         prev
@@ -71,5 +76,28 @@ pub fn finite_or<T: Real>(x: T, fallback: T) -> T {
         x
     } else {
         fallback
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clamps_large_and_holds_non_finite() {
+        let mut g = InputGuard::<f32>::default();
+        let mut io = LoopSignals::default();
+        io.setpoint.ddy = 2e6; // a 100 Hz, 5 um sine: beyond the bound, still usable
+        io.y_um = 3.0;
+        let c = g.clean(&io);
+        assert_eq!(c.setpoint.ddy, INPUT_BOUND as f32);
+        assert_eq!(c.y_um, 3.0);
+        io.setpoint.ddy = -5.0;
+        io.y_um = f32::NAN;
+        io.u_ff = f32::INFINITY;
+        let c = g.clean(&io);
+        assert_eq!(c.setpoint.ddy, -5.0);
+        assert_eq!(c.y_um, 3.0);
+        assert_eq!(c.u_ff, 0.0);
     }
 }

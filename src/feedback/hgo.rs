@@ -54,6 +54,10 @@ impl<T: Real> ObserverModel<T> {
     #[inline]
     pub fn slope(&self, h: T, s: T) -> T {
         match self {
+            // n = 1: `beta s sgn(h) |h| = beta s h`, exactly (no sign tests).
+            ObserverModel::Cbw(m) if m.n() == T::ONE => {
+                m.alpha() - m.gamma() * h.abs() - m.beta() * s * h
+            }
             ObserverModel::Cbw(m) => m.slope(h, s),
             ObserverModel::Gbw(m) => m.slope(h, s),
             ObserverModel::Dahl(m) => m.slope(h, s),
@@ -63,7 +67,10 @@ impl<T: Real> ObserverModel<T> {
     #[inline]
     pub fn advance_h(&self, h: T, u0: T, du: T) -> T {
         match self {
-            ObserverModel::Cbw(m) => m.advance_h(h, u0, du),
+            ObserverModel::Cbw(m) => match cbw_n1_piece(m, h, du) {
+                Some(h1) => h1,
+                None => m.advance_h(h, u0, du),
+            },
             ObserverModel::Gbw(m) => m.advance_h(h, u0, du),
             ObserverModel::Dahl(m) => m.advance_h(h, du),
         }
@@ -79,6 +86,34 @@ impl<T: Real> ObserverModel<T> {
     }
 }
 
+/// The CBW step for `n = 1` on one affine piece (000 eq. 1 integrated exactly over `du`:
+/// `h1 = h + (alpha - k h) du phi(k du)`, `k = beta sgn(du) + gamma sgn(h)`), the
+/// per-sample case; the same closed form as [`Cbw::advance_h`] without its generic
+/// bookkeeping. `None` when `n != 1` or `h` crosses zero inside the step (the model's own
+/// two-piece step handles that, once per half cycle).
+#[inline]
+pub(crate) fn cbw_n1_piece<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
+    if m.n() != T::ONE {
+        return None;
+    }
+    let up = du > T::ZERO;
+    if !(up || du < T::ZERO) {
+        return Some(h); // no move (NaN du is refused by the callers)
+    }
+    // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as selects.
+    let h_up = if h == T::ZERO { up } else { h > T::ZERO };
+    let k = if up { m.beta() } else { -m.beta() } + if h_up { m.gamma() } else { -m.gamma() };
+    let x = k * du;
+    let em = (-x).exp_m1();
+    let phi = if x == T::ZERO { T::ONE } else { -em / x };
+    let h1 = h + (m.alpha() - k * h) * du * phi;
+    if h * h1 < T::ZERO {
+        None
+    } else {
+        Some(h1)
+    }
+}
+
 /// HGO configuration: model, sample period and the discrete gains derived from `eps`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hgo<T> {
@@ -91,6 +126,9 @@ pub struct Hgo<T> {
     gd: T,
     l1: T,
     l2: T,
+    /// `model.h_bound()` (a `powf` for CBW: computed once) and `model.d()`.
+    h_bound: T,
+    d_p: T,
 }
 
 /// Estimates `x_hat` (um), `h_hat` (um) and the input they correspond to (V).
@@ -162,6 +200,8 @@ impl<T: Real> Hgo<T> {
             gd,
             l1,
             l2,
+            h_bound: model.h_bound(),
+            d_p: model.d(),
         })
     }
 
@@ -184,6 +224,11 @@ impl<T: Real> Hgo<T> {
 
     pub fn model(&self) -> &ObserverModel<T> {
         &self.model
+    }
+    /// The model's piezo coefficient `d_p` (um/V).
+    #[inline]
+    pub fn d_p(&self) -> T {
+        self.d_p
     }
     pub fn a_per_s(&self) -> T {
         self.a_per_s
@@ -215,7 +260,7 @@ impl<T: Real> Hgo<T> {
     /// Steady state consistent with measurement `y` at input `u`: `x = y`,
     /// `h_hat = d_p*u - y`.
     pub fn init(&self, y: T, u: T) -> HgoState<T> {
-        let b = self.model.h_bound();
+        let b = self.h_bound;
         let h_hat = self.model.d() * u - y;
         let h = h_hat.clamp_to(-b, b);
         HgoState {
@@ -232,7 +277,7 @@ impl<T: Real> Hgo<T> {
     pub fn step(&self, s: &mut HgoState<T>, y: T, u: T) {
         // f(h, u') integrated over the input increment (000 eq. 6, second line).
         let h_pred = self.model.advance_h(s.h, s.u, u - s.u);
-        let x_pred = self.ad * s.x + self.gd * (self.model.d() * u - h_pred - s.d);
+        let x_pred = self.ad * s.x + self.gd * (self.d_p * u - h_pred - s.d);
         let e = y - x_pred;
         s.x = x_pred + self.l1 * e;
         // The correction drains `d` first, so `d` holds only what `h` cannot.
@@ -247,11 +292,13 @@ impl<T: Real> Hgo<T> {
             }
         }
         let h = h_pred + corr;
-        let b = self.model.h_bound();
+        let b = self.h_bound;
         s.h = h.clamp_to(-b, b);
         s.d += h - s.h;
         s.u = u;
-        if !(s.x.is_finite() && s.h.is_finite() && s.d.is_finite()) {
+        // One test for the three: a sum of finite values is finite (or overflowed, which
+        // is as bad).
+        if !(s.x + s.h + s.d).is_finite() {
             *s = self.init(y, u);
         }
     }

@@ -189,9 +189,9 @@ impl<T: Real> Robust<T> {
         }
         let u0 = io.u_applied;
         self.hgo.step(&mut self.state.obs, io.y_um, u0);
-        let m = *self.hgo.model();
+        let d_p = self.hgo.d_p();
         let h_hat = self.state.obs.h_hat();
-        let v_hat = m.d() * u0 - h_hat;
+        let v_hat = d_p * u0 - h_hat;
         let v_d = self.v_d(&io, self.state.obs.x);
         // Target effective input for this sample: what is left of the error to v_d.
         let (dv, du_ff) = if self.cfg.feedforward {
@@ -205,7 +205,8 @@ impl<T: Real> Robust<T> {
         s.v_d_prev = v_d;
         s.u_ff_prev = io.u_ff;
         // The model's slope at the hysteresis part of the estimate (inside the loop bound).
-        let den = (m.d() - m.slope(s.obs.h, dv.sgn())).clamp_to(self.den_lo, self.den_hi);
+        let den =
+            (d_p - self.hgo.model().slope(s.obs.h, dv.sgn())).clamp_to(self.den_lo, self.den_hi);
         let u = u0 + du_ff + dv / den;
         if u.is_finite() {
             u

@@ -12,7 +12,7 @@
 use super::creep::CreepInverse;
 use super::solve::solve_increasing_hinted;
 use super::FfError;
-use crate::hysteresis::{Cbw, Hysteresis};
+use crate::hysteresis::{BwState, Cbw, Hysteresis};
 use crate::real::Real;
 
 /// A model in piezo form `y = d*u - h` that the IMS can invert.
@@ -22,6 +22,68 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     /// An upper bound of `dh/du` over every state the model can reach from rest.
     /// `d` must exceed it: then `y` is strictly increasing in `u` and the IMS well defined.
     fn max_h_slope(&self) -> T;
+    /// Direct inversion of one step, for models whose step has a closed form: the input
+    /// `u` whose step from `state` gives `y_model(u) = y_ref` to within `tol`, the model
+    /// output there and the state after the step. `None` (the default): the IMS runs its
+    /// bracketed solve on [`Hysteresis::step`] instead.
+    #[inline]
+    fn invert_step(
+        &self,
+        _state: &Self::State,
+        _y_ref: T,
+        _tol: T,
+    ) -> Option<Inverted<T, Self::State>> {
+        None
+    }
+}
+
+/// A solved step (see [`ImsModel::invert_step`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Inverted<T, S> {
+    pub u: T,
+    /// Model output at `u` (um).
+    pub y: T,
+    pub state: S,
+    /// Newton iterations used.
+    pub iterations: usize,
+}
+
+/// Newton iterations of one piece of [`ImsModel::invert_step`] for CBW at most.
+const CBW_NEWTON_MAX: usize = 8;
+
+/// Solves `g(du) = d du - c du phi(k du) = r` for `du` on one affine piece of the CBW step
+/// (`dh/du = alpha - k h`, `c = alpha - k h0`, `h1 - h0 = c du phi(k du)`,
+/// `phi(x) = (1 - e^-x)/x`). `g` is strictly increasing (`g' = d - c e^-(k du) >= d - max
+/// dh/du > 0`) with `g(0) = 0`, so Newton from 0 converges. Each iteration evaluates the
+/// exact step at its new point (the state must be exact: the model's contraction per sample
+/// is only `k du`, so per-sample state errors would add up over thousands of samples) and
+/// stops once the residual that point leaves, `|g''| step^2 / 2` to second order, is below
+/// `tol`. At 100 kHz in f32 one iteration (one `exp_m1`) is all it takes. Returns
+/// `(du, h1 - h0, iterations)`, `None` if it did not converge.
+#[inline]
+fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T) -> Option<(T, T, usize)> {
+    let mut du = T::ZERO;
+    let mut dh = T::ZERO;
+    let mut e = T::ONE; // e^-(k du)
+    for i in 1..=CBW_NEWTON_MAX {
+        let step = (d * du - dh - r) / (d - c * e);
+        du -= step;
+        let x = k * du;
+        let em = (-x).exp_m1(); // e^-x - 1
+        let phi = if x == T::ZERO { T::ONE } else { -em / x };
+        dh = c * du * phi;
+        // g'' = c k e^-(k du): what the step leaves of the residual, to second order.
+        let left = (c * k * e).abs() * step * step * T::HALF;
+        e = T::ONE + em;
+        if !(left > tol) {
+            return if du.is_finite() && dh.is_finite() {
+                Some((du, dh, i))
+            } else {
+                None
+            };
+        }
+    }
+    None
 }
 
 impl<T: Real> ImsModel<T> for Cbw<T> {
@@ -32,6 +94,66 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
     /// `alpha + (beta - gamma) * alpha / (beta + gamma) = 2*alpha*beta / (beta + gamma)`.
     fn max_h_slope(&self) -> T {
         T::TWO * self.alpha() * self.beta() / (self.beta() + self.gamma())
+    }
+
+    /// `n = 1`: each monotone piece of the step is affine in `h` (see [`cbw_piece`]); the
+    /// direction of the step is that of `y_ref - y` (the output increases with `u`). When
+    /// `h` crosses zero inside the step, the first piece ends exactly where `h = 0` and a
+    /// second piece finishes the step, as in the model's own closed-form step.
+    #[inline]
+    fn invert_step(&self, state: &BwState<T>, y_ref: T, tol: T) -> Option<Inverted<T, BwState<T>>> {
+        if self.n() != T::ONE {
+            return None;
+        }
+        let (d, alpha, beta, gamma) = (self.d(), self.alpha(), self.beta(), self.gamma());
+        let h0 = state.h;
+        let r = y_ref - (d * state.u - h0);
+        // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) as selects, not `sgn`
+        // products: this runs every sample.
+        let up = r > T::ZERO;
+        if !(up || r < T::ZERO) {
+            // Already there (or NaN: the caller holds the output).
+            return if r == T::ZERO {
+                Some(Inverted {
+                    u: state.u,
+                    y: y_ref,
+                    state: *state,
+                    iterations: 0,
+                })
+            } else {
+                None
+            };
+        }
+        let s = if up { T::ONE } else { -T::ONE };
+        let beta_s = if up { beta } else { -beta };
+        let h_up = if h0 == T::ZERO { up } else { h0 > T::ZERO };
+        let k = beta_s + if h_up { gamma } else { -gamma };
+        let (mut du, mut dh, mut it) = cbw_piece(d, alpha - k * h0, k, r, tol)?;
+        if h0 * (h0 + dh) < T::ZERO {
+            // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
+            // moving in direction s, where sgn(h) = s.
+            let du0 = if k == T::ZERO {
+                -h0 / alpha
+            } else {
+                (-k * h0 / alpha).ln_1p() / k
+            };
+            let r2 = r - (d * du0 + h0);
+            if !(du0.is_finite() && du0.sgn() != -s && r2.sgn() != -s) {
+                return None;
+            }
+            let (du2, dh2, it2) = cbw_piece(d, alpha, (beta + gamma) * s, r2, tol)?;
+            du = du0 + du2;
+            dh = dh2 - h0;
+            it += it2;
+        }
+        let u = state.u + du;
+        let h = h0 + dh;
+        Some(Inverted {
+            u,
+            y: d * u - h,
+            state: BwState { u, h },
+            iterations: it,
+        })
     }
 }
 
@@ -191,13 +313,27 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         };
         let u = match self.closure {
             ImsLoop::Solved => {
+                let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
+                let tol = T::from_f64(8.0) * T::EPSILON * scale;
+                if self.quad == T::ZERO {
+                    if let Some(inv) = self.model.invert_step(&self.state, y_ref_um, tol) {
+                        let (lo, hi) = (
+                            self.volts_min.max(self.u - self.max_step_volts),
+                            self.volts_max.min(self.u + self.max_step_volts),
+                        );
+                        if inv.u >= lo && inv.u <= hi {
+                            // Inside the limits: the solve's own step is the model's.
+                            self.evals = inv.iterations;
+                            self.state = inv.state;
+                            return self.commit(inv.u, inv.y);
+                        }
+                    }
+                }
                 let (model, state, dt, quad) = (&self.model, self.state, self.dt_s, self.quad);
                 let f = |u: T| {
                     let mut s = state;
                     model.step(&mut s, u, dt) + quad * u * u - y_ref_um
                 };
-                let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
-                let tol = T::from_f64(8.0) * T::EPSILON * scale;
                 // f at the held voltage: not `self.y - y_ref` for models with rate terms.
                 let f0 = f(self.u);
                 let root =
@@ -221,7 +357,14 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u = u
             .clamp_to(self.volts_min, self.volts_max)
             .clamp_to(self.u - self.max_step_volts, self.u + self.max_step_volts);
-        self.y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
+        let y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
+        self.commit(u, y)
+    }
+
+    /// Takes `u` with model output `y` as this sample's voltage.
+    #[inline]
+    fn commit(&mut self, u: T, y: T) -> T {
+        self.y = y;
         self.u = u;
         if let Some(c) = &mut self.creep {
             c.commit(self.y);
@@ -359,5 +502,45 @@ mod stage_terms {
             .unwrap()
             .with_quadratic(-0.01)
             .is_err());
+    }
+}
+
+#[cfg(test)]
+mod invert_step_tests {
+    use super::*;
+
+    /// The closed-form inversion lands on the model's own step (f64 and f32), across zero
+    /// crossings of h and both directions, for small and large steps.
+    #[test]
+    fn cbw_invert_step_matches_model_step() {
+        let m = Cbw::with_n1(0.16f64, 0.07, 0.02, 0.01).unwrap();
+        let mut st = m.init(0.0);
+        let mut worst: f64 = 0.0;
+        for k in 0..20_000 {
+            let t = k as f64 * 1e-4;
+            let y_ref = 8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())
+                + 0.5 * (2.0 * core::f64::consts::PI * 130.0 * t).sin();
+            let inv = m.invert_step(&st, y_ref, 1e-12).expect("converges");
+            let mut s2 = st;
+            let y = m.step(&mut s2, inv.u, 1e-4);
+            worst = worst.max((y - y_ref).abs()).max((s2.h - inv.state.h).abs());
+            st = s2;
+        }
+        assert!(worst < 1e-10, "f64 {worst}");
+        let m = Cbw::with_n1(0.16f32, 0.07, 0.02, 0.01).unwrap();
+        let mut st = m.init(0.0);
+        let mut worst: f64 = 0.0;
+        for k in 0..20_000 {
+            let t = k as f64 * 1e-4;
+            let y_ref = (8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())) as f32;
+            let inv = m
+                .invert_step(&st, y_ref, 8.0 * f32::EPSILON * 17.0)
+                .expect("converges");
+            let mut s2 = st;
+            let y = m.step(&mut s2, inv.u, 1e-4);
+            worst = worst.max((y - y_ref).abs() as f64);
+            st = s2;
+        }
+        assert!(worst < 2e-5, "f32 {worst}");
     }
 }

@@ -49,6 +49,10 @@ impl<T: Real> DacScale<T> {
 pub struct Output<T> {
     pub dac: DacScale<T>,
     codes_per_volt: T,
+    /// `code_lo` and `code_hi - code_lo` as reals (precomputed: the per-sample path only
+    /// compares against them).
+    code_lo_real: T,
+    code_span_real: T,
     code_lo: i32,
     code_hi: i32,
     max_step: i32,
@@ -108,6 +112,8 @@ impl<T: Real> Output<T> {
         Ok(Self {
             dac: *dac,
             codes_per_volt: T::ONE / dac.volts_per_code,
+            code_lo_real: T::from_f64(code_lo),
+            code_span_real: T::from_f64(code_hi - code_lo),
             code_lo: code_lo as i32,
             code_hi: code_hi as i32,
             max_step: libm::floor(step).min(i32::MAX as f64 / 4.0) as i32,
@@ -133,22 +139,24 @@ impl<T: Real> Output<T> {
     /// lowest code of the range, then slew-limited).
     #[inline]
     pub fn limit(&self, volts: T, prev: i32) -> Limited {
-        let lo = T::from_i32(self.code_lo);
-        let x = ((volts - self.dac.volts_at_zero) * self.codes_per_volt)
-            .clamp_to(lo, T::from_i32(self.code_hi));
-        // x >= lo, so truncation of the shifted value is the floor (no libm call).
-        let want = ((x - lo + T::HALF).to_i32() as i64 + self.code_lo as i64)
-            .max(self.code_lo as i64)
-            .min(self.code_hi as i64) as i32;
+        // Codes above the range's lowest, as a real: `clamp_to` maps NaN to 0 (the lowest).
+        let x = (volts - self.dac.volts_at_zero) * self.codes_per_volt - self.code_lo_real;
+        let in_range = x >= T::ZERO && x <= self.code_span_real;
+        let x = x.clamp_to(T::ZERO, self.code_span_real);
+        // x >= 0, so truncation of x + 1/2 is the rounding (no floor); the sum stays in the
+        // range because the span is exact.
+        let want = self
+            .code_lo
+            .saturating_add((x + T::HALF).to_i32())
+            .min(self.code_hi);
         // max/min, not `clamp`: `clamp` asserts lo <= hi, a panic path in the ISR.
         let prev = prev.max(self.code_lo).min(self.code_hi);
         let code = want
             .max(prev.saturating_sub(self.max_step))
             .min(prev.saturating_add(self.max_step));
-        let exact = (volts - self.dac.volts(want)).abs() <= self.dac.volts_per_code;
         Limited {
             code,
-            saturated: code != want || !exact,
+            saturated: code != want || !in_range,
         }
     }
 }

@@ -24,6 +24,8 @@ enum Cmd {
     Diagnose(hal_sim::cli::diagnose::Args),
     /// Fault campaign over every controller mode.
     Faults(hal_sim::cli::faults::Args),
+    /// Talk to the firmware over its serial command port (or QEMU's, over TCP).
+    Serial(hal_sim::cli::serial::Args),
 }
 
 fn main() {
@@ -34,6 +36,7 @@ fn main() {
         Cmd::Fit(a) => hal_sim::cli::fit::run(a),
         Cmd::Diagnose(a) => hal_sim::cli::diagnose::run(a),
         Cmd::Faults(a) => hal_sim::cli::faults::run(a),
+        Cmd::Serial(a) => hal_sim::cli::serial::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

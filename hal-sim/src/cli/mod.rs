@@ -3,4 +3,5 @@ pub mod demo;
 pub mod diagnose;
 pub mod faults;
 pub mod fit;
+pub mod serial;
 pub mod sim;

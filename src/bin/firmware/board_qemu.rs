@@ -10,8 +10,10 @@
 //!   feedback law x feedforward combination (run QEMU with `-icount shift=0`: one instruction
 //!   per virtual ns, so SysTick ticks over N steps count instructions; a loop of known length
 //!   calibrates ticks to instructions). The `bench` command prints that table.
-//! * After at least [`PERIODS_MIN`] periods and one answered command the app exits through
-//!   semihosting with status 0 (1 if no command arrived within [`PERIODS_MAX`] periods).
+//! * After at least [`PERIODS_MIN`] periods, one answered command and [`QUIET_PERIODS`]
+//!   without a received byte the app exits through semihosting with status 0 (1 if no
+//!   command arrived within [`PERIODS_MAX`] periods), so a host (`piezo serial`) can hold a
+//!   session of several commands.
 
 /// Sample rate of the control loop (Hz of virtual time): 100 kHz in f32, 16 384 Hz in Q16.16.
 pub use crate::control::SAMPLE_HZ;
@@ -21,6 +23,8 @@ pub const SYSTICK_HZ: u32 = 25_000_000;
 pub const PERIODS_MIN: u32 = 10_000;
 /// Give up (exit 1) when no command was answered after this many periods.
 pub const PERIODS_MAX: u32 = 300_000;
+/// Keep serving this many periods after the last received byte.
+pub const QUIET_PERIODS: u32 = PERIODS_MIN;
 /// Steps per benchmark row.
 pub const BENCH_STEPS: usize = 2_000;
 
@@ -323,7 +327,9 @@ pub mod bench {
 
 #[rtic::app(device = crate::board_qemu::pac, peripherals = false)]
 mod app {
-    use super::{bench, uart, SimStage, PERIODS_MAX, PERIODS_MIN, SAMPLE_HZ, SYSTICK_HZ};
+    use super::{
+        bench, uart, SimStage, PERIODS_MAX, PERIODS_MIN, QUIET_PERIODS, SAMPLE_HZ, SYSTICK_HZ,
+    };
     use crate::control::{c, stream_frames, Ctl};
     use core::fmt::Write;
     use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
@@ -412,8 +418,11 @@ mod app {
     #[idle(shared = [ctl, periods], local = [line, table])]
     fn idle(mut cx: idle::Context) -> ! {
         let mut answered = 0u32;
+        let mut last_rx = 0u32;
         loop {
+            let mut received = false;
             while let Some(byte) = uart::try_read() {
+                received = true;
                 let Some(line) = cx.local.line.push(byte) else {
                     continue;
                 };
@@ -444,10 +453,14 @@ mod app {
                 answered += 1;
             }
             let periods = cx.shared.periods.lock(|p| *p);
-            if periods >= PERIODS_MIN && answered > 0 {
+            if received {
+                last_rx = periods;
+            }
+            let quiet = periods.wrapping_sub(last_rx) >= QUIET_PERIODS;
+            if periods >= PERIODS_MIN && answered > 0 && quiet {
                 finish(&mut cx.shared.ctl, periods, answered, 0);
             }
-            if periods >= PERIODS_MAX {
+            if periods >= PERIODS_MAX && answered == 0 {
                 uart::line("error: no command received");
                 finish(&mut cx.shared.ctl, periods, answered, 1);
             }

@@ -1,0 +1,126 @@
+#!/usr/bin/env bash
+# The host CLI against the real firmware: the QEMU build of 30-qemu.sh (mps2-an386,
+# Cortex-M4F, f32) boots with its UART on a TCP socket, and `piezo serial` selects a mode
+# and feedforward, sets limits, starts a sine, reads the recorder to CSV (free-running and
+# edge-triggered) and checks that a refused command names the firmware's numbered error.
+# The CSVs must have the expected rows and physically sane values; anything off fails.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
+target=thumbv7em-none-eabihf
+cargo build --release --target "$target" -p piezo-core --bin firmware \
+  --no-default-features --features board-qemu
+if [ -n "${PIEZO_BIN:-}" ]; then
+  piezo=$PIEZO_BIN
+else
+  cargo build --release -q -p hal-sim --bin piezo
+  piezo=target/release/piezo
+fi
+work=$(mktemp -d)
+cp "target/$target/release/firmware" "$work/firmware.elf"
+port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+
+qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none -icount shift=0 \
+  -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
+  -semihosting-config enable=on,target=native -kernel "$work/firmware.elf" >"$work/defmt.bin" &
+qemu=$!
+cleanup() {
+  kill "$qemu" 2>/dev/null || true
+  wait "$qemu" 2>/dev/null || true
+  rm -rf "$work"
+}
+trap cleanup EXIT
+fail() {
+  echo "35-host-serial: FAIL: $*"
+  exit 1
+}
+
+s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
+# QEMU listens at once; the firmware answers after its boot-time bench table.
+for _ in $(seq 50); do
+  if s ping >"$work/ping.txt" 2>&1; then break; fi
+  sleep 0.2
+done
+cat "$work/ping.txt"
+grep -q '^ok pong' "$work/ping.txt" || fail "no answer to ping"
+
+run() {
+  echo "\$ piezo serial $*"
+  s "$@" | tee "$work/last.txt"
+}
+run mode ff+hgo-robust --ff ims-cbw
+grep -qx 'ok ff ims-cbw' "$work/last.txt" || fail "feedforward not selected"
+grep -qx 'ok mode ff+hgo-robust' "$work/last.txt" || fail "mode not selected"
+run limits --u-max 140V --slew 20V/ms
+grep -qx 'output 0 V .. 140 V, slew limit 20000 V/s (20 V/ms)' "$work/last.txt" || fail "limits not set"
+run wave sine 5um 100Hz --offset 10um
+grep -qx 'ok wave sine 5 100 10' "$work/last.txt" || fail "wave not started"
+run record --signals ref_um,y_um,u_volts,error_um --out "$work/rec.csv" --svg "$work/rec.svg"
+run record --signals ref_um,y_um,u_volts,dac_code --trigger rise:ref_um:10 --pre 100 \
+  --out "$work/trig.csv"
+run stats --clock 25MHz
+grep -q '^samples [0-9]*  overruns [0-9]*$' "$work/last.txt" || fail "stats not read"
+run -- "get sample_hz" "rec status"
+grep -qx 'ok sample_hz 100000' "$work/last.txt" || fail "raw get failed"
+
+# A refused command: exit status 1, the command and the firmware's numbered error named.
+echo "\$ piezo serial -- \"mode warp-drive\""
+if s -- "mode warp-drive" >"$work/bad.txt" 2>&1; then fail "unknown mode accepted"; fi
+cat "$work/bad.txt"
+grep -q '`mode warp-drive`: firmware error 9: unknown mode name (UnknownMode)' "$work/bad.txt" ||
+  fail "error does not name the command and code"
+
+# The free-running capture: 1024 frames at 100 kHz of a 5 um, 100 Hz sine around 10 um.
+head -3 "$work/rec.csv"
+[ "$(sed -n 3p "$work/rec.csv")" = "i,t_s,ref_um,y_um,u_volts,error_um" ] || fail "CSV header"
+grep -q '^# units: i \[frame\], t_s \[s\], ref_um \[um\], y_um \[um\], u_volts \[V\], error_um \[um\]$' \
+  "$work/rec.csv" || fail "CSV units line"
+[ -s "$work/rec.svg" ] || fail "no SVG"
+awk -F, '
+  /^#/ || NR == 3 { next }
+  {
+    n++
+    if ($1 != n - 1) { print "row " n ": index " $1; bad = 1 }
+    if (n > 1 && ($2 - t - 1e-5) ^ 2 > 1e-18) { print "row " n ": time step " $2 - t; bad = 1 }
+    t = $2
+    for (k = 2; k <= 6; k++) if ($k !~ /^-?[0-9.e+-]+$/) { print "row " n ": not a number: " $k; bad = 1 }
+    if ($3 < 4.99 || $3 > 15.01) { print "row " n ": ref_um " $3 " outside the sine"; bad = 1 }
+    if ($4 < 0 || $4 > 100) { print "row " n ": y_um " $4 " outside the sensor range"; bad = 1 }
+    if ($5 < 0 || $5 > 140) { print "row " n ": u_volts " $5 " outside the 0..140 V limit"; bad = 1 }
+    d = $3 - $4 - $6
+    if (d * d > 1e-6) { print "row " n ": error_um != ref_um - y_um"; bad = 1 }
+    if ($3 < rmin || n == 1) rmin = $3
+    if ($3 > rmax || n == 1) rmax = $3
+    e2 += $6 * $6
+  }
+  END {
+    rms = sqrt(e2 / n)
+    printf "rec.csv: %d rows, ref_um %.3f..%.3f, rms error %.4f um\n", n, rmin, rmax, rms
+    if (n != 1024) { print "expected 1024 rows"; bad = 1 }
+    # 10.24 ms hold a full period of the 100 Hz sine: the reference spans 5..15 um.
+    if (rmin > 5.05 || rmax < 14.95) { print "reference does not span the sine"; bad = 1 }
+    # The loop follows the sine: RMS error below half the 5 um amplitude (a stage that
+    # stays put gives 3.5 um).
+    if (!(rms < 2.5)) { print "tracking error too large"; bad = 1 }
+    exit bad
+  }' "$work/rec.csv" || fail "free-running capture"
+
+# The triggered capture: frame 100 (t = 0) is the first at or above 10 um after a rise.
+awk -F, '
+  /^#/ || NR == 3 { next }
+  {
+    n++
+    if (n == 100) before = $3
+    if (n == 101) { at = $3; t0 = $2 }
+    if ($6 < 0 || $6 > 4095 || $6 != int($6)) { print "row " n ": dac_code " $6; bad = 1 }
+  }
+  END {
+    printf "trig.csv: %d rows, ref_um %.4f -> %.4f at t_s %s\n", n, before, at, t0
+    if (n != 1024) { print "expected 1024 rows"; bad = 1 }
+    if (!(before < 10 && at >= 10)) { print "trigger frame is not the rising crossing of 10 um"; bad = 1 }
+    if (t0 + 0 != 0) { print "t_s is not 0 at the trigger"; bad = 1 }
+    exit bad
+  }' "$work/trig.csv" || fail "triggered capture"
+
+kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
+echo "35-host-serial: ok"

@@ -1,0 +1,1803 @@
+//! `piezo serial`: the host side of the firmware's command protocol
+//! ([`piezo_core::command`]: one ASCII line per command, one `ok ...` or `err <code> <message>`
+//! reply line, `rec read` and `bench` send data lines before it).
+//!
+//! Transport: a serial port (`--port /dev/ttyACM0 [--baud 115200]`) or TCP (`--tcp
+//! 127.0.0.1:PORT`, e.g. QEMU `-serial tcp::PORT,server=on,wait=off`).
+//!
+//! Every command the host builds is a [`Command`] of the core's protocol module, written by
+//! [`format_command`] (an exhaustive match: a new command in the firmware's enum does not
+//! compile here until the host knows it) and parsed back with the firmware's own parser
+//! before it is sent, so host and firmware cannot drift apart.
+//!
+//! ```text
+//! piezo serial --tcp 127.0.0.1:4444 -- "mode ff+pid" "wave sine 5 100 10"
+//! piezo serial --port /dev/ttyACM0 wave sine 5um 100Hz --offset 10um
+//! piezo serial --tcp 127.0.0.1:4444 record --signals ref_um,y_um,u_volts --out rec.csv --svg rec.svg
+//! ```
+use std::fmt;
+use std::io::{self, Read, Write};
+use std::net::{TcpStream, ToSocketAddrs};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, bail, Context, Result};
+use piezo_core::command::{self, Command, RecCmd, Shape, TriggerCmd, MAX_LINE, MAX_WORDS};
+use piezo_core::recorder::Signal;
+
+use crate::plot::{write_grid, Plot};
+
+/// Longest reply line accepted (bytes); a longer run without newline is garbage (wrong baud
+/// rate, binary output) and fails the command instead of growing a buffer forever.
+pub const MAX_REPLY: usize = 4096;
+/// Frames asked for per `rec read` (keeps each reply short on a 115200 Bd port).
+pub const READ_CHUNK: usize = 128;
+
+// ---------------------------------------------------------------------------------------
+// Command lines: built from the core's `Command` enum, checked with the core's parser.
+
+/// Writes `cmd` as the line the firmware's parser reads back as `cmd`. Numbers use the
+/// shortest representation that round-trips (`f32` `Display`).
+pub fn format_command(cmd: &Command<'_>) -> String {
+    match cmd {
+        Command::Empty => String::new(),
+        Command::Ping => "ping".into(),
+        Command::Help => "help".into(),
+        Command::Get(name) => format!("get {name}"),
+        Command::Set(name, v) => format!("set {name} {v}"),
+        Command::Mode(law) => format!("mode {law}"),
+        Command::Feedforward(name) => format!("ff {name}"),
+        Command::WaveOff => "wave off".into(),
+        Command::WaveHold(y_um) => format!("wave hold {y_um}"),
+        Command::Wave {
+            shape,
+            amp_um,
+            freq_hz,
+            offset_um,
+        } => format!("wave {} {amp_um} {freq_hz} {offset_um}", shape.name()),
+        Command::Stats => "stats".into(),
+        Command::StatsReset => "stats reset".into(),
+        Command::Rec(r) => match r {
+            RecCmd::Select(names) => {
+                let mut s = String::from("rec sel");
+                for n in names.iter() {
+                    s.push(' ');
+                    s.push_str(n);
+                }
+                s
+            }
+            RecCmd::Trigger(t) => match t {
+                TriggerCmd::Now => "rec trig now".into(),
+                TriggerCmd::Rising {
+                    channel,
+                    level,
+                    pre,
+                } => format!("rec trig rise {channel} {level} {pre}"),
+                TriggerCmd::Falling {
+                    channel,
+                    level,
+                    pre,
+                } => format!("rec trig fall {channel} {level} {pre}"),
+                TriggerCmd::Level {
+                    channel,
+                    level,
+                    pre,
+                } => format!("rec trig level {channel} {level} {pre}"),
+            },
+            RecCmd::Arm => "rec arm".into(),
+            RecCmd::Stop => "rec stop".into(),
+            RecCmd::Status => "rec status".into(),
+            RecCmd::Read { start, count } => format!("rec read {start} {count}"),
+        },
+        Command::Bench => "bench".into(),
+    }
+}
+
+/// [`format_command`], then the firmware's parser must read the line back as `cmd` and it
+/// must fit the firmware's line buffer.
+pub fn checked_line(cmd: &Command<'_>) -> Result<String, SerialError> {
+    let line = format_command(cmd);
+    check_built(&line, Some(cmd))?;
+    Ok(line)
+}
+
+/// Checks a line the host built: it fits [`MAX_LINE`] and the firmware's parser accepts it
+/// (and, with `expect`, reads it back as that command).
+fn check_built(line: &str, expect: Option<&Command<'_>>) -> Result<(), SerialError> {
+    let bad = |why: String| SerialError::BadCommand {
+        command: line.to_string(),
+        why,
+    };
+    if line.len() > MAX_LINE {
+        return Err(bad(format!(
+            "{} bytes, the firmware takes at most {MAX_LINE} (it would answer err 1)",
+            line.len()
+        )));
+    }
+    match command::parse(line.as_bytes()) {
+        Err(e) => Err(bad(format!("the protocol parser rejects it: {e}"))),
+        Ok(parsed) => match expect {
+            Some(cmd) if parsed != *cmd => Err(bad(format!(
+                "the protocol parser reads it as {parsed:?}, not {cmd:?}"
+            ))),
+            _ => Ok(()),
+        },
+    }
+}
+
+/// `rec sel <names>`: every name must be a recorder [`Signal`].
+pub fn select_line(signals: &[Signal]) -> Result<String, SerialError> {
+    let mut line = String::from("rec sel");
+    for s in signals {
+        line.push(' ');
+        line.push_str(s.name());
+    }
+    if signals.is_empty() || signals.len() > MAX_WORDS - 2 {
+        return Err(SerialError::BadCommand {
+            command: line,
+            why: format!("select 1 to {} signals", MAX_WORDS - 2),
+        });
+    }
+    check_built(&line, None)?;
+    Ok(line)
+}
+
+/// Every protocol error, for mapping a reply's code back to its meaning. The match below
+/// fails to compile when the firmware gains an error the host does not list.
+pub const ERRORS: [command::Error; 13] = {
+    use command::Error::*;
+    [
+        LineTooLong,
+        NotAscii,
+        UnknownCommand,
+        MissingArgument,
+        TooManyArguments,
+        BadNumber,
+        UnknownParam,
+        OutOfRange,
+        UnknownMode,
+        UnknownSignal,
+        BadKeyword,
+        Busy,
+        Unsupported,
+    ]
+};
+
+#[allow(dead_code)]
+fn errors_are_listed(e: command::Error) {
+    use command::Error::*;
+    match e {
+        LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
+        | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
+        | Busy | Unsupported => {}
+    }
+}
+
+/// The protocol error of a numbered reply code.
+pub fn known_error(code: u8) -> Option<command::Error> {
+    ERRORS.into_iter().find(|e| e.code() == code)
+}
+
+/// Unit of a recorder signal (for the CSV header and the plots).
+pub fn signal_unit(s: Signal) -> &'static str {
+    match s {
+        Signal::RefUm | Signal::YUm | Signal::ErrorUm => "um",
+        Signal::FfVolts | Signal::UVolts => "V",
+        Signal::AdcCode | Signal::DacCode => "code",
+    }
+}
+
+/// Unit of a channel named by the firmware (its names end in their unit).
+fn name_unit(name: &str) -> &'static str {
+    match Signal::from_name(name) {
+        Some(s) => signal_unit(s),
+        None if name.ends_with("_um") => "um",
+        None if name.ends_with("_volts") => "V",
+        None => "?",
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Replies.
+
+/// One line from the firmware.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Line {
+    /// `ok` or `ok <details>`: the command succeeded.
+    Ok(String),
+    /// `err <code> <message>`; `code` is `None` when the number is unreadable.
+    Err { code: Option<u8>, message: String },
+    /// Anything else (frames of `rec read`, the bench table, boot messages).
+    Data(String),
+}
+
+/// Classifies one received line (without its newline). Never panics.
+pub fn parse_line(line: &str) -> Line {
+    let line = line.trim_end_matches('\r');
+    if line == "ok" {
+        return Line::Ok(String::new());
+    }
+    if let Some(rest) = line.strip_prefix("ok ") {
+        return Line::Ok(rest.trim().to_string());
+    }
+    if let Some(rest) = line.strip_prefix("err ") {
+        let rest = rest.trim();
+        let (num, message) = rest.split_once(' ').unwrap_or((rest, ""));
+        return Line::Err {
+            code: num.parse().ok(),
+            message: message.trim().to_string(),
+        };
+    }
+    Line::Data(line.to_string())
+}
+
+/// The reply to one command: data lines, then the `ok` details.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Response {
+    pub data: Vec<String>,
+    /// Text after `ok` (empty for a bare `ok`).
+    pub details: String,
+}
+
+impl Response {
+    /// The whole reply line as the firmware sent it.
+    pub fn reply_line(&self) -> String {
+        if self.details.is_empty() {
+            "ok".into()
+        } else {
+            format!("ok {}", self.details)
+        }
+    }
+}
+
+/// Why a command failed.
+#[derive(Debug)]
+pub enum SerialError {
+    /// The firmware answered `err <code> <message>`.
+    Firmware {
+        command: String,
+        code: Option<u8>,
+        message: String,
+    },
+    /// No complete reply line within the timeout.
+    Timeout {
+        command: String,
+        after: Duration,
+    },
+    /// The other end closed the connection.
+    Closed {
+        command: String,
+    },
+    /// A reply the host cannot use.
+    BadReply {
+        command: String,
+        line: String,
+        why: String,
+    },
+    /// A command line the host refuses to send.
+    BadCommand {
+        command: String,
+        why: String,
+    },
+    Io {
+        command: String,
+        source: io::Error,
+    },
+}
+
+impl fmt::Display for SerialError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SerialError::Firmware {
+                command,
+                code,
+                message,
+            } => {
+                match code {
+                    Some(c) => write!(f, "`{command}`: firmware error {c}: {message}")?,
+                    None => write!(f, "`{command}`: firmware error (no code): {message}")?,
+                }
+                match code.and_then(known_error) {
+                    Some(e) => write!(f, " ({e:?})"),
+                    None => write!(f, " (a code this host does not know)"),
+                }
+            }
+            SerialError::Timeout { command, after } => write!(
+                f,
+                "`{command}`: no reply within {:.1} s (firmware running? right port and baud rate?)",
+                after.as_secs_f64()
+            ),
+            SerialError::Closed { command } => write!(
+                f,
+                "`{command}`: connection closed before the reply (firmware exited or reset?)"
+            ),
+            SerialError::BadReply { command, line, why } => {
+                write!(f, "`{command}`: unusable reply `{line}`: {why}")
+            }
+            SerialError::BadCommand { command, why } => {
+                write!(f, "`{command}`: not sent: {why}")
+            }
+            SerialError::Io { command, source } => write!(f, "`{command}`: {source}"),
+        }
+    }
+}
+
+// The I/O error's text is part of the message already, so no `source`.
+impl std::error::Error for SerialError {}
+
+// ---------------------------------------------------------------------------------------
+// Transport.
+
+/// A byte stream to the firmware.
+pub trait Link: Send {
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()>;
+    /// Reads what has arrived, waiting at most `timeout`. `Ok(0)`: the other end closed;
+    /// nothing within the timeout is an error of kind `TimedOut` or `WouldBlock`.
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize>;
+}
+
+impl Link for TcpStream {
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.write_all(bytes)?;
+        self.flush()
+    }
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+        self.set_read_timeout(Some(timeout.max(Duration::from_millis(1))))?;
+        self.read(buf)
+    }
+}
+
+struct Serial(Box<dyn serialport::SerialPort>);
+
+impl Link for Serial {
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.0.write_all(bytes)?;
+        self.0.flush()
+    }
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+        self.0
+            .set_timeout(timeout.max(Duration::from_millis(1)))
+            .map_err(io::Error::from)?;
+        self.0.read(buf)
+    }
+}
+
+/// Opens a TCP connection (the address may be a host name).
+pub fn connect_tcp(addr: &str, timeout: Duration) -> Result<TcpStream> {
+    let addrs: Vec<_> = addr
+        .to_socket_addrs()
+        .with_context(|| format!("--tcp {addr}: not a host:port address"))?
+        .collect();
+    let mut last = None;
+    for a in &addrs {
+        match TcpStream::connect_timeout(a, timeout) {
+            Ok(s) => {
+                s.set_nodelay(true).ok();
+                return Ok(s);
+            }
+            Err(e) => last = Some(e),
+        }
+    }
+    match last {
+        Some(e) => Err(anyhow!("--tcp {addr}: cannot connect: {e}")),
+        None => bail!("--tcp {addr}: the name resolves to no address"),
+    }
+}
+
+/// Opens a serial port, 8N1, no flow control, and drops anything already received.
+pub fn open_serial(path: &str, baud: u32, timeout: Duration) -> Result<Box<dyn Link>> {
+    let port = serialport::new(path, baud)
+        .timeout(timeout)
+        .open()
+        .with_context(|| format!("--port {path}: cannot open at {baud} Bd"))?;
+    port.clear(serialport::ClearBuffer::Input).ok();
+    Ok(Box::new(Serial(port)))
+}
+
+// ---------------------------------------------------------------------------------------
+// Client.
+
+/// Sends command lines and collects their replies.
+pub struct Client {
+    link: Box<dyn Link>,
+    pending: Vec<u8>,
+    /// Longest wait for the next reply line.
+    pub timeout: Duration,
+}
+
+impl Client {
+    pub fn new(link: Box<dyn Link>, timeout: Duration) -> Self {
+        Self {
+            link,
+            pending: Vec::new(),
+            timeout,
+        }
+    }
+
+    /// Sends one line as it is (no `\n`/`\r` inside) and waits for its `ok`/`err` line.
+    pub fn raw(&mut self, line: &str) -> Result<Response, SerialError> {
+        if line.contains(['\n', '\r']) {
+            return Err(SerialError::BadCommand {
+                command: line.escape_debug().to_string(),
+                why: "one command per line: no line breaks inside".into(),
+            });
+        }
+        self.send_line(line)?;
+        let mut resp = Response::default();
+        loop {
+            match parse_line(&self.read_line(line)?) {
+                Line::Ok(details) => {
+                    resp.details = details;
+                    return Ok(resp);
+                }
+                Line::Err { code, message } => {
+                    return Err(SerialError::Firmware {
+                        command: line.to_string(),
+                        code,
+                        message,
+                    })
+                }
+                Line::Data(d) => {
+                    // Bounded: a reply never has more data lines than the recorder frames
+                    // or the bench rows; anything beyond is runaway output.
+                    if resp.data.len() >= 1 << 16 {
+                        return Err(SerialError::BadReply {
+                            command: line.to_string(),
+                            line: d,
+                            why: "more than 65536 data lines without an ok".into(),
+                        });
+                    }
+                    resp.data.push(d);
+                }
+            }
+        }
+    }
+
+    /// Sends a command of the protocol (checked with the firmware's parser first).
+    pub fn send(&mut self, cmd: &Command<'_>) -> Result<Response, SerialError> {
+        let line = checked_line(cmd)?;
+        self.raw(&line)
+    }
+
+    /// Gets in step with the firmware: ends any partial line it holds, then sends `ping`
+    /// and skips everything up to `ok pong` (boot messages, replies to an earlier client).
+    /// Returns the skipped lines.
+    pub fn sync(&mut self) -> Result<Vec<String>, SerialError> {
+        let cmd = "ping";
+        self.link
+            .send(b"\n")
+            .map_err(|source| io_err(cmd, source))?;
+        self.send_line(cmd)?;
+        let mut skipped = Vec::new();
+        loop {
+            let l = self.read_line(cmd)?;
+            // Connecting mid-line leaves the tail of a line before the reply.
+            if l.ends_with("ok pong") {
+                return Ok(skipped);
+            }
+            if skipped.len() >= 1 << 16 {
+                return Err(SerialError::BadReply {
+                    command: cmd.into(),
+                    line: l,
+                    why: "no `ok pong` among 65536 lines".into(),
+                });
+            }
+            skipped.push(l);
+        }
+    }
+
+    fn send_line(&mut self, line: &str) -> Result<(), SerialError> {
+        let mut bytes = Vec::with_capacity(line.len() + 1);
+        bytes.extend_from_slice(line.as_bytes());
+        bytes.push(b'\n');
+        self.link
+            .send(&bytes)
+            .map_err(|source| io_err(line, source))
+    }
+
+    /// Next complete line (lossy UTF-8, `\r` removed); waits at most [`Client::timeout`]
+    /// for it.
+    fn read_line(&mut self, command: &str) -> Result<String, SerialError> {
+        let deadline = Instant::now() + self.timeout;
+        loop {
+            if let Some(pos) = self.pending.iter().position(|&b| b == b'\n') {
+                let line: Vec<u8> = self.pending.drain(..=pos).collect();
+                let text = String::from_utf8_lossy(&line[..pos]);
+                return Ok(text.trim_end_matches('\r').to_string());
+            }
+            if self.pending.len() > MAX_REPLY {
+                let head = String::from_utf8_lossy(&self.pending[..80]).into_owned();
+                self.pending.clear();
+                return Err(SerialError::BadReply {
+                    command: command.into(),
+                    line: format!("{}...", head.escape_debug()),
+                    why: format!("over {MAX_REPLY} bytes without a newline (wrong baud rate?)"),
+                });
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(SerialError::Timeout {
+                    command: command.into(),
+                    after: self.timeout,
+                });
+            }
+            let mut buf = [0u8; 1024];
+            match self.link.recv(&mut buf, left) {
+                Ok(0) => {
+                    return Err(SerialError::Closed {
+                        command: command.into(),
+                    })
+                }
+                Ok(n) => self.pending.extend_from_slice(&buf[..n.min(buf.len())]),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        io::ErrorKind::TimedOut
+                            | io::ErrorKind::WouldBlock
+                            | io::ErrorKind::Interrupted
+                    ) => {}
+                Err(e) => return Err(io_err(command, e)),
+            }
+        }
+    }
+}
+
+/// A hang-up is [`SerialError::Closed`]; other I/O errors keep their text.
+fn io_err(command: &str, source: io::Error) -> SerialError {
+    use io::ErrorKind::*;
+    match source.kind() {
+        ConnectionReset | ConnectionAborted | BrokenPipe | UnexpectedEof => SerialError::Closed {
+            command: command.into(),
+        },
+        _ => SerialError::Io {
+            command: command.into(),
+            source,
+        },
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Typed replies.
+
+/// `get <param>` reply `ok <param> <value>`.
+pub fn parse_get(resp: &Response, param: &str) -> Result<f64, String> {
+    let mut w = resp.details.split_whitespace();
+    match (w.next(), w.next(), w.next()) {
+        (Some(p), Some(v), None) if p == param => v
+            .parse::<f64>()
+            .map_err(|_| format!("value `{v}` is not a number")),
+        _ => Err(format!("expected `ok {param} <value>`")),
+    }
+}
+
+/// Timing counts of `stats`: DWT cycles on the H743, SysTick ticks (25 MHz) under QEMU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+pub struct Stats {
+    pub step_min: u32,
+    pub step_max: u32,
+    pub step_last: u32,
+    pub isr_min: u32,
+    pub isr_max: u32,
+    pub isr_last: u32,
+    pub samples: u32,
+    pub overruns: u32,
+}
+
+/// `ok step <min> <max> <last> isr <min> <max> <last> samples <n> overruns <n>`.
+pub fn parse_stats(details: &str) -> Result<Stats, String> {
+    let w: Vec<&str> = details.split_whitespace().collect();
+    let expect = "step <min> <max> <last> isr <min> <max> <last> samples <n> overruns <n>";
+    let keys = [(0, "step"), (4, "isr"), (8, "samples"), (10, "overruns")];
+    if w.len() != 12 || keys.iter().any(|&(i, k)| w.get(i) != Some(&k)) {
+        return Err(format!("expected `{expect}`"));
+    }
+    let n = |i: usize| -> Result<u32, String> {
+        let s = w.get(i).copied().unwrap_or("");
+        s.parse::<u32>()
+            .map_err(|_| format!("`{s}` is not a count in `{expect}`"))
+    };
+    Ok(Stats {
+        step_min: n(1)?,
+        step_max: n(2)?,
+        step_last: n(3)?,
+        isr_min: n(5)?,
+        isr_max: n(6)?,
+        isr_last: n(7)?,
+        samples: n(9)?,
+        overruns: n(11)?,
+    })
+}
+
+/// State of the recorder from `rec status` (`ok rec <state> <frames>`).
+pub fn parse_rec_status(details: &str) -> Result<(String, usize), String> {
+    let mut w = details.split_whitespace();
+    match (w.next(), w.next(), w.next(), w.next()) {
+        (Some("rec"), Some(state), Some(n), None)
+            if matches!(state, "idle" | "armed" | "triggered" | "done") =>
+        {
+            n.parse::<usize>()
+                .map(|n| (state.to_string(), n))
+                .map_err(|_| format!("frame count `{n}` is not a number"))
+        }
+        _ => Err("expected `ok rec idle|armed|triggered|done <frames>`".into()),
+    }
+}
+
+/// Channel names of the `rec sel` reply (`ok rec sel <name>...`).
+pub fn parse_rec_sel(details: &str) -> Result<Vec<String>, String> {
+    let mut w = details.split_whitespace();
+    if (w.next(), w.next()) != (Some("rec"), Some("sel")) {
+        return Err("expected `ok rec sel <signal>...`".into());
+    }
+    let names: Vec<String> = w.map(str::to_string).collect();
+    if names.is_empty() {
+        return Err("no channels in the reply".into());
+    }
+    Ok(names)
+}
+
+/// One frame line of `rec read`: `<index> <v0> <v1> ...` with `channels` values (any
+/// number of at least one for `None`).
+pub fn parse_frame(line: &str, channels: Option<usize>) -> Result<(usize, Vec<f64>), String> {
+    let mut w = line.split_whitespace();
+    let i = w
+        .next()
+        .and_then(|s| s.parse::<usize>().ok())
+        .ok_or("no frame index")?;
+    let v = w
+        .map(|s| {
+            s.parse::<f64>()
+                .map_err(|_| format!("`{s}` is not a number"))
+        })
+        .collect::<Result<Vec<f64>, String>>()?;
+    match channels {
+        Some(n) if v.len() != n => Err(format!("{} values, expected {n}", v.len())),
+        None if v.is_empty() => Err("no values".into()),
+        _ => Ok((i, v)),
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Quantities with units on the command line.
+
+/// A number with an optional unit; bare numbers are in `base`.
+fn quantity(s: &str, what: &str, units: &[(&str, f64)]) -> Result<f64, String> {
+    let t = s.trim();
+    let split = t
+        .char_indices()
+        .find(|&(i, c)| {
+            !(c.is_ascii_digit()
+                || c == '.'
+                || ((c == '-' || c == '+')
+                    && (i == 0 || t[..i].ends_with('e') || t[..i].ends_with('E')))
+                || ((c == 'e' || c == 'E')
+                    && t[i + 1..]
+                        .starts_with(|d: char| d.is_ascii_digit() || d == '-' || d == '+')))
+        })
+        .map(|(i, _)| i)
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let unit = unit.trim();
+    let v: f64 = num
+        .parse()
+        .map_err(|_| format!("`{s}`: not a {what} (a number, optionally with a unit)"))?;
+    let names = || units.iter().map(|(u, _)| *u).collect::<Vec<_>>().join(", ");
+    let factor = if unit.is_empty() {
+        1.0
+    } else {
+        units
+            .iter()
+            .find(|(u, _)| *u == unit)
+            .map(|(_, f)| *f)
+            .ok_or_else(|| format!("`{s}`: unknown unit `{unit}` for a {what}; use {}", names()))?
+    };
+    let v = v * factor;
+    if !v.is_finite() || v.abs() > f32::MAX as f64 {
+        return Err(format!("`{s}`: not a finite {what}"));
+    }
+    Ok(v)
+}
+
+/// Position in um (`12.5`, `12.5um`, `300nm`, `0.1mm`).
+pub fn parse_um(s: &str) -> Result<f64, String> {
+    quantity(
+        s,
+        "position",
+        &[("um", 1.0), ("µm", 1.0), ("nm", 1e-3), ("mm", 1e3)],
+    )
+}
+
+/// Frequency in Hz (`100`, `100Hz`, `2kHz`, `25MHz`, `500mHz`).
+pub fn parse_hz(s: &str) -> Result<f64, String> {
+    quantity(
+        s,
+        "frequency",
+        &[("Hz", 1.0), ("kHz", 1e3), ("MHz", 1e6), ("mHz", 1e-3)],
+    )
+}
+
+/// Voltage in V (`120`, `120V`, `500mV`).
+pub fn parse_volts(s: &str) -> Result<f64, String> {
+    quantity(s, "voltage", &[("V", 1.0), ("mV", 1e-3), ("kV", 1e3)])
+}
+
+/// Slew rate in V/s (`20000`, `20V/ms`, `20kV/s`, `0.02V/us`).
+pub fn parse_volts_per_s(s: &str) -> Result<f64, String> {
+    quantity(
+        s,
+        "slew rate",
+        &[
+            ("V/s", 1.0),
+            ("kV/s", 1e3),
+            ("V/ms", 1e3),
+            ("V/us", 1e6),
+            ("V/µs", 1e6),
+        ],
+    )
+}
+
+/// f64 quantity as the protocol's f32 (already checked finite and in range).
+fn f32_of(v: f64) -> f32 {
+    v as f32
+}
+
+// ---------------------------------------------------------------------------------------
+// CLI.
+
+#[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Raw lines: piezo serial --tcp 127.0.0.1:4444 -- \"mode ff+pid\" \"wave sine 5 100 10\"\n\
+Protocol: one ASCII line per command (max 96 bytes); reply `ok [details]` or `err <code> <message>`; \
+`help` lists the commands and parameters."
+)]
+pub struct Args {
+    #[command(flatten)]
+    pub conn: Conn,
+    #[command(subcommand)]
+    pub action: Option<Action>,
+    /// Raw command lines (after `--`), sent in order; each reply is printed.
+    #[arg(last = true, value_name = "LINE")]
+    pub lines: Vec<String>,
+}
+
+/// Where the firmware is.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Conn {
+    /// Serial device of the firmware's command port (Nucleo: the ST-LINK VCP, /dev/ttyACM0).
+    #[arg(long, global = true, conflicts_with = "tcp")]
+    pub port: Option<String>,
+    /// Baud rate of --port.
+    #[arg(long, global = true, default_value_t = 115_200)]
+    pub baud: u32,
+    /// TCP address of the serial port (QEMU: -serial tcp::PORT,server=on,wait=off).
+    #[arg(long, global = true, value_name = "HOST:PORT")]
+    pub tcp: Option<String>,
+    /// Longest wait for a reply line, in seconds.
+    #[arg(long, global = true, default_value_t = 2.0, value_name = "S")]
+    pub timeout_s: f64,
+    /// Do not send the `ping` that skips stale output before the first command.
+    #[arg(long, global = true)]
+    pub no_sync: bool,
+    /// Raw lines: go on after a command the firmware refuses (exit status 1 at the end).
+    #[arg(long, global = true)]
+    pub keep_going: bool,
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum Action {
+    /// Send raw command lines, print every reply.
+    Send {
+        #[arg(required = true, value_name = "LINE")]
+        lines: Vec<String>,
+    },
+    /// Check the link (`ping`).
+    Ping,
+    /// List the firmware's commands and parameters (its `help` command).
+    Commands,
+    /// Select the control mode: open-loop, feedforward or a feedback law (pid, ff+pid,
+    /// hgo-robust, ff+hgo-robust, fts, ff+fts, adrc, ff+adrc, nmpc, ff+nmpc); bumpless.
+    Mode {
+        law: String,
+        /// Feedforward compensator to select first (linear, ims-cbw, ims-cbw-delayed).
+        #[arg(long)]
+        ff: Option<String>,
+    },
+    /// Set the output limits; with no option, print them.
+    Limits {
+        /// Lowest output voltage (`0`, `0V`).
+        #[arg(long, value_parser = parse_volts, allow_hyphen_values = true)]
+        u_min: Option<f64>,
+        /// Highest output voltage (`120V`).
+        #[arg(long, value_parser = parse_volts, allow_hyphen_values = true)]
+        u_max: Option<f64>,
+        /// Slew limit (`20V/ms`, `20000` = V/s).
+        #[arg(long, value_parser = parse_volts_per_s)]
+        slew: Option<f64>,
+    },
+    /// Start a waveform, hold a position or stop (hold where it is).
+    #[command(subcommand)]
+    Wave(WaveCmd),
+    /// Link, parameters, timing and recorder state.
+    Status,
+    /// Timing of the control task (counts: DWT cycles on the H743, SysTick ticks in QEMU).
+    Stats {
+        /// Reset the counters after reading them.
+        #[arg(long)]
+        reset: bool,
+        /// Clock of the counts, to print microseconds too (H743 400e6, QEMU 25e6).
+        #[arg(long, value_parser = parse_hz)]
+        clock: Option<f64>,
+    },
+    /// Capture with the recorder and write CSV (optionally SVG).
+    Record(RecordArgs),
+    /// Instructions per control step for every mode (QEMU board).
+    Bench,
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum WaveCmd {
+    /// Sine around --offset (`wave sine 5um 100Hz --offset 10um`).
+    Sine(WaveArgs),
+    /// Triangle around --offset.
+    Triangle(WaveArgs),
+    /// Square between offset - amplitude and offset + amplitude.
+    Square(WaveArgs),
+    /// Hold a position (`wave hold 12.5um`).
+    Hold {
+        #[arg(value_parser = parse_um, allow_hyphen_values = true)]
+        position: f64,
+    },
+    /// Stop the waveform and hold where it is.
+    Off,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct WaveArgs {
+    /// Amplitude (`5um`, `500nm`; bare numbers in um).
+    #[arg(value_parser = parse_um)]
+    pub amplitude: f64,
+    /// Frequency (`100Hz`, `1kHz`; bare numbers in Hz).
+    #[arg(value_parser = parse_hz)]
+    pub freq: f64,
+    /// Centre position.
+    #[arg(long, default_value = "0um", value_parser = parse_um, allow_hyphen_values = true)]
+    pub offset: f64,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RecordArgs {
+    /// Signals, comma separated (ref_um, y_um, error_um, ff_volts, u_volts, adc_code,
+    /// dac_code); the firmware records 4 channels, unnamed ones keep their signal.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "ref_um,y_um,u_volts,error_um"
+    )]
+    pub signals: Vec<String>,
+    /// `now`, or `rise|fall|level:<signal>:<level>` (level in the signal's unit).
+    #[arg(long, default_value = "now")]
+    pub trigger: String,
+    /// Frames kept before the trigger.
+    #[arg(long, default_value_t = 0)]
+    pub pre: usize,
+    /// Longest wait for the capture to complete, in seconds.
+    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    pub wait_s: f64,
+    /// Read the finished capture without arming a new one (--signals then only names the
+    /// columns, in the order the capture was selected).
+    #[arg(long)]
+    pub no_arm: bool,
+    /// CSV file: `i,t_s,<signal>...`, `#` lines say what and the units.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// SVG plot of every channel against time.
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+}
+
+/// Opens the link of `conn` and syncs (unless --no-sync).
+pub fn connect(conn: &Conn) -> Result<Client> {
+    if !(conn.timeout_s.is_finite() && conn.timeout_s > 0.0 && conn.timeout_s <= 3600.0) {
+        bail!(
+            "--timeout-s must be in (0, 3600] seconds, got {}",
+            conn.timeout_s
+        );
+    }
+    let timeout = Duration::from_secs_f64(conn.timeout_s);
+    let link: Box<dyn Link> = match (&conn.port, &conn.tcp) {
+        (Some(p), None) => open_serial(p, conn.baud, timeout)?,
+        (None, Some(a)) => Box::new(connect_tcp(a, timeout)?),
+        _ => bail!("say where the firmware is: --port <device> or --tcp <host:port>"),
+    };
+    let mut client = Client::new(link, timeout);
+    if !conn.no_sync {
+        client.sync().context("no answer to ping")?;
+    }
+    Ok(client)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let action = match (args.action, args.lines.is_empty()) {
+        (Some(a), true) => a,
+        (None, false) => Action::Send { lines: args.lines },
+        (Some(_), false) => bail!("give either a subcommand or raw lines after --, not both"),
+        (None, true) => {
+            bail!("nothing to send: give a subcommand (see --help) or raw lines after --")
+        }
+    };
+    let mut c = connect(&args.conn)?;
+    let out = &mut io::stdout().lock();
+    execute(&mut c, action, args.conn.keep_going, out)
+}
+
+/// Runs one action on a connected client, printing to `out`.
+pub fn execute(
+    c: &mut Client,
+    action: Action,
+    keep_going: bool,
+    out: &mut impl Write,
+) -> Result<()> {
+    match action {
+        Action::Send { lines } => {
+            let mut failed = 0;
+            for l in &lines {
+                match c.raw(l) {
+                    Ok(r) => {
+                        for d in &r.data {
+                            writeln!(out, "{d}")?;
+                        }
+                        writeln!(out, "{}", r.reply_line())?;
+                    }
+                    Err(e @ SerialError::Firmware { .. }) if keep_going => {
+                        writeln!(out, "{}", firmware_line(&e))?;
+                        eprintln!("error: {e}");
+                        failed += 1;
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            if failed > 0 {
+                bail!("{failed} of {} commands failed", lines.len());
+            }
+        }
+        Action::Ping => {
+            let t = Instant::now();
+            let r = c.send(&Command::Ping)?;
+            writeln!(
+                out,
+                "{} ({:.1} ms round trip)",
+                r.reply_line(),
+                t.elapsed().as_secs_f64() * 1e3
+            )?;
+        }
+        Action::Commands => writeln!(out, "{}", c.send(&Command::Help)?.reply_line())?,
+        Action::Bench => {
+            let r = c.send(&Command::Bench)?;
+            for d in &r.data {
+                writeln!(out, "{d}")?;
+            }
+            writeln!(out, "{}", r.reply_line())?;
+        }
+        Action::Mode { law, ff } => {
+            if let Some(ff) = ff {
+                let r = c.send(&Command::Feedforward(&ff))?;
+                writeln!(out, "{}", r.reply_line())?;
+            }
+            let r = c.send(&Command::Mode(&law))?;
+            writeln!(out, "{}", r.reply_line())?;
+        }
+        Action::Limits { u_min, u_max, slew } => {
+            // Widen before narrowing so the firmware's u_min < u_max check holds in between.
+            let mut sets = Vec::new();
+            if let Some(v) = u_max {
+                sets.push(("u_max", v));
+            }
+            if let Some(v) = u_min {
+                sets.push(("u_min", v));
+            }
+            if let (Some(_), Some(hi)) = (u_min, u_max) {
+                // A new maximum at or below the present minimum needs the minimum first.
+                if hi <= get_param(c, "u_min")? {
+                    sets.reverse();
+                }
+            }
+            if let Some(v) = slew {
+                sets.push(("slew", v));
+            }
+            for (p, v) in sets {
+                c.send(&Command::Set(p, f32_of(v)))?;
+            }
+            let lo = get_param(c, "u_min")?;
+            let hi = get_param(c, "u_max")?;
+            let sl = get_param(c, "slew")?;
+            writeln!(
+                out,
+                "output {lo} V .. {hi} V, slew limit {sl} V/s ({} V/ms)",
+                sl / 1e3
+            )?;
+        }
+        Action::Wave(w) => {
+            let (shape, a) = match w {
+                WaveCmd::Sine(a) => (Shape::Sine, a),
+                WaveCmd::Triangle(a) => (Shape::Triangle, a),
+                WaveCmd::Square(a) => (Shape::Square, a),
+                WaveCmd::Hold { position } => {
+                    let r = c.send(&Command::WaveHold(f32_of(position)))?;
+                    writeln!(out, "{}", r.reply_line())?;
+                    return Ok(());
+                }
+                WaveCmd::Off => {
+                    let r = c.send(&Command::WaveOff)?;
+                    writeln!(out, "{}", r.reply_line())?;
+                    return Ok(());
+                }
+            };
+            let r = c.send(&Command::Wave {
+                shape,
+                amp_um: f32_of(a.amplitude),
+                freq_hz: f32_of(a.freq),
+                offset_um: f32_of(a.offset),
+            })?;
+            writeln!(out, "{}", r.reply_line())?;
+        }
+        Action::Status => status(c, out)?,
+        Action::Stats { reset, clock } => {
+            let r = c.send(&Command::Stats)?;
+            let s = parse_stats(&r.details).map_err(|why| SerialError::BadReply {
+                command: "stats".into(),
+                line: r.reply_line(),
+                why,
+            })?;
+            print_stats(out, &s, clock)?;
+            if reset {
+                c.send(&Command::StatsReset)?;
+                writeln!(out, "counters reset")?;
+            }
+        }
+        Action::Record(a) => {
+            let rec = record(c, &a)?;
+            rec.write_csv(&a.out)?;
+            if let Some(svg) = &a.svg {
+                rec.write_svg(svg)?;
+            }
+            rec.summary(out)?;
+            writeln!(out, "wrote {}", a.out.display())?;
+            if let Some(svg) = &a.svg {
+                writeln!(out, "wrote {}", svg.display())?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The `err ...` line of a firmware error, as the firmware sent it.
+fn firmware_line(e: &SerialError) -> String {
+    match e {
+        SerialError::Firmware { code, message, .. } => match code {
+            Some(c) => format!("err {c} {message}"),
+            None => format!("err {message}"),
+        },
+        other => other.to_string(),
+    }
+}
+
+fn get_param(c: &mut Client, name: &str) -> Result<f64> {
+    let r = c.send(&Command::Get(name))?;
+    parse_get(&r, name).map_err(|why| {
+        SerialError::BadReply {
+            command: format!("get {name}"),
+            line: r.reply_line(),
+            why,
+        }
+        .into()
+    })
+}
+
+fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Result<()> {
+    let us = |n: u32| match clock_hz {
+        Some(f) if f > 0.0 => format!(" ({:.3} us)", n as f64 / f * 1e6),
+        _ => String::new(),
+    };
+    writeln!(
+        out,
+        "control step  min {}{} max {}{} last {}{}",
+        s.step_min,
+        us(s.step_min),
+        s.step_max,
+        us(s.step_max),
+        s.step_last,
+        us(s.step_last)
+    )?;
+    writeln!(
+        out,
+        "interrupt     min {}{} max {}{} last {}{}",
+        s.isr_min,
+        us(s.isr_min),
+        s.isr_max,
+        us(s.isr_max),
+        s.isr_last,
+        us(s.isr_last)
+    )?;
+    writeln!(out, "samples {}  overruns {}", s.samples, s.overruns)?;
+    Ok(())
+}
+
+fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
+    let t = Instant::now();
+    c.send(&Command::Ping)?;
+    writeln!(
+        out,
+        "link          ok ({:.1} ms round trip)",
+        t.elapsed().as_secs_f64() * 1e3
+    )?;
+    // The parameter list comes from the firmware (`help` ends with `params: <names>`).
+    let help = c.send(&Command::Help)?;
+    let params: Vec<String> = help
+        .details
+        .split_once("params:")
+        .map(|(_, p)| p.split_whitespace().map(str::to_string).collect())
+        .unwrap_or_default();
+    for p in &params {
+        let v = get_param(c, p)?;
+        writeln!(out, "{p:<13} {v}")?;
+    }
+    let r = c.send(&Command::Stats)?;
+    let s = parse_stats(&r.details).map_err(|why| SerialError::BadReply {
+        command: "stats".into(),
+        line: r.reply_line(),
+        why,
+    })?;
+    print_stats(out, &s, None)?;
+    let r = c.send(&Command::Rec(RecCmd::Status))?;
+    let (state, n) = parse_rec_status(&r.details).map_err(|why| SerialError::BadReply {
+        command: "rec status".into(),
+        line: r.reply_line(),
+        why,
+    })?;
+    writeln!(out, "recorder      {state}, {n} frames")?;
+    Ok(())
+}
+
+/// A finished capture.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    pub channels: Vec<String>,
+    pub sample_hz: f64,
+    /// Frames before the trigger (time 0 is frame `pre`).
+    pub pre: usize,
+    pub trigger: String,
+    /// Frames, oldest first.
+    pub frames: Vec<Vec<f64>>,
+}
+
+impl Recording {
+    pub fn t_s(&self, i: usize) -> f64 {
+        (i as f64 - self.pre as f64) / self.sample_hz
+    }
+
+    pub fn write_csv(&self, path: &std::path::Path) -> Result<()> {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "# piezo serial record: {} frames at {} Hz, trigger {}, {} frames before it (t_s = 0 at the trigger)",
+            self.frames.len(),
+            self.sample_hz,
+            self.trigger,
+            self.pre
+        );
+        let units: Vec<String> = self
+            .channels
+            .iter()
+            .map(|n| format!("{n} [{}]", name_unit(n)))
+            .collect();
+        let _ = writeln!(s, "# units: i [frame], t_s [s], {}", units.join(", "));
+        let _ = writeln!(s, "i,t_s,{}", self.channels.join(","));
+        for (i, f) in self.frames.iter().enumerate() {
+            let _ = write!(s, "{i},{:e}", self.t_s(i));
+            for v in f {
+                let _ = write!(s, ",{v}");
+            }
+            s.push('\n');
+        }
+        if let Some(dir) = path.parent() {
+            if !dir.as_os_str().is_empty() {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+            }
+        }
+        std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+    }
+
+    /// One panel per unit (positions together, voltages together, codes together).
+    pub fn write_svg(&self, path: &std::path::Path) -> Result<()> {
+        let t_ms: Vec<f64> = (0..self.frames.len()).map(|i| self.t_s(i) * 1e3).collect();
+        let mut plots = Vec::new();
+        let mut seen = Vec::new();
+        for u in self.channels.iter().map(|n| name_unit(n)) {
+            if seen.contains(&u) {
+                continue;
+            }
+            seen.push(u);
+            let mut p = Plot::new(
+                &format!("recorder, trigger {}", self.trigger),
+                "t [ms]",
+                &format!("[{u}]"),
+            );
+            for (k, name) in self.channels.iter().enumerate() {
+                if name_unit(name) == u {
+                    let y: Vec<f64> = self
+                        .frames
+                        .iter()
+                        .map(|f| f.get(k).copied().unwrap_or(f64::NAN))
+                        .collect();
+                    p = p.line(name, &t_ms, &y);
+                }
+            }
+            plots.push(p);
+        }
+        write_grid(path, &plots, 1).with_context(|| format!("writing {}", path.display()))
+    }
+
+    /// Min/mean/max per channel.
+    pub fn summary(&self, out: &mut impl Write) -> Result<()> {
+        writeln!(
+            out,
+            "recorded {} frames at {} Hz ({:.3} ms), trigger {}",
+            self.frames.len(),
+            self.sample_hz,
+            self.frames.len() as f64 / self.sample_hz * 1e3,
+            self.trigger
+        )?;
+        for (k, name) in self.channels.iter().enumerate() {
+            let v: Vec<f64> = self
+                .frames
+                .iter()
+                .filter_map(|f| f.get(k).copied())
+                .collect();
+            let (lo, hi) = v
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                    (a.min(x), b.max(x))
+                });
+            let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+            writeln!(
+                out,
+                "  {name:<10} min {lo:>12.5} mean {mean:>12.5} max {hi:>12.5} {}",
+                name_unit(name)
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// Parses `--trigger`: `now` or `rise|fall|level:<signal or channel>:<level>`, with the
+/// channel index resolved against the selected `channels`.
+pub fn parse_trigger(spec: &str, channels: &[String], pre: usize) -> Result<TriggerCmd> {
+    if spec == "now" {
+        if pre != 0 {
+            bail!("--pre needs an edge trigger (rise|fall|level:<signal>:<level>), not `now`");
+        }
+        return Ok(TriggerCmd::Now);
+    }
+    let parts: Vec<&str> = spec.split(':').collect();
+    let [kind, ch, level] = parts.as_slice() else {
+        bail!("--trigger `{spec}`: use now or rise|fall|level:<signal>:<level>");
+    };
+    let channel = match channels.iter().position(|n| n == ch) {
+        Some(i) => i,
+        None => match ch.parse::<usize>() {
+            Ok(i) if i < channels.len() => i,
+            _ => bail!(
+                "--trigger `{spec}`: `{ch}` is not a recorded channel ({})",
+                channels.join(", ")
+            ),
+        },
+    };
+    let level: f32 = command::parse_f32(level)
+        .map_err(|_| anyhow!("--trigger `{spec}`: level `{level}` is not a finite number"))?;
+    Ok(match *kind {
+        "rise" => TriggerCmd::Rising {
+            channel,
+            level,
+            pre,
+        },
+        "fall" => TriggerCmd::Falling {
+            channel,
+            level,
+            pre,
+        },
+        "level" => TriggerCmd::Level {
+            channel,
+            level,
+            pre,
+        },
+        _ => bail!("--trigger `{spec}`: `{kind}` is not rise, fall or level"),
+    })
+}
+
+/// Selects, triggers, arms, waits for the capture and reads it.
+pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
+    if !(a.wait_s.is_finite() && a.wait_s > 0.0) {
+        bail!("--wait-s must be positive, got {}", a.wait_s);
+    }
+    let sample_hz = get_param(c, "sample_hz")?;
+    if !(sample_hz.is_finite() && sample_hz > 0.0) {
+        bail!("the firmware reports sample_hz {sample_hz}");
+    }
+    let (channels, trigger, pre) = if a.no_arm {
+        let (state, n) = rec_status(c)?;
+        if state != "done" || n == 0 {
+            bail!("--no-arm: the recorder holds no finished capture (it is {state})");
+        }
+        let names: Vec<String> = a.signals.iter().map(|s| s.trim().to_string()).collect();
+        (names, "unknown (--no-arm)".to_string(), a.pre)
+    } else {
+        let mut signals = Vec::new();
+        for name in &a.signals {
+            let s = Signal::from_name(name.trim()).ok_or_else(|| {
+                anyhow!(
+                    "--signals: unknown signal `{name}`; one of {}",
+                    Signal::ALL.map(|s| s.name()).join(", ")
+                )
+            })?;
+            signals.push(s);
+        }
+        let line = select_line(&signals)?;
+        let r = c.raw(&line)?;
+        let channels = parse_rec_sel(&r.details).map_err(|why| SerialError::BadReply {
+            command: line.clone(),
+            line: r.reply_line(),
+            why,
+        })?;
+        let trig = parse_trigger(&a.trigger, &channels, a.pre)?;
+        c.send(&Command::Rec(RecCmd::Trigger(trig)))?;
+        c.send(&Command::Rec(RecCmd::Arm))?;
+        (channels, a.trigger.clone(), a.pre)
+    };
+    let deadline = Instant::now() + Duration::from_secs_f64(a.wait_s);
+    let n = loop {
+        let (state, n) = rec_status(c)?;
+        if state == "done" {
+            break n;
+        }
+        if state == "idle" {
+            bail!("the recorder went idle without a capture (stopped by someone else?)");
+        }
+        if Instant::now() >= deadline {
+            bail!(
+                "the recorder is still {state} after {} s (trigger `{}` never fired?)",
+                a.wait_s,
+                a.trigger
+            );
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let mut frames = Vec::with_capacity(n);
+    // Values per frame: the selected channels, or what the first frame has (--no-arm).
+    let mut width = (!a.no_arm).then_some(channels.len());
+    while frames.len() < n {
+        let start = frames.len();
+        let count = READ_CHUNK.min(n - start);
+        let cmd = Command::Rec(RecCmd::Read { start, count });
+        let line = checked_line(&cmd)?;
+        let r = c.send(&cmd)?;
+        let bad = |l: &str, why: String| SerialError::BadReply {
+            command: line.clone(),
+            line: l.to_string(),
+            why,
+        };
+        if r.data.len() != count {
+            return Err(bad(
+                &r.reply_line(),
+                format!("{} frame lines, asked for {count}", r.data.len()),
+            )
+            .into());
+        }
+        if r.details != format!("rec read {count}") {
+            return Err(bad(&r.reply_line(), format!("expected `ok rec read {count}`")).into());
+        }
+        for (k, l) in r.data.iter().enumerate() {
+            let (i, v) = parse_frame(l, width).map_err(|why| bad(l, why))?;
+            width = Some(v.len());
+            if i != start + k {
+                return Err(bad(l, format!("frame {i}, expected {}", start + k)).into());
+            }
+            frames.push(v);
+        }
+    }
+    let mut channels = channels;
+    if let Some(first) = frames.first() {
+        // --no-arm without enough names: number the rest.
+        while channels.len() < first.len() {
+            channels.push(format!("ch{}", channels.len()));
+        }
+    }
+    Ok(Recording {
+        channels,
+        sample_hz,
+        pre,
+        trigger,
+        frames,
+    })
+}
+
+fn rec_status(c: &mut Client) -> Result<(String, usize)> {
+    let r = c.send(&Command::Rec(RecCmd::Status))?;
+    parse_rec_status(&r.details).map_err(|why| {
+        SerialError::BadReply {
+            command: "rec status".into(),
+            line: r.reply_line(),
+            why,
+        }
+        .into()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::sync::{Arc, Mutex};
+
+    /// A link that answers from a script: each written line is looked up in `replies`.
+    struct Scripted {
+        replies: Vec<(String, Vec<u8>)>,
+        out: Vec<u8>,
+        written: Arc<Mutex<Vec<u8>>>,
+        closed: bool,
+    }
+
+    impl Link for Scripted {
+        fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+            self.written.lock().unwrap().extend_from_slice(bytes);
+            for line in String::from_utf8_lossy(bytes).split('\n') {
+                if let Some((_, r)) = self.replies.iter().find(|(l, _)| l == line) {
+                    self.out.extend_from_slice(r);
+                }
+            }
+            Ok(())
+        }
+        fn recv(&mut self, buf: &mut [u8], _timeout: Duration) -> io::Result<usize> {
+            if self.out.is_empty() {
+                return if self.closed {
+                    Ok(0)
+                } else {
+                    Err(io::ErrorKind::TimedOut.into())
+                };
+            }
+            // Dribble a few bytes at a time, as a UART does.
+            let n = self.out.len().min(buf.len()).min(7);
+            buf[..n].copy_from_slice(&self.out[..n]);
+            self.out.drain(..n);
+            Ok(n)
+        }
+    }
+
+    fn client(replies: &[(&str, &[u8])], pre: &[u8], closed: bool) -> Client {
+        let link = Scripted {
+            replies: replies
+                .iter()
+                .map(|(l, r)| (l.to_string(), r.to_vec()))
+                .collect(),
+            out: pre.to_vec(),
+            written: Arc::default(),
+            closed,
+        };
+        Client::new(Box::new(link), Duration::from_millis(50))
+    }
+
+    #[derive(clap::Parser, Debug)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    #[test]
+    fn cli_definition_is_valid_and_parses_units() {
+        use clap::{CommandFactory, Parser};
+        Cli::command().debug_assert();
+        let a = Cli::try_parse_from([
+            "serial",
+            "--tcp",
+            "127.0.0.1:1",
+            "wave",
+            "sine",
+            "5um",
+            "0.1kHz",
+            "--offset",
+            "-2um",
+        ])
+        .unwrap()
+        .args;
+        match a.action {
+            Some(Action::Wave(WaveCmd::Sine(w))) => {
+                assert_eq!((w.amplitude, w.freq, w.offset), (5.0, 100.0, -2.0))
+            }
+            other => panic!("{other:?}"),
+        }
+        let a = Cli::try_parse_from(["serial", "--tcp", "h:1", "--", "mode pid", "stats"])
+            .unwrap()
+            .args;
+        assert_eq!(a.lines, vec!["mode pid", "stats"]);
+        assert!(a.action.is_none());
+        let e = Cli::try_parse_from(["serial", "limits", "--slew", "5 parsecs"]).unwrap_err();
+        assert!(e.to_string().contains("unknown unit"), "{e}");
+    }
+
+    #[test]
+    fn classifies_reply_lines() {
+        assert_eq!(parse_line("ok"), Line::Ok(String::new()));
+        assert_eq!(parse_line("ok pong\r"), Line::Ok("pong".into()));
+        assert_eq!(
+            parse_line("err 9 unknown mode name"),
+            Line::Err {
+                code: Some(9),
+                message: "unknown mode name".into()
+            }
+        );
+        assert_eq!(
+            parse_line("err x?"),
+            Line::Err {
+                code: None,
+                message: "".into()
+            }
+        );
+        assert_eq!(parse_line("okay"), Line::Data("okay".into()));
+        assert_eq!(
+            parse_line("12 1.5 2 3 4"),
+            Line::Data("12 1.5 2 3 4".into())
+        );
+        assert_eq!(known_error(12), Some(command::Error::Busy));
+        assert_eq!(known_error(0), None);
+        for e in ERRORS {
+            assert_eq!(known_error(e.code()), Some(e));
+        }
+    }
+
+    #[test]
+    fn typed_replies_parse_and_refuse_garbage() {
+        let s = parse_stats("step 10 20 15 isr 30 40 35 samples 1000 overruns 2").unwrap();
+        assert_eq!((s.step_max, s.isr_last, s.overruns), (20, 35, 2));
+        assert!(parse_stats("step 10 20 isr 30 40 35 samples 1000 overruns 2").is_err());
+        assert!(parse_stats("step a 20 15 isr 30 40 35 samples 1000 overruns 2").is_err());
+        assert!(parse_stats("").is_err());
+        assert_eq!(
+            parse_rec_status("rec done 1024").unwrap(),
+            ("done".to_string(), 1024)
+        );
+        assert!(parse_rec_status("rec sleeping 3").is_err());
+        assert!(parse_rec_status("rec done -1").is_err());
+        assert_eq!(
+            parse_rec_sel("rec sel ref_um y_um").unwrap(),
+            vec!["ref_um".to_string(), "y_um".to_string()]
+        );
+        assert!(parse_rec_sel("rec sel").is_err());
+        assert_eq!(
+            parse_frame("3 1.5 -2 inf 4", Some(4)).unwrap(),
+            (3, vec![1.5, -2.0, f64::INFINITY, 4.0])
+        );
+        assert!(parse_frame("3 1.5 -2 4", Some(4)).is_err());
+        assert!(parse_frame("x 1 2 3 4", None).is_err());
+        assert!(parse_frame("3 1 2 3 zz", Some(4)).is_err());
+        let r = Response {
+            data: vec![],
+            details: "u_max 150".into(),
+        };
+        assert_eq!(parse_get(&r, "u_max"), Ok(150.0));
+        assert!(parse_get(&r, "u_min").is_err());
+    }
+
+    #[test]
+    fn units_scale_and_unknown_units_fail() {
+        assert_eq!(parse_um("5"), Ok(5.0));
+        assert_eq!(parse_um("5um"), Ok(5.0));
+        assert_eq!(parse_um("-2.5 um"), Ok(-2.5));
+        assert!((parse_um("300nm").unwrap() - 0.3).abs() < 1e-12);
+        assert_eq!(parse_um("0.1mm"), Ok(100.0));
+        assert_eq!(parse_um("1e1um"), Ok(10.0));
+        assert_eq!(parse_hz("2kHz"), Ok(2000.0));
+        assert_eq!(parse_volts_per_s("20V/ms"), Ok(20_000.0));
+        assert_eq!(parse_volts("120V"), Ok(120.0));
+        let e = parse_um("5 furlong").unwrap_err();
+        assert!(e.contains("unknown unit `furlong`"), "{e}");
+        assert!(parse_hz("fast").is_err());
+        assert!(parse_hz("1e60Hz").is_err());
+        assert!(parse_volts("nan").is_err());
+    }
+
+    #[test]
+    fn replies_are_collected_and_errors_name_the_command() {
+        let mut c = client(
+            &[
+                ("ping", b"ok pong\n"),
+                ("mode fancy", b"err 9 unknown mode name\n"),
+                ("rec read 0 2", b"0 1 2 3 4\r\n1 5 6 7 8\nok rec read 2\n"),
+            ],
+            b"boot noise\xff\xfe\nready\n",
+            false,
+        );
+        let skipped = c.sync().unwrap();
+        assert_eq!(skipped.len(), 2);
+        let e = c.send(&Command::Mode("fancy")).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("`mode fancy`")
+                && msg.contains("firmware error 9")
+                && msg.contains("UnknownMode"),
+            "{msg}"
+        );
+        let r = c.raw("rec read 0 2").unwrap();
+        assert_eq!(r.data, vec!["0 1 2 3 4", "1 5 6 7 8"]);
+        assert_eq!(r.details, "rec read 2");
+    }
+
+    #[test]
+    fn silence_garbage_and_hangup_are_errors_not_panics() {
+        let mut c = client(&[], b"", false);
+        let e = c.raw("ping").unwrap_err();
+        assert!(matches!(e, SerialError::Timeout { .. }), "{e}");
+        assert!(e.to_string().contains("`ping`: no reply"), "{e}");
+
+        let mut c = client(&[("ping", &[0x55u8; 5000])], b"", false);
+        let e = c.raw("ping").unwrap_err();
+        assert!(matches!(e, SerialError::BadReply { .. }), "{e}");
+
+        let mut c = client(&[], b"partial", true);
+        let e = c.raw("stats").unwrap_err();
+        assert!(matches!(e, SerialError::Closed { .. }), "{e}");
+
+        let mut c = client(&[], b"", false);
+        let e = c.raw("ping\nping").unwrap_err();
+        assert!(matches!(e, SerialError::BadCommand { .. }), "{e}");
+    }
+
+    #[test]
+    fn built_lines_are_checked_by_the_firmware_parser() {
+        assert_eq!(
+            checked_line(&Command::Wave {
+                shape: Shape::Sine,
+                amp_um: 5.0,
+                freq_hz: 100.0,
+                offset_um: 10.0
+            })
+            .unwrap(),
+            "wave sine 5 100 10"
+        );
+        // A negative amplitude is refused on the host with the protocol's own error.
+        let e = checked_line(&Command::Wave {
+            shape: Shape::Sine,
+            amp_um: -5.0,
+            freq_hz: 100.0,
+            offset_um: 10.0,
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("err 8"), "{e}");
+        // Too long for the firmware's line buffer.
+        let e = checked_line(&Command::Wave {
+            shape: Shape::Triangle,
+            amp_um: 3.0e38,
+            freq_hz: 3.0e38,
+            offset_um: -3.0e38,
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("at most 96"), "{e}");
+        assert_eq!(
+            select_line(&[Signal::RefUm, Signal::UVolts]).unwrap(),
+            "rec sel ref_um u_volts"
+        );
+        assert!(select_line(&[]).is_err());
+    }
+
+    #[test]
+    fn trigger_spec_resolves_channels() {
+        let ch: Vec<String> = ["ref_um", "y_um", "u_volts", "error_um"]
+            .map(String::from)
+            .to_vec();
+        assert_eq!(parse_trigger("now", &ch, 0).unwrap(), TriggerCmd::Now);
+        assert_eq!(
+            parse_trigger("rise:y_um:10.5", &ch, 100).unwrap(),
+            TriggerCmd::Rising {
+                channel: 1,
+                level: 10.5,
+                pre: 100
+            }
+        );
+        assert_eq!(
+            parse_trigger("fall:2:3", &ch, 0).unwrap(),
+            TriggerCmd::Falling {
+                channel: 2,
+                level: 3.0,
+                pre: 0
+            }
+        );
+        assert!(parse_trigger("rise:dac_code:1", &ch, 0).is_err());
+        assert!(parse_trigger("rise:y_um:nan", &ch, 0).is_err());
+        assert!(parse_trigger("up:y_um:1", &ch, 0).is_err());
+        assert!(parse_trigger("now", &ch, 5).is_err());
+    }
+
+    fn finite() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            -1.0e6f32..1.0e6,
+            any::<f32>().prop_filter("finite", |v| v.is_finite() && v.abs() < 1e12),
+            Just(0.0f32),
+            Just(-0.0f32),
+        ]
+    }
+
+    fn name() -> impl Strategy<Value = String> {
+        "[a-z_+\\-0-9]{1,16}"
+    }
+
+    proptest! {
+        /// Every command the host can build reads back identically with the firmware's
+        /// parser (or the host refuses it before sending).
+        #[test]
+        fn every_built_command_round_trips(
+            which in 0usize..20, a in finite(), b in finite(), d in finite(),
+            n in name(), i in 0usize..5000, k in 0usize..5000,
+        ) {
+            let shape = [Shape::Sine, Shape::Triangle, Shape::Square][which % 3];
+            let cmd = match which {
+                0 => Command::Ping,
+                1 => Command::Help,
+                2 => Command::Get(&n),
+                3 => Command::Set(&n, a),
+                4 => Command::Mode(&n),
+                5 => Command::Feedforward(&n),
+                6 => Command::WaveOff,
+                7 => Command::WaveHold(a),
+                8..=10 => Command::Wave { shape, amp_um: a.abs(), freq_hz: b.abs(), offset_um: d },
+                11 => Command::Stats,
+                12 => Command::StatsReset,
+                13 => Command::Rec(RecCmd::Trigger(TriggerCmd::Now)),
+                14 => Command::Rec(RecCmd::Trigger(TriggerCmd::Rising { channel: i, level: a, pre: k })),
+                15 => Command::Rec(RecCmd::Trigger(TriggerCmd::Falling { channel: i, level: a, pre: k })),
+                16 => Command::Rec(RecCmd::Trigger(TriggerCmd::Level { channel: i, level: a, pre: k })),
+                17 => Command::Rec(RecCmd::Read { start: i, count: k }),
+                18 => Command::Rec([RecCmd::Arm, RecCmd::Stop, RecCmd::Status][i % 3]),
+                _ => Command::Bench,
+            };
+            let line = format_command(&cmd);
+            match checked_line(&cmd) {
+                Ok(l) => {
+                    prop_assert_eq!(&l, &line);
+                    prop_assert_eq!(command::parse(l.as_bytes()), Ok(cmd));
+                }
+                // Only an overlong line may be refused.
+                Err(e) => prop_assert!(line.len() > MAX_LINE, "{e}"),
+            }
+        }
+
+        #[test]
+        fn select_lines_round_trip(idx in proptest::collection::vec(0usize..Signal::COUNT, 1..5)) {
+            let sig: Vec<Signal> = idx.iter().map(|&i| Signal::ALL[i]).collect();
+            let line = select_line(&sig).unwrap();
+            match command::parse(line.as_bytes()) {
+                Ok(Command::Rec(RecCmd::Select(w))) => {
+                    let names: Vec<&str> = w.iter().collect();
+                    let want: Vec<&str> = sig.iter().map(|s| s.name()).collect();
+                    prop_assert_eq!(names, want);
+                    prop_assert_eq!(format_command(&Command::Rec(RecCmd::Select(w))), line);
+                }
+                other => prop_assert!(false, "{other:?}"),
+            }
+        }
+
+        #[test]
+        fn garbage_replies_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+            let mut c = client(&[], &bytes, true);
+            for _ in 0..4 {
+                let _ = c.raw("rec read 0 4");
+            }
+            if let Ok(s) = std::str::from_utf8(&bytes) {
+                let _ = parse_stats(s);
+                let _ = parse_rec_status(s);
+                let _ = parse_frame(s, None);
+                let _ = parse_line(s);
+                let _ = parse_um(s);
+            }
+        }
+    }
+}

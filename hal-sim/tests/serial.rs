@@ -1,0 +1,410 @@
+//! `piezo serial` against a fake firmware in this process: a TCP listener thread runs the
+//! firmware's own board-independent executor (`src/bin/firmware/control.rs`, included by
+//! path: the same `Ctl::execute`, recorder and `stream_frames`) behind the firmware's line
+//! buffer and parser, with a first-order stage in place of the converters. On the host the
+//! executor builds with the Cortex-M3 number type (Q16.16, 16 384 Hz).
+
+// The module names the firmware's board features, which this crate does not have.
+#![allow(unexpected_cfgs)]
+
+#[allow(dead_code, clippy::all)]
+#[path = "../../src/bin/firmware/control.rs"]
+mod control;
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::PathBuf;
+use std::process::Command as Process;
+use std::thread;
+use std::time::Duration;
+
+use hal_sim::cli::serial::{
+    connect, execute, record, Action, Conn, RecordArgs, SerialError, WaveArgs, WaveCmd,
+};
+use piezo_core::command::{self, Command, LineBuffer, RecCmd};
+
+/// Control periods run before each command is executed (the firmware runs on while the
+/// host talks).
+const PERIODS_PER_LINE: usize = 300;
+
+/// The firmware's control state and a stage: y follows 0.16 um/V of the output with a lag.
+struct Fake {
+    ctl: control::Ctl,
+    y_um: f64,
+    dac: u16,
+}
+
+impl Fake {
+    fn new() -> Self {
+        Self {
+            ctl: control::Ctl::new(control::c(control::SAMPLE_HZ as f64)),
+            y_um: 0.0,
+            dac: 0,
+        }
+    }
+
+    fn run(&mut self, periods: usize) {
+        for _ in 0..periods {
+            let volts = self.dac as f64 * 150.0 / control::DAC_MAX as f64;
+            self.y_um += 0.3 * (0.16 * volts - self.y_um);
+            let code = (self.y_um * 655.35).clamp(0.0, 65535.0) as u32;
+            self.dac = self.ctl.lp.step(code);
+            self.ctl.record(code, self.dac);
+            self.ctl.timing.step.record(40);
+            self.ctl.timing.isr.record(60);
+        }
+    }
+
+    /// What the boards' command task does with one line.
+    fn answer(&mut self, line: Result<&[u8], command::Error>, out: &mut Vec<u8>) {
+        self.run(PERIODS_PER_LINE);
+        let mut reply = command::Reply::<160>::new();
+        match line.and_then(command::parse) {
+            Ok(Command::Empty) => return,
+            Ok(Command::Rec(RecCmd::Read { start, count })) => {
+                let rec = &self.ctl.rec;
+                control::stream_frames(
+                    start,
+                    count,
+                    |i| rec.frame(i).copied(),
+                    |l| {
+                        out.extend_from_slice(l.as_bytes());
+                        out.push(b'\n');
+                    },
+                );
+                return;
+            }
+            Ok(c) => self.ctl.execute(c, &mut reply),
+            Err(e) => {
+                use std::fmt::Write as _;
+                write!(reply, "{e}").ok();
+            }
+        }
+        out.extend_from_slice(reply.as_bytes());
+        out.push(b'\n');
+    }
+}
+
+/// Serves connections one after another on one firmware state, like a UART that stays up
+/// while host programs come and go. Each connection first gets boot noise.
+fn spawn_firmware() -> String {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    thread::spawn(move || {
+        let mut fake = Fake::new();
+        for stream in listener.incoming() {
+            let Ok(mut s) = stream else { continue };
+            s.write_all(b"bench: table\n\xff\xfegarbage\nready\nhalf a li")
+                .ok();
+            let mut lb = LineBuffer::new();
+            let mut buf = [0u8; 512];
+            'conn: loop {
+                let n = match s.read(&mut buf) {
+                    Ok(0) | Err(_) => break 'conn,
+                    Ok(n) => n,
+                };
+                let mut out = Vec::new();
+                for &b in &buf[..n] {
+                    if let Some(line) = lb.push(b) {
+                        fake.answer(line, &mut out);
+                    }
+                }
+                if s.write_all(&out).is_err() {
+                    break 'conn;
+                }
+            }
+        }
+    });
+    addr
+}
+
+fn conn(addr: &str) -> Conn {
+    Conn {
+        port: None,
+        baud: 115_200,
+        tcp: Some(addr.to_string()),
+        timeout_s: 5.0,
+        no_sync: false,
+        keep_going: false,
+    }
+}
+
+fn run(addr: &str, action: Action) -> anyhow::Result<String> {
+    let mut c = connect(&conn(addr))?;
+    let mut out = Vec::new();
+    execute(&mut c, action, false, &mut out)?;
+    Ok(String::from_utf8(out).unwrap())
+}
+
+fn tmp(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("serial-{name}"))
+}
+
+fn read_csv(path: &PathBuf) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap()).collect())
+        .collect();
+    (header, rows)
+}
+
+#[test]
+fn typed_commands_drive_the_firmware_executor() {
+    let addr = spawn_firmware();
+    let out = run(
+        &addr,
+        Action::Mode {
+            law: "ff+pid".into(),
+            ff: Some("ims-cbw".into()),
+        },
+    )
+    .unwrap();
+    assert_eq!(out, "ok ff ims-cbw\nok mode ff+pid\n");
+
+    let out = run(
+        &addr,
+        Action::Limits {
+            u_min: None,
+            u_max: Some(140.0),
+            slew: Some(20_000.0),
+        },
+    )
+    .unwrap();
+    assert_eq!(out, "output 0 V .. 140 V, slew limit 20000 V/s (20 V/ms)\n");
+
+    let out = run(
+        &addr,
+        Action::Wave(WaveCmd::Sine(WaveArgs {
+            amplitude: 5.0,
+            freq: 200.0,
+            offset: 10.0,
+        })),
+    )
+    .unwrap();
+    assert!(out.starts_with("ok wave sine 5"), "{out}");
+
+    // The firmware refuses; the error names the command and the numbered error.
+    let e = run(
+        &addr,
+        Action::Mode {
+            law: "warp-drive".into(),
+            ff: None,
+        },
+    )
+    .unwrap_err();
+    match e.downcast_ref::<SerialError>() {
+        Some(SerialError::Firmware { command, code, .. }) => {
+            assert_eq!((command.as_str(), *code), ("mode warp-drive", Some(9)))
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(
+        e.to_string()
+            .contains("`mode warp-drive`: firmware error 9: unknown mode name (UnknownMode)"),
+        "{e}"
+    );
+    let e = run(
+        &addr,
+        Action::Limits {
+            u_min: None,
+            u_max: Some(200.0),
+            slew: None,
+        },
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().contains("`set u_max 200`: firmware error 8"),
+        "{e}"
+    );
+
+    let out = run(&addr, Action::Status).unwrap();
+    for want in [
+        "u_max         140",
+        "sample_hz     16384",
+        "control step  min 40",
+        "recorder      idle",
+    ] {
+        assert!(out.contains(want), "{want:?} missing in\n{out}");
+    }
+}
+
+#[test]
+fn the_recorder_comes_back_as_csv_with_units() {
+    let addr = spawn_firmware();
+    run(
+        &addr,
+        Action::Wave(WaveCmd::Sine(WaveArgs {
+            amplitude: 5.0,
+            freq: 16.0,
+            offset: 10.0,
+        })),
+    )
+    .unwrap();
+    let (csv, svg) = (tmp("rec.csv"), tmp("rec.svg"));
+    let out = run(
+        &addr,
+        Action::Record(RecordArgs {
+            signals: vec!["ref_um".into(), "y_um".into(), "u_volts".into()],
+            trigger: "rise:ref_um:10".into(),
+            pre: 64,
+            wait_s: 10.0,
+            no_arm: false,
+            out: csv.clone(),
+            svg: Some(svg.clone()),
+        }),
+    )
+    .unwrap();
+    assert!(out.contains("recorded 1024 frames at 16384 Hz"), "{out}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(
+        text.contains("# units: i [frame], t_s [s], ref_um [um], y_um [um], u_volts [V]"),
+        "{text:.300}"
+    );
+    let (header, rows) = read_csv(&csv);
+    // The fourth channel keeps the signal it had (the recorder has 4 channels).
+    assert_eq!(
+        header,
+        ["i", "t_s", "ref_um", "y_um", "u_volts", "ff_volts"]
+    );
+    assert_eq!(rows.len(), 1024);
+    for (k, r) in rows.iter().enumerate() {
+        assert_eq!(r[0], k as f64);
+        let t = (k as f64 - 64.0) / 16384.0;
+        assert!((r[1] - t).abs() < 1e-9, "row {k}: t_s {}", r[1]);
+        assert!((4.99..=15.01).contains(&r[2]), "row {k}: ref_um {}", r[2]);
+        assert!((0.0..=140.0).contains(&r[4]), "row {k}: u_volts {}", r[4]);
+    }
+    // Frame 64 is the trigger: the rising crossing of 10 um.
+    assert!(
+        rows[63][2] < 10.0 && rows[64][2] >= 10.0,
+        "{:?}",
+        &rows[62..66]
+    );
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+
+    // The same capture again without arming.
+    let mut c = connect(&conn(&addr)).unwrap();
+    let again = record(
+        &mut c,
+        &RecordArgs {
+            signals: vec!["a".into()],
+            trigger: "now".into(),
+            pre: 64,
+            wait_s: 1.0,
+            no_arm: true,
+            out: tmp("unused.csv"),
+            svg: None,
+        },
+    )
+    .unwrap();
+    assert_eq!(again.channels, ["a", "ch1", "ch2", "ch3"]);
+    assert_eq!(again.frames.len(), 1024);
+    assert_eq!(again.frames[64][0], rows[64][2]);
+}
+
+#[test]
+fn the_binary_sends_raw_lines_and_fails_loudly() {
+    let addr = spawn_firmware();
+    let piezo = env!("CARGO_BIN_EXE_piezo");
+    let out = Process::new(piezo)
+        .args([
+            "serial",
+            "--tcp",
+            &addr,
+            "--",
+            "ping",
+            "get u_max",
+            "rec status",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(stdout, "ok pong\nok u_max 150.00000\nok rec idle 0\n");
+
+    let out = Process::new(piezo)
+        .args(["serial", "--tcp", &addr, "--keep-going", "--"])
+        .args(["set u_max 1e9", "wave sine 1 2 3", "jump"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{out:?}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stdout.starts_with("err 8 value out of range\nok wave sine"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.ends_with("err 3 unknown command (try help)\n"),
+        "{stdout}"
+    );
+    assert!(stderr.contains("`jump`: firmware error 3"), "{stderr}");
+    assert!(stderr.contains("2 of 3 commands failed"), "{stderr}");
+
+    let out = Process::new(piezo)
+        .args([
+            "serial",
+            "--tcp",
+            &addr,
+            "wave",
+            "sine",
+            "5 furlongs",
+            "1Hz",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown unit `furlongs`"));
+}
+
+#[test]
+fn silent_closing_and_babbling_peers_are_clear_errors() {
+    // Accepts and never answers.
+    let silent = TcpListener::bind("127.0.0.1:0").unwrap();
+    let silent_addr = silent.local_addr().unwrap().to_string();
+    thread::spawn(move || {
+        let mut keep = Vec::new();
+        for s in silent.incoming() {
+            keep.push(s);
+        }
+    });
+    let mut c = conn(&silent_addr);
+    c.timeout_s = 0.2;
+    let e = connect(&c).err().unwrap();
+    assert!(
+        format!("{e:#}").contains("`ping`: no reply within 0.2 s"),
+        "{e:#}"
+    );
+
+    // Answers with noise, then hangs up.
+    let babbler = TcpListener::bind("127.0.0.1:0").unwrap();
+    let babbler_addr = babbler.local_addr().unwrap().to_string();
+    thread::spawn(move || {
+        for s in babbler.incoming() {
+            let Ok(mut s) = s else { continue };
+            let mut buf = [0u8; 64];
+            let _ = s.read(&mut buf);
+            s.write_all(b"\x00\x01ok\xffpong?\nerr\nerr zz top\n").ok();
+            thread::sleep(Duration::from_millis(20));
+        }
+    });
+    let e = connect(&conn(&babbler_addr)).err().unwrap();
+    assert!(
+        format!("{e:#}").contains("connection closed before the reply"),
+        "{e:#}"
+    );
+    let mut c = conn(&babbler_addr);
+    c.no_sync = true;
+    let mut client = connect(&c).unwrap();
+    let e = client.raw("stats").expect_err("garbage is not a reply");
+    // The first `err` line ends the command, however malformed.
+    assert!(matches!(e, SerialError::Firmware { code: None, .. }), "{e}");
+    let _ = TcpStream::connect(&babbler_addr);
+}
