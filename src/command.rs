@@ -69,6 +69,8 @@ pub enum Error {
     Busy,
     /// This board does not implement the command.
     Unsupported,
+    /// A number with more than [`MAX_DIGITS`] significant digits.
+    TooManyDigits,
 }
 
 impl Error {
@@ -88,6 +90,7 @@ impl Error {
             Error::BadKeyword => 11,
             Error::Busy => 12,
             Error::Unsupported => 13,
+            Error::TooManyDigits => 14,
         }
     }
 
@@ -107,6 +110,7 @@ impl Error {
             Error::BadKeyword => "unknown sub-command",
             Error::Busy => "not possible in the current state",
             Error::Unsupported => "not supported on this board",
+            Error::TooManyDigits => "number has more than 19 significant digits",
         }
     }
 }
@@ -211,10 +215,18 @@ impl<'a> Words<'a> {
     fn split(line: &'a str) -> Result<Self, Error> {
         let mut words = [""; MAX_WORDS];
         let mut len = 0;
-        for w in line.split(' ').filter(|w| !w.is_empty()) {
-            let slot = words.get_mut(len).ok_or(Error::TooManyArguments)?;
-            *slot = w;
-            len += 1;
+        // Byte scan (no core::str::split: its searcher carries panic paths).
+        let mut start = 0;
+        for (i, c) in line.bytes().chain(core::iter::once(b' ')).enumerate() {
+            if c != b' ' {
+                continue;
+            }
+            if i > start {
+                let slot = words.get_mut(len).ok_or(Error::TooManyArguments)?;
+                *slot = line.get(start..i).ok_or(Error::NotAscii)?;
+                len += 1;
+            }
+            start = i + 1;
         }
         Ok(Self { words, len })
     }
@@ -263,7 +275,7 @@ impl<'a> Words<'a> {
     }
 
     fn index(&self, i: usize) -> Result<usize, Error> {
-        self.arg(i)?.parse::<usize>().map_err(|_| Error::BadNumber)
+        parse_usize(self.arg(i)?)
     }
 
     /// Fails unless the line has at most `n` words.
@@ -276,12 +288,298 @@ impl<'a> Words<'a> {
     }
 }
 
-/// A finite `f32`; `nan`, `inf` and garbage are [`Error::BadNumber`].
+/// Most significant decimal digits a number may have. Leading zeros and trailing zeros
+/// do not count (`0.000150000` has 2); 19 digits fit a `u64`, more than `f32`'s 9 needed.
+pub const MAX_DIGITS: u32 = 19;
+
+/// A finite `f32` from decimal text, correctly rounded (nearest, ties to even), without
+/// core's float parser (bounded work, no panic path in the firmware's serial handler).
+///
+/// Accepted syntax: `[+-]digits[.digits][(e|E)[+-]digits]`, also `5.` and `.5`, with at
+/// most [`MAX_DIGITS`] significant digits. Values that round to zero give `0` (`-0` with a
+/// minus sign), as core's parser does.
+/// * [`Error::BadNumber`]: not that syntax (`nan`, `inf`, `0x10`, `1e`, `1.2.3`, ...), or a
+///   value beyond `f32::MAX` once rounded;
+/// * [`Error::TooManyDigits`]: more than [`MAX_DIGITS`] significant digits.
 pub fn parse_f32(s: &str) -> Result<f32, Error> {
-    match s.parse::<f32>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(Error::BadNumber),
+    let b = s.as_bytes();
+    let (neg, b) = match b.split_first() {
+        Some((b'-', r)) => (true, r),
+        Some((b'+', r)) => (false, r),
+        _ => (false, b),
+    };
+    // Value = m * 10^exp10, m the significant digits; zeros after the last nonzero digit
+    // wait in `zeros` (they only move the exponent).
+    let (mut m, mut n_sig, mut zeros, mut exp10) = (0u64, 0u32, 0u32, 0i32);
+    let (mut digits, mut dot) = (0u32, false);
+    let mut rest: &[u8] = &[];
+    for (i, &c) in b.iter().enumerate() {
+        match c {
+            b'0'..=b'9' => {
+                digits = digits.saturating_add(1);
+                if dot {
+                    exp10 = exp10.saturating_sub(1);
+                }
+                if c == b'0' {
+                    if n_sig > 0 {
+                        zeros = zeros.saturating_add(1);
+                    }
+                    continue;
+                }
+                let n = n_sig.saturating_add(zeros).saturating_add(1);
+                if n > MAX_DIGITS {
+                    return Err(Error::TooManyDigits);
+                }
+                let scale = POW10_U64
+                    .get(zeros as usize + 1)
+                    .ok_or(Error::TooManyDigits)?;
+                m = m
+                    .checked_mul(*scale)
+                    .and_then(|m| m.checked_add((c - b'0') as u64))
+                    .ok_or(Error::TooManyDigits)?;
+                n_sig = n;
+                zeros = 0;
+            }
+            b'.' if !dot => dot = true,
+            b'e' | b'E' => {
+                rest = b.get(i + 1..).unwrap_or(&[]);
+                if rest.is_empty() {
+                    return Err(Error::BadNumber);
+                }
+                break;
+            }
+            _ => return Err(Error::BadNumber),
+        }
     }
+    if digits == 0 {
+        return Err(Error::BadNumber);
+    }
+    exp10 = exp10.saturating_add(zeros as i32);
+    if !rest.is_empty() {
+        let (eneg, ed) = match rest.split_first() {
+            Some((b'-', r)) => (true, r),
+            Some((b'+', r)) => (false, r),
+            _ => (false, rest),
+        };
+        if ed.is_empty() {
+            return Err(Error::BadNumber);
+        }
+        let mut e = 0i32;
+        for &c in ed {
+            if !c.is_ascii_digit() {
+                return Err(Error::BadNumber);
+            }
+            // Saturate far beyond f32's range: the value is then 0 or too large anyway.
+            e = (e * 10 + (c - b'0') as i32).min(100_000);
+        }
+        exp10 = exp10.saturating_add(if eneg { -e } else { e });
+    }
+    let sign = |v: f32| if neg { -v } else { v };
+    // V in [10^(n_sig-1+exp10), 10^(n_sig+exp10)).
+    let top = (n_sig as i32).saturating_add(exp10);
+    if m == 0 || top <= -46 {
+        // Below half the smallest subnormal (7.0e-46): rounds to zero.
+        return Ok(sign(0.0));
+    }
+    if top > 39 {
+        return Err(Error::BadNumber);
+    }
+    // Candidate from f64 arithmetic (relative error < 1e-15, far below f32's 6e-8), then
+    // exact comparisons with the rounding midpoints around it decide.
+    let p = pow10_f64(exp10.unsigned_abs());
+    let approx = if exp10 >= 0 {
+        m as f64 * p
+    } else {
+        m as f64 / p
+    };
+    let mut bits = (approx as f32).to_bits().min(F32_INF_BITS);
+    for _ in 0..8 {
+        let up = bits < F32_INF_BITS && {
+            let c = cmp_midpoint(m, exp10, bits);
+            c.is_gt() || (c.is_eq() && bits & 1 == 1)
+        };
+        if up {
+            bits += 1;
+            continue;
+        }
+        let down = bits > 0 && {
+            let c = cmp_midpoint(m, exp10, bits - 1);
+            c.is_lt() || (c.is_eq() && bits & 1 == 1)
+        };
+        if down {
+            bits -= 1;
+            continue;
+        }
+        break;
+    }
+    if bits >= F32_INF_BITS {
+        return Err(Error::BadNumber);
+    }
+    Ok(sign(f32::from_bits(bits)))
+}
+
+/// Bit pattern of `f32::INFINITY`; one above `f32::MAX`.
+const F32_INF_BITS: u32 = 0x7F80_0000;
+
+/// 10^0 ..= 10^19.
+const POW10_U64: [u64; 20] = {
+    let mut t = [1u64; 20];
+    let mut i = 1;
+    while i < 20 {
+        t[i] = t[i - 1] * 10;
+        i += 1;
+    }
+    t
+};
+
+/// 10^n as f64 (exact up to 10^22, then within a few ulp); `n` is at most 65 here.
+fn pow10_f64(n: u32) -> f64 {
+    const EXACT: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+        1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
+    let mut p = 1.0;
+    let mut n = n.min(330);
+    while n > 22 {
+        p *= 1e22;
+        n -= 22;
+    }
+    p * EXACT.get(n as usize).copied().unwrap_or(1.0)
+}
+
+/// Compares `m * 10^exp10` with the midpoint between the positive f32 of bit pattern
+/// `bits` and the next one up, exactly (integers of up to 384 bits).
+fn cmp_midpoint(m: u64, exp10: i32, bits: u32) -> core::cmp::Ordering {
+    let (ef, frac) = (bits >> 23, bits & 0x7F_FFFF);
+    let (sig, e2) = if ef == 0 {
+        (frac, -149)
+    } else {
+        (frac | 0x80_0000, ef as i32 - 150)
+    };
+    // Midpoint = (2 sig + 1) * 2^(e2 - 1).
+    let (mut lhs, mut rhs) = (Big::new(m), Big::new(2 * sig as u64 + 1));
+    if exp10 >= 0 {
+        lhs.mul_pow10(exp10.unsigned_abs());
+    } else {
+        rhs.mul_pow10(exp10.unsigned_abs());
+    }
+    let e = e2 - 1;
+    if e >= 0 {
+        rhs.shl(e.unsigned_abs());
+    } else {
+        lhs.shl(e.unsigned_abs());
+    }
+    lhs.cmp(&rhs)
+}
+
+/// Unsigned integer of [`Big::WORDS`] 64-bit words, least significant first; a result
+/// that does not fit saturates to "larger than any that does" (never wraps, never panics).
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct Big {
+    w: [u64; Big::WORDS],
+    overflow: bool,
+}
+
+impl Big {
+    const WORDS: usize = 6;
+
+    fn new(v: u64) -> Self {
+        let mut w = [0; Self::WORDS];
+        w[0] = v;
+        Self { w, overflow: false }
+    }
+
+    fn mul_small(&mut self, x: u64) {
+        let mut carry = 0u128;
+        for w in self.w.iter_mut() {
+            let t = *w as u128 * x as u128 + carry;
+            *w = t as u64;
+            carry = t >> 64;
+        }
+        self.overflow |= carry != 0;
+    }
+
+    fn mul_pow10(&mut self, mut n: u32) {
+        while n > 0 {
+            let k = n.min(19);
+            self.mul_small(POW10_U64.get(k as usize).copied().unwrap_or(1));
+            n -= k;
+        }
+    }
+
+    fn bit_len(&self) -> u32 {
+        let mut len = 0;
+        for (i, w) in self.w.iter().enumerate() {
+            if *w != 0 {
+                len = i as u32 * 64 + (64 - w.leading_zeros());
+            }
+        }
+        len
+    }
+
+    fn shl(&mut self, n: u32) {
+        if self.bit_len() == 0 {
+            return;
+        }
+        if self.bit_len().saturating_add(n) > 64 * Self::WORDS as u32 {
+            self.overflow = true;
+            return;
+        }
+        let (words, bits) = ((n / 64) as usize, n % 64);
+        let src = self.w;
+        let at = |j: Option<usize>| j.and_then(|j| src.get(j)).copied().unwrap_or(0);
+        for (i, w) in self.w.iter_mut().enumerate() {
+            let lo = at(i.checked_sub(words));
+            let below = at(i.checked_sub(words + 1));
+            *w = if bits == 0 {
+                lo
+            } else {
+                (lo << bits) | (below >> (64 - bits))
+            };
+        }
+    }
+}
+
+impl PartialOrd for Big {
+    fn partial_cmp(&self, other: &Self) -> Option<core::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Big {
+    fn cmp(&self, other: &Self) -> core::cmp::Ordering {
+        match (self.overflow, other.overflow) {
+            (true, false) => return core::cmp::Ordering::Greater,
+            (false, true) => return core::cmp::Ordering::Less,
+            _ => {}
+        }
+        for (a, b) in self.w.iter().rev().zip(other.w.iter().rev()) {
+            if a != b {
+                return a.cmp(b);
+            }
+        }
+        core::cmp::Ordering::Equal
+    }
+}
+
+/// A non-negative integer (`[+]digits`), without core's integer parser.
+pub fn parse_usize(s: &str) -> Result<usize, Error> {
+    let b = s.as_bytes();
+    let b = b.strip_prefix(b"+").unwrap_or(b);
+    if b.is_empty() {
+        return Err(Error::BadNumber);
+    }
+    let mut v = 0usize;
+    for &c in b {
+        if !c.is_ascii_digit() {
+            return Err(Error::BadNumber);
+        }
+        v = v
+            .checked_mul(10)
+            .and_then(|v| v.checked_add((c - b'0') as usize))
+            .ok_or(Error::OutOfRange)?;
+    }
+    Ok(v)
 }
 
 /// Parses one line (without its terminator).
@@ -522,11 +820,15 @@ impl<const N: usize> Reply<N> {
     pub fn truncated(&self) -> bool {
         self.truncated
     }
-}
 
-impl<const N: usize> fmt::Write for Reply<N> {
-    fn write_str(&mut self, s: &str) -> fmt::Result {
-        for &b in s.as_bytes() {
+    /// Appends text (cut at the capacity). The `push_*` writers are what the firmware uses:
+    /// no `core::fmt`, so no indirect calls and a known stack bound in its handlers.
+    pub fn push_str(&mut self, s: &str) {
+        self.push_bytes(s.as_bytes());
+    }
+
+    fn push_bytes(&mut self, bytes: &[u8]) {
+        for &b in bytes {
             match self.buf.get_mut(self.len) {
                 Some(slot) => {
                     *slot = b;
@@ -538,6 +840,184 @@ impl<const N: usize> fmt::Write for Reply<N> {
                 }
             }
         }
+    }
+
+    /// `s`, then spaces up to `width` bytes (left-aligned column).
+    pub fn push_padded(&mut self, s: &str, width: usize) {
+        self.push_str(s);
+        for _ in s.len()..width {
+            self.push_bytes(b" ");
+        }
+    }
+
+    /// Spaces, then `s`, `width` bytes in all (right-aligned column).
+    pub fn push_right(&mut self, s: &str, width: usize) {
+        for _ in s.len()..width {
+            self.push_bytes(b" ");
+        }
+        self.push_str(s);
+    }
+
+    /// `v / 10^decimals` with exactly `decimals` digits after the point (`1234, 2` ->
+    /// `12.34`): fixed-point counters without floats.
+    pub fn push_fixed(&mut self, v: u32, decimals: u32) {
+        let scale = POW10_U64.get(decimals as usize).copied().unwrap_or(1);
+        let v = v as u64;
+        self.push_u64(v / scale);
+        if decimals == 0 {
+            return;
+        }
+        self.push_bytes(b".");
+        let mut frac = Reply::<20>::new();
+        frac.push_u64(v % scale);
+        for _ in frac.len..decimals as usize {
+            self.push_bytes(b"0");
+        }
+        self.push_bytes(frac.as_bytes());
+    }
+
+    /// Decimal integer.
+    pub fn push_u64(&mut self, mut v: u64) {
+        let mut digits = [0u8; 20];
+        let mut n = 0;
+        for d in digits.iter_mut().rev() {
+            *d = b'0' + (v % 10) as u8;
+            v /= 10;
+            n += 1;
+            if v == 0 {
+                break;
+            }
+        }
+        self.push_bytes(digits.get(digits.len() - n..).unwrap_or(&[]));
+    }
+
+    pub fn push_u32(&mut self, v: u32) {
+        self.push_u64(v as u64);
+    }
+
+    pub fn push_usize(&mut self, v: usize) {
+        self.push_u64(v as u64);
+    }
+
+    pub fn push_i32(&mut self, v: i32) {
+        if v < 0 {
+            self.push_bytes(b"-");
+        }
+        self.push_u64(v.unsigned_abs() as u64);
+    }
+
+    /// `err <code> <message>`, the reply to a failed command.
+    pub fn push_error(&mut self, e: Error) {
+        self.push_str("err ");
+        self.push_u32(e.code() as u32);
+        self.push_bytes(b" ");
+        self.push_str(e.message());
+    }
+
+    /// A number in the fewest of 6 to 9 significant digits that [`parse_f32`] reads back to
+    /// the same `f32` (9 always do), trailing zeros dropped, `%g` style: positional for
+    /// 1e-4 <= |v| < 1e9 (`0.16`, `150`, `20000`, `0.0001`), else `1.5e-5`,
+    /// `3.4028235e38`; `nan`, `inf`, `-inf`.
+    pub fn push_f32(&mut self, v: f32) {
+        if v.is_nan() {
+            return self.push_str("nan");
+        }
+        if v.is_sign_negative() && v != 0.0 {
+            self.push_bytes(b"-");
+        }
+        let a = v.abs();
+        if a.is_infinite() {
+            return self.push_str("inf");
+        }
+        let mut text = Reply::<24>::new();
+        for p in 6..=9 {
+            text.clear();
+            text.push_g(a, p);
+            if p == 9 || parse_f32(text.as_str()).map(f32::to_bits) == Ok(a.to_bits()) {
+                break;
+            }
+        }
+        self.push_bytes(text.as_bytes());
+    }
+
+    /// Finite non-negative `v` to `p` (1..=9) significant digits, `%g` style.
+    fn push_g(&mut self, v: f32, p: u32) {
+        let x = v as f64;
+        if x <= 0.0 {
+            return self.push_bytes(b"0");
+        }
+        // Decimal exponent: 10^e <= x < 10^(e+1), from the binary one, then corrected.
+        let e2 = ((x.to_bits() >> 52) & 0x7FF) as i32 - 1023;
+        let mut e = (e2 * 30103).div_euclid(100_000);
+        for _ in 0..3 {
+            if x < pow10_signed(e) {
+                e -= 1;
+            } else if x >= pow10_signed(e + 1) {
+                e += 1;
+            }
+        }
+        // p digits, rounded; 999.5 (p = 3) rounds up to the next decade.
+        let p = p.clamp(1, 9);
+        let full = POW10_U64.get(p as usize).copied().unwrap_or(1);
+        let mut d = (x * pow10_signed(p as i32 - 1 - e) + 0.5) as u64;
+        if d >= full {
+            d /= 10;
+            e += 1;
+        }
+        let mut buf = [b'0'; 9];
+        let digits = buf.get_mut(..p as usize).unwrap_or(&mut []);
+        for slot in digits.iter_mut().rev() {
+            *slot = b'0' + (d % 10) as u8;
+            d /= 10;
+        }
+        let mut n = digits.len();
+        while n > 1 && digits.get(n - 1) == Some(&b'0') {
+            n -= 1;
+        }
+        let digits = digits.get(..n).unwrap_or(&[]);
+        if (-4..9).contains(&e) {
+            if e < 0 {
+                self.push_bytes(b"0.");
+                for _ in 0..(-e - 1) {
+                    self.push_bytes(b"0");
+                }
+                self.push_bytes(digits);
+            } else {
+                let int = e as usize + 1;
+                for i in 0..int {
+                    self.push_bytes(&[digits.get(i).copied().unwrap_or(b'0')]);
+                }
+                if let Some(frac) = digits.get(int..).filter(|f| !f.is_empty()) {
+                    self.push_bytes(b".");
+                    self.push_bytes(frac);
+                }
+            }
+        } else {
+            let (first, rest) = digits.split_first().unwrap_or((&b'0', &[]));
+            self.push_bytes(&[*first]);
+            if !rest.is_empty() {
+                self.push_bytes(b".");
+                self.push_bytes(rest);
+            }
+            self.push_bytes(b"e");
+            self.push_i32(e);
+        }
+    }
+}
+
+/// 10^n as f64 for |n| <= 330 (approximate beyond 10^22).
+fn pow10_signed(n: i32) -> f64 {
+    let p = pow10_f64(n.unsigned_abs());
+    if n < 0 {
+        1.0 / p
+    } else {
+        p
+    }
+}
+
+impl<const N: usize> fmt::Write for Reply<N> {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        self.push_str(s);
         Ok(())
     }
 }
@@ -659,7 +1139,213 @@ mod tests {
         assert!(!r.truncated());
     }
 
+    /// Significant digits of a decimal string (what [`MAX_DIGITS`] counts).
+    fn significant_digits(s: &str) -> usize {
+        let mant = s.split(['e', 'E']).next().unwrap_or("");
+        let d: String = mant.chars().filter(|c| c.is_ascii_digit()).collect();
+        d.trim_start_matches('0').trim_end_matches('0').len()
+    }
+
+    /// Our parser against core's: same bits, or the documented error.
+    fn check_against_std(s: &str) {
+        let ours = parse_f32(s);
+        match s.parse::<f32>() {
+            Ok(v) if significant_digits(s) > MAX_DIGITS as usize => {
+                assert_eq!(ours, Err(Error::TooManyDigits), "{s} (std {v})")
+            }
+            Ok(v) if v.is_finite() => {
+                let got = ours.unwrap_or_else(|e| panic!("{s}: {e:?}, std {v}"));
+                assert_eq!(got.to_bits(), v.to_bits(), "{s}: {got:e} vs std {v:e}");
+            }
+            _ => assert_eq!(ours, Err(Error::BadNumber), "{s}"),
+        }
+    }
+
+    #[test]
+    fn float_parser_matches_std_on_edge_cases() {
+        for s in [
+            "0",
+            "-0",
+            "+0",
+            "0.0",
+            "00012",
+            "1",
+            "-1",
+            "1.5e-3",
+            "12.5",
+            ".5",
+            "5.",
+            "-.5e1",
+            "150",
+            "0.16",
+            "1e10",
+            "1E10",
+            "1e+10",
+            "3.4028235e38",
+            "3.4028236e38",
+            "3.40282356e38",
+            "3.40282357e38",
+            "1e39",
+            "1e-45",
+            "7e-46",
+            "7.006e-46",
+            "7.0064923216240862e-46",
+            "7.0064923216240863e-46",
+            "1.4012984e-45",
+            "1.1754942e-38",
+            "1.17549435e-38",
+            "16777217",
+            "16777219",
+            "33554433",
+            "0.000000000000000000000000000000000000000000001",
+            "9999999999999999999",
+            "99999999999999999999",
+            "1000000000000000000000000",
+            "0.1000000000000000000001",
+            "123456789.123456789",
+            "2.5",
+            "8388608.5",
+            "8388609.5",
+            "1e-65",
+            "1e-99999",
+            "1e99999",
+            "0e99999",
+            "",
+            ".",
+            "-",
+            "+",
+            "e5",
+            "1e",
+            "1e+",
+            "1e-",
+            "--1",
+            "+-1",
+            "1.2.3",
+            "0x10",
+            "1_000",
+            "inf",
+            "-inf",
+            "nan",
+            "NaN",
+            "infinity",
+            "1 ",
+            " 1",
+            "1e5.5",
+            "1..2",
+            "1ee5",
+            "١",
+        ] {
+            check_against_std(s);
+        }
+        assert_eq!(parse_f32("-0").map(|v| v.is_sign_negative()), Ok(true));
+        assert_eq!(parse_f32("1e39"), Err(Error::BadNumber));
+        assert_eq!(parse_f32("12345678901234567891"), Err(Error::TooManyDigits));
+        // Leading and trailing zeros are not significant digits.
+        assert_eq!(
+            parse_f32("0.000000000000000000000000001500000000000000000000"),
+            Ok(1.5e-27)
+        );
+        assert_eq!(parse_usize("+17"), Ok(17));
+        assert_eq!(parse_usize("-1"), Err(Error::BadNumber));
+        assert_eq!(parse_usize(""), Err(Error::BadNumber));
+        assert_eq!(
+            parse_usize("99999999999999999999999"),
+            Err(Error::OutOfRange)
+        );
+    }
+
+    #[test]
+    fn number_writer_prints_like_g8() {
+        let f = |v: f32| {
+            let mut r = Reply::<32>::new();
+            r.push_f32(v);
+            r.as_str().to_string()
+        };
+        assert_eq!(f(0.16), "0.16");
+        assert_eq!(f(150.0), "150");
+        assert_eq!(f(20_000.0), "20000");
+        assert_eq!(f(-2.5), "-2.5");
+        assert_eq!(f(0.0), "0");
+        assert_eq!(f(1.5e-5), "1.5e-5");
+        assert_eq!(f(0.0001), "0.0001");
+        assert_eq!(f(12_345_678.0), "12345678");
+        assert_eq!(f(123_456_790.0), "123456790");
+        assert_eq!(f(1.5e9), "1.5e9");
+        assert_eq!(f(f32::MAX), "3.4028235e38");
+        assert_eq!(f(f32::MIN_POSITIVE), "1.1754944e-38");
+        assert_eq!(f(1e-45), "1.4013e-45");
+        assert_eq!(f(f32::from_bits(3_351_468_226)), "-100017.516");
+        assert_eq!(f(f32::NAN), "nan");
+        assert_eq!(f(f32::NEG_INFINITY), "-inf");
+        let mut r = Reply::<64>::new();
+        r.push_str("ok ");
+        r.push_i32(-42);
+        r.push_bytes(b" ");
+        r.push_u32(u32::MAX);
+        r.push_bytes(b" ");
+        r.push_padded("ab", 4);
+        r.push_str("|");
+        r.push_right("ab", 4);
+        r.push_bytes(b" ");
+        r.push_fixed(1205, 2);
+        r.push_bytes(b" ");
+        r.push_fixed(40_000, 3);
+        assert_eq!(r.as_str(), "ok -42 4294967295 ab  |  ab 12.05 40.000");
+        r.clear();
+        r.push_error(Error::UnknownParam);
+        assert_eq!(r.as_str(), Error::UnknownParam.to_string());
+    }
+
     proptest! {
+        #[test]
+        fn float_parser_matches_std_on_printed_floats(bits in any::<u32>(), prec in 0usize..12) {
+            let v = f32::from_bits(bits);
+            prop_assume!(v.is_finite());
+            for s in [
+                format!("{v}"),
+                format!("{v:e}"),
+                format!("{v:.prec$e}"),
+                format!("{v:.prec$}"),
+                format!("{:.prec$e}", v as f64 * 1.000_000_03),
+            ] {
+                check_against_std(&s);
+            }
+        }
+
+        #[test]
+        fn float_parser_matches_std_on_decimal_strings(
+            neg in any::<bool>(),
+            digits in "[0-9]{1,22}",
+            dot in 0usize..23,
+            exp in proptest::option::of(-70i32..45),
+        ) {
+            let dot = dot.min(digits.len());
+            let mut s = String::new();
+            if neg {
+                s.push('-');
+            }
+            s.push_str(&digits[..dot]);
+            s.push('.');
+            s.push_str(&digits[dot..]);
+            if let Some(e) = exp {
+                s.push_str(&format!("e{e}"));
+            }
+            check_against_std(&s);
+        }
+
+        #[test]
+        fn printed_numbers_read_back(bits in any::<u32>()) {
+            let v = f32::from_bits(bits);
+            prop_assume!(v.is_finite());
+            let mut r = Reply::<32>::new();
+            r.push_f32(v);
+            let back = parse_f32(r.as_str()).unwrap();
+            prop_assert_eq!(back.to_bits(), v.to_bits(), "{:e} -> {} -> {:e}", v, r.as_str(), back);
+            // No longer than needed by more than 3 digits: core's shortest form.
+            let shortest = significant_digits(&format!("{:e}", v));
+            prop_assert!(significant_digits(r.as_str()) <= shortest.max(6));
+        }
+
         #[test]
         fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
             let _ = parse(&bytes);

@@ -4,17 +4,19 @@
 # and feedforward, sets limits, starts a sine, reads the recorder to CSV (free-running and
 # edge-triggered) and checks that a refused command names the firmware's numbered error.
 # The CSVs must have the expected rows and physically sane values; anything off fails.
+# PIEZO_SERIAL_OUT=<dir> keeps the CSVs and the SVG plot there (the README's main job).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
 target=thumbv7em-none-eabihf
 cargo build --release --target "$target" -p piezo-core --bin firmware \
   --no-default-features --features board-qemu
+# The dev-profile CLI (built by 10-host's `cargo test` already); PIEZO_BIN picks another.
 if [ -n "${PIEZO_BIN:-}" ]; then
   piezo=$PIEZO_BIN
 else
-  cargo build --release -q -p hal-sim --bin piezo
-  piezo=target/release/piezo
+  cargo build -q -p hal-sim --bin piezo
+  piezo=target/debug/piezo
 fi
 work=$(mktemp -d)
 cp "target/$target/release/firmware" "$work/firmware.elf"
@@ -87,6 +89,11 @@ awk -F, '
     if ($3 < 4.99 || $3 > 15.01) { print "row " n ": ref_um " $3 " outside the sine"; bad = 1 }
     if ($4 < 0 || $4 > 100) { print "row " n ": y_um " $4 " outside the sensor range"; bad = 1 }
     if ($5 < 0 || $5 > 140) { print "row " n ": u_volts " $5 " outside the 0..140 V limit"; bad = 1 }
+    # The slew limit set above: 20 V/ms is 0.2 V per 10 us sample.
+    du = $5 - u; if (du < 0) du = -du
+    if (n > 1 && du > 0.2001) { print "row " n ": u_volts step " du " V above the slew limit"; bad = 1 }
+    if (n > 1 && du > dumax) dumax = du
+    u = $5
     d = $3 - $4 - $6
     if (d * d > 1e-6) { print "row " n ": error_um != ref_um - y_um"; bad = 1 }
     if ($3 < rmin || n == 1) rmin = $3
@@ -95,7 +102,7 @@ awk -F, '
   }
   END {
     rms = sqrt(e2 / n)
-    printf "rec.csv: %d rows, ref_um %.3f..%.3f, rms error %.4f um\n", n, rmin, rmax, rms
+    printf "rec.csv: %d rows, ref_um %.3f..%.3f, rms error %.4f um, largest u_volts step %.4f V\n", n, rmin, rmax, rms, dumax
     if (n != 1024) { print "expected 1024 rows"; bad = 1 }
     # 10.24 ms hold a full period of the 100 Hz sine: the reference spans 5..15 um.
     if (rmin > 5.05 || rmax < 14.95) { print "reference does not span the sine"; bad = 1 }
@@ -123,4 +130,9 @@ awk -F, '
   }' "$work/trig.csv" || fail "triggered capture"
 
 kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
+if [ -n "${PIEZO_SERIAL_OUT:-}" ]; then
+  mkdir -p "$PIEZO_SERIAL_OUT"
+  cp "$work/rec.csv" "$work/rec.svg" "$work/trig.csv" "$PIEZO_SERIAL_OUT/"
+  echo "wrote $PIEZO_SERIAL_OUT/{rec.csv,rec.svg,trig.csv}"
+fi
 echo "35-host-serial: ok"

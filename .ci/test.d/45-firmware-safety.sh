@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Firmware static checks (no heap linked; no panic path reachable from the control
-# interrupt; worst-case stack per handler from -Z emit-stack-sizes). Needs nightly;
+# Firmware static checks (no heap linked; no panic path and no indirect call reachable from
+# any interrupt handler; worst-case stack per handler from -Z emit-stack-sizes). Needs nightly;
 # skipped with a message where none is installed.
 set -euo pipefail
 if ! rustup run nightly rustc --version >/dev/null 2>&1; then

@@ -85,34 +85,42 @@ impl Fake {
     }
 }
 
-/// Serves connections one after another on one firmware state, like a UART that stays up
-/// while host programs come and go. Each connection first gets boot noise.
+/// Serves one connection (TCP stream or serial port) until it closes: boot noise first,
+/// then one reply per command line.
+fn serve(s: &mut (impl Read + Write), fake: &mut Fake) {
+    s.write_all(b"bench: table\n\xff\xfegarbage\nready\nhalf a li")
+        .ok();
+    let mut lb = LineBuffer::new();
+    let mut buf = [0u8; 512];
+    loop {
+        let n = match s.read(&mut buf) {
+            Ok(0) => return,
+            Ok(n) => n,
+            // A serial port's read timeout: keep listening.
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
+            Err(_) => return,
+        };
+        let mut out = Vec::new();
+        for &b in &buf[..n] {
+            if let Some(line) = lb.push(b) {
+                fake.answer(line, &mut out);
+            }
+        }
+        if s.write_all(&out).is_err() {
+            return;
+        }
+    }
+}
+
+/// Serves TCP connections one after another on one firmware state, like a UART that stays
+/// up while host programs come and go.
 fn spawn_firmware() -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     thread::spawn(move || {
         let mut fake = Fake::new();
-        for stream in listener.incoming() {
-            let Ok(mut s) = stream else { continue };
-            s.write_all(b"bench: table\n\xff\xfegarbage\nready\nhalf a li")
-                .ok();
-            let mut lb = LineBuffer::new();
-            let mut buf = [0u8; 512];
-            'conn: loop {
-                let n = match s.read(&mut buf) {
-                    Ok(0) | Err(_) => break 'conn,
-                    Ok(n) => n,
-                };
-                let mut out = Vec::new();
-                for &b in &buf[..n] {
-                    if let Some(line) = lb.push(b) {
-                        fake.answer(line, &mut out);
-                    }
-                }
-                if s.write_all(&out).is_err() {
-                    break 'conn;
-                }
-            }
+        for mut s in listener.incoming().flatten() {
+            serve(&mut s, &mut fake);
         }
     });
     addr
@@ -226,10 +234,10 @@ fn typed_commands_drive_the_firmware_executor() {
 
     let out = run(&addr, Action::Status).unwrap();
     for want in [
-        "u_max         140",
-        "sample_hz     16384",
-        "control step  min 40",
-        "recorder      idle",
+        "u_max           140",
+        "sample_hz       100000",
+        "control step    min 40",
+        "recorder        idle",
     ] {
         assert!(out.contains(want), "{want:?} missing in\n{out}");
     }
@@ -261,7 +269,7 @@ fn the_recorder_comes_back_as_csv_with_units() {
         }),
     )
     .unwrap();
-    assert!(out.contains("recorded 1024 frames at 16384 Hz"), "{out}");
+    assert!(out.contains("recorded 1024 frames at 100000 Hz"), "{out}");
     let text = std::fs::read_to_string(&csv).unwrap();
     assert!(
         text.contains("# units: i [frame], t_s [s], ref_um [um], y_um [um], u_volts [V]"),
@@ -276,7 +284,7 @@ fn the_recorder_comes_back_as_csv_with_units() {
     assert_eq!(rows.len(), 1024);
     for (k, r) in rows.iter().enumerate() {
         assert_eq!(r[0], k as f64);
-        let t = (k as f64 - 64.0) / 16384.0;
+        let t = (k as f64 - 64.0) / 100_000.0;
         assert!((r[1] - t).abs() < 1e-9, "row {k}: t_s {}", r[1]);
         assert!((4.99..=15.01).contains(&r[2]), "row {k}: ref_um {}", r[2]);
         assert!((0.0..=140.0).contains(&r[4]), "row {k}: u_volts {}", r[4]);
@@ -327,7 +335,7 @@ fn the_binary_sends_raw_lines_and_fails_loudly() {
         .unwrap();
     assert!(out.status.success(), "{out:?}");
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert_eq!(stdout, "ok pong\nok u_max 150.00000\nok rec idle 0\n");
+    assert_eq!(stdout, "ok pong\nok u_max 150\nok rec idle 0\n");
 
     let out = Process::new(piezo)
         .args(["serial", "--tcp", &addr, "--keep-going", "--"])
@@ -407,4 +415,72 @@ fn silent_closing_and_babbling_peers_are_clear_errors() {
     // The first `err` line ends the command, however malformed.
     assert!(matches!(e, SerialError::Firmware { code: None, .. }), "{e}");
     let _ = TcpStream::connect(&babbler_addr);
+}
+
+#[test]
+fn a_trigger_that_never_fires_times_out_and_does_not_block_the_next_capture() {
+    let addr = spawn_firmware();
+    let args = |trigger: &str, wait_s: f64| RecordArgs {
+        signals: vec!["ref_um".into()],
+        trigger: trigger.into(),
+        pre: 0,
+        wait_s,
+        no_arm: false,
+        out: tmp("never.csv"),
+        svg: None,
+    };
+    let e = run(&addr, Action::Record(args("rise:ref_um:1000", 0.3))).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("still armed after 0.3 s (trigger `rise:ref_um:1000` never fired?)"),
+        "{e}"
+    );
+    let out = run(&addr, Action::Record(args("now", 10.0))).unwrap();
+    assert!(out.contains("recorded 1024 frames"), "{out}");
+}
+
+/// `--port`: the binary opens the slave side of a pseudo-terminal, the fake firmware answers
+/// on the master side (the same code path as a USB-serial adapter or the ST-LINK VCP).
+#[test]
+fn the_binary_speaks_over_a_serial_port() {
+    use serialport::SerialPort;
+    let (mut master, slave) = serialport::TTYPort::pair().expect("pseudo-terminal pair");
+    let name = slave.name().expect("slave name");
+    thread::spawn(move || {
+        let mut fake = Fake::new();
+        serve(&mut master, &mut fake);
+    });
+    let piezo = env!("CARGO_BIN_EXE_piezo");
+    let out = Process::new(piezo)
+        .args(["serial", "--port", &name, "--baud", "115200", "--"])
+        .args(["ping", "get u_max", "mode open-loop"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    // Numbers as the executor's number type prints them (150, 150.00000 in Q16.16).
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 3, "{stdout}");
+    assert_eq!(lines[0], "ok pong");
+    assert_eq!(
+        lines[1].strip_prefix("ok u_max ").map(|v| v.parse::<f64>()),
+        Some(Ok(150.0)),
+        "{stdout}"
+    );
+    assert_eq!(lines[2], "ok mode open-loop");
+    let out = Process::new(piezo)
+        .args(["serial", "--port", &name, "wave", "hold", "12.5um"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        stdout
+            .trim()
+            .strip_prefix("ok wave hold ")
+            .map(|v| v.parse::<f64>()),
+        Some(Ok(12.5)),
+        "{stdout}"
+    );
+    drop(slave);
 }

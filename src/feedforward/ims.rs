@@ -544,3 +544,28 @@ mod invert_step_tests {
         assert!(worst < 2e-5, "f32 {worst}");
     }
 }
+
+#[cfg(test)]
+mod iteration_tests {
+    use super::*;
+
+    /// At 100 kHz in f32 the closed-form step needs one or two Newton iterations (one
+    /// `exp_m1` each) and never the bracketed fallback (which would report > 8).
+    #[test]
+    fn f32_at_100khz_needs_at_most_two_iterations() {
+        let m = Cbw::with_n1(0.16f32, 0.07, 0.02, 0.01).unwrap();
+        let mut ff = Ims::new(m, ImsLoop::Solved, 0.0, 150.0, 1e-5).unwrap();
+        ff.reset(10.0);
+        let (mut total, mut worst) = (0usize, 0usize);
+        let n = 20_000;
+        for k in 0..n {
+            let t = k as f64 * 1e-5;
+            let y_ref = (10.0 + 5.0 * (2.0 * core::f64::consts::PI * 100.0 * t).sin()) as f32;
+            ff.compensate(y_ref);
+            total += ff.last_evals();
+            worst = worst.max(ff.last_evals());
+        }
+        let mean = total as f64 / n as f64;
+        assert!(mean < 1.6 && worst <= 4, "mean {mean}, worst {worst}");
+    }
+}

@@ -144,7 +144,7 @@ pub fn select_line(signals: &[Signal]) -> Result<String, SerialError> {
 
 /// Every protocol error, for mapping a reply's code back to its meaning. The match below
 /// fails to compile when the firmware gains an error the host does not list.
-pub const ERRORS: [command::Error; 13] = {
+pub const ERRORS: [command::Error; 14] = {
     use command::Error::*;
     [
         LineTooLong,
@@ -160,6 +160,7 @@ pub const ERRORS: [command::Error; 13] = {
         BadKeyword,
         Busy,
         Unsupported,
+        TooManyDigits,
     ]
 };
 
@@ -169,7 +170,7 @@ fn errors_are_listed(e: command::Error) {
     match e {
         LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
         | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
-        | Busy | Unsupported => {}
+        | Busy | Unsupported | TooManyDigits => {}
     }
 }
 
@@ -1100,7 +1101,7 @@ fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Result
     };
     writeln!(
         out,
-        "control step  min {}{} max {}{} last {}{}",
+        "control step    min {}{} max {}{} last {}{}",
         s.step_min,
         us(s.step_min),
         s.step_max,
@@ -1110,7 +1111,7 @@ fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Result
     )?;
     writeln!(
         out,
-        "interrupt     min {}{} max {}{} last {}{}",
+        "interrupt       min {}{} max {}{} last {}{}",
         s.isr_min,
         us(s.isr_min),
         s.isr_max,
@@ -1127,7 +1128,7 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
     c.send(&Command::Ping)?;
     writeln!(
         out,
-        "link          ok ({:.1} ms round trip)",
+        "link            ok ({:.1} ms round trip)",
         t.elapsed().as_secs_f64() * 1e3
     )?;
     // The parameter list comes from the firmware (`help` ends with `params: <names>`).
@@ -1139,7 +1140,7 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
         .unwrap_or_default();
     for p in &params {
         let v = get_param(c, p)?;
-        writeln!(out, "{p:<13} {v}")?;
+        writeln!(out, "{p:<15} {v}")?;
     }
     let r = c.send(&Command::Stats)?;
     let s = parse_stats(&r.details).map_err(|why| SerialError::BadReply {
@@ -1154,7 +1155,7 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
         line: r.reply_line(),
         why,
     })?;
-    writeln!(out, "recorder      {state}, {n} frames")?;
+    writeln!(out, "recorder        {state}, {n} frames")?;
     Ok(())
 }
 
@@ -1343,6 +1344,8 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
             })?;
             signals.push(s);
         }
+        // A capture left armed (an interrupted session) would refuse the new selection.
+        c.send(&Command::Rec(RecCmd::Stop))?;
         let line = select_line(&signals)?;
         let r = c.raw(&line)?;
         let channels = parse_rec_sel(&r.details).map_err(|why| SerialError::BadReply {

@@ -5,8 +5,11 @@
 //! * The ADC1 end-of-conversion interrupt is the highest-priority task: read the sample, run
 //!   the step, write the DAC (PA4, DAC1 channel 1).
 //! * USART3 (ST-LINK virtual COM port, PD8/PD9, 115200 Bd) carries the command protocol;
-//!   its receive interrupt runs at priority 1.
-//! * Telemetry (timing, overruns) goes over defmt-RTT once per second.
+//!   its receive interrupt runs at priority 1. Replies are written without `core::fmt`.
+//! * Telemetry (timing, overruns) goes over defmt-RTT once per second from `idle`: defmt
+//!   logs from thread mode only (init, then idle), never from an interrupt handler, so its
+//!   logger lock is never contended and no handler reaches its reentrancy panic. Timing is
+//!   kept by the DWT cycle counter: no monotonic timer, no async task, no dispatcher.
 //!
 //! Analog input: PA3 (ADC12_INP15, CN9 pin 1 "A0" on the Nucleo-144).
 
@@ -16,19 +19,16 @@ pub const SYSCLK_HZ: u32 = 400_000_000;
 /// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
 pub const WATCHDOG_MS: u32 = 10;
 
-#[rtic::app(device = stm32h7xx_hal::pac, peripherals = true, dispatchers = [SAI1, SAI2])]
+#[rtic::app(device = stm32h7xx_hal::pac, peripherals = true)]
 mod app {
     use super::{SAMPLE_HZ, SYSCLK_HZ, WATCHDOG_MS};
     use crate::control::{c, stream_frames, Ctl};
     use cortex_m::peripheral::DWT;
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
-    use rtic_monotonics::systick::prelude::*;
     use stm32h7xx_hal::{
         adc, delay::Delay, independent_watchdog::IndependentWatchdog, pac, prelude::*,
         rcc::rec::AdcClkSel, serial, timer::Timer, traits::DacOut,
     };
-
-    systick_monotonic!(Mono, 1_000);
 
     type DacChannel = stm32h7xx_hal::dac::C1<pac::DAC, stm32h7xx_hal::dac::Enabled>;
 
@@ -105,9 +105,7 @@ mod app {
         let (tx, mut rx) = serial.split();
         rx.listen();
 
-        // The systick delay gave SYST back implicitly by value; the monotonic takes it over.
-        let syst = delay.free();
-        Mono::start(syst, SYSCLK_HZ);
+        let _ = delay.free();
 
         // Independent watchdog (LSI clock, survives a main-clock failure): only a control
         // period that met its deadline feeds it, so a stalled or overrunning loop resets
@@ -122,7 +120,6 @@ mod app {
         timer.inner_mut().cr2.modify(|_, w| w.mms().update());
         timer.resume();
 
-        telemetry::spawn().ok();
         defmt::info!("firmware up: {} Hz sample rate", SAMPLE_HZ);
         (
             Shared {
@@ -207,27 +204,31 @@ mod app {
                     continue;
                 }
                 Ok(c) => cx.shared.ctl.lock(|ctl| ctl.execute(c, &mut reply)),
-                Err(e) => {
-                    use core::fmt::Write;
-                    write!(reply, "{e}").ok();
-                }
+                Err(e) => reply.push_error(e),
             }
             send(tx, reply.as_str());
         }
     }
 
-    /// One reply line, blocking (low priority; 115200 Bd).
+    /// One reply line, blocking (low priority; 115200 Bd: the holding register always
+    /// drains, the control task preempts the wait).
     fn send(tx: &mut serial::Tx<pac::USART3>, line: &str) {
-        use core::fmt::Write;
-        tx.write_str(line).ok();
-        tx.write_str("\r\n").ok();
+        use stm32h7xx_hal::hal::serial::Write;
+        for &b in line.as_bytes().iter().chain(b"\r\n") {
+            while let Err(stm32h7xx_hal::nb::Error::WouldBlock) = tx.write(b) {}
+        }
     }
 
-    /// Timing and overruns over defmt, once per second.
-    #[task(priority = 1, shared = [ctl])]
-    async fn telemetry(mut cx: telemetry::Context) {
+    /// Timing and overruns over defmt, once per second (DWT cycle counter), from thread
+    /// mode: the only context besides `init` that logs.
+    #[idle(shared = [ctl])]
+    fn idle(mut cx: idle::Context) -> ! {
+        let mut last = DWT::cycle_count();
         loop {
-            Mono::delay(rtic_monotonics::fugit::ExtU32::millis(1000)).await;
+            if DWT::cycle_count().wrapping_sub(last) < SYSCLK_HZ {
+                continue;
+            }
+            last = last.wrapping_add(SYSCLK_HZ);
             let t = cx.shared.ctl.lock(|c| c.timing);
             defmt::info!(
                 "step cycles min {} max {} last {} | isr min {} max {} last {} | samples {} overruns {}",

@@ -137,7 +137,6 @@ impl SimStage {
 pub mod bench {
     use super::{uart, SimStage, BENCH_STEPS, SAMPLE_HZ};
     use crate::control::{c, Ctl, FFS, LAWS};
-    use core::fmt::Write;
     use core::hint::black_box;
     use cortex_m::peripheral::{syst::SystClkSource, SYST};
     use piezo_core::command::Reply;
@@ -190,7 +189,7 @@ pub mod bench {
         } else {
             law
         };
-        ctl.lp.set_law(law, ctl.laws).ok()?;
+        ctl.lp.set_law(law).ok()?;
         ctl.lp
             .p
             .set_wave(
@@ -282,34 +281,31 @@ pub mod bench {
     /// so not while the loop runs).
     pub fn print(t: &Table, log: bool) {
         let mut r = Reply::<160>::new();
-        write!(
-            r,
-            "bench: instructions per control step (ADC code -> DAC code), {} steps, QEMU -icount shift=0, {}.{:03} instr/SysTick tick, loop overhead {} ticks",
-            BENCH_STEPS,
-            t.instr_per_tick_x1000 / 1000,
-            t.instr_per_tick_x1000 % 1000,
-            t.overhead_ticks
-        )
-        .ok();
+        r.push_str("bench: instructions per control step (ADC code -> DAC code), ");
+        r.push_usize(BENCH_STEPS);
+        r.push_str(" steps, QEMU -icount shift=0, ");
+        r.push_fixed(t.instr_per_tick_x1000, 3);
+        r.push_str(" instr/SysTick tick, loop overhead ");
+        r.push_u32(t.overhead_ticks);
+        r.push_str(" ticks");
         uart::line(r.as_str());
         uart::line("mode               feedforward        instr/step  first-50-max");
         for row in &t.rows {
             r.clear();
+            r.push_padded(row.law, 19);
+            r.push_padded(row.ff, 19);
             if row.unsupported {
-                write!(r, "{:<18} {:<18} {:>10}", row.law, row.ff, "n/a").ok();
+                r.push_right("n/a", 10);
                 uart::line(r.as_str());
                 continue;
             }
-            write!(
-                r,
-                "{:<18} {:<18} {:>7}.{:02}  {:>8}",
-                row.law,
-                row.ff,
-                row.instr_x100 / 100,
-                row.instr_x100 % 100,
-                row.max_instr
-            )
-            .ok();
+            let mut n = Reply::<16>::new();
+            n.push_fixed(row.instr_x100, 2);
+            r.push_right(n.as_str(), 10);
+            n.clear();
+            n.push_u32(row.max_instr);
+            r.push_str("  ");
+            r.push_right(n.as_str(), 8);
             uart::line(r.as_str());
             if !log {
                 continue;
@@ -331,7 +327,6 @@ mod app {
         bench, uart, SimStage, PERIODS_MAX, PERIODS_MIN, QUIET_PERIODS, SAMPLE_HZ, SYSTICK_HZ,
     };
     use crate::control::{c, stream_frames, Ctl};
-    use core::fmt::Write;
     use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
 
@@ -431,7 +426,8 @@ mod app {
                     Ok(Command::Empty) => continue,
                     Ok(Command::Bench) => {
                         bench::print(cx.local.table, false);
-                        write!(reply, "ok bench {}", bench::ROWS).ok();
+                        reply.push_str("ok bench ");
+                        reply.push_usize(bench::ROWS);
                     }
                     Ok(Command::Rec(RecCmd::Read { start, count })) => {
                         let ctl = &mut cx.shared.ctl;
@@ -445,9 +441,7 @@ mod app {
                         continue;
                     }
                     Ok(c) => cx.shared.ctl.lock(|ctl| ctl.execute(c, &mut reply)),
-                    Err(e) => {
-                        write!(reply, "{e}").ok();
-                    }
+                    Err(e) => reply.push_error(e),
                 }
                 uart::line(reply.as_str());
                 answered += 1;
@@ -470,12 +464,20 @@ mod app {
     fn finish(ctl: &mut impl rtic::Mutex<T = Ctl>, periods: u32, answered: u32, code: i32) -> ! {
         let t = ctl.lock(|c| c.timing);
         let mut r = cmd::Reply::<160>::new();
-        write!(
-            r,
-            "done periods {periods} commands {answered} step_ticks {} {} isr_ticks {} {} overruns {}",
-            t.step.min, t.step.max, t.isr.min, t.isr.max, t.overruns
-        )
-        .ok();
+        r.push_str("done periods ");
+        r.push_u32(periods);
+        r.push_str(" commands ");
+        r.push_u32(answered);
+        r.push_str(" step_ticks ");
+        r.push_u32(t.step.min);
+        r.push_str(" ");
+        r.push_u32(t.step.max);
+        r.push_str(" isr_ticks ");
+        r.push_u32(t.isr.min);
+        r.push_str(" ");
+        r.push_u32(t.isr.max);
+        r.push_str(" overruns ");
+        r.push_u32(t.overruns);
         uart::line(r.as_str());
         defmt::info!(
             "done: {=u32} periods, {=u32} commands, step ticks min {=u32} max {=u32}, overruns {=u32}",

@@ -2,7 +2,6 @@
 //! the recorder hook, the timing statistics and the command executor. The boards call
 //! [`Ctl::step`] from their highest-priority task and [`Ctl::execute`] from a low-priority one.
 
-use core::fmt::Write;
 use piezo_core::command::{self, Command, Error, RecCmd, Shape, TriggerCmd};
 use piezo_core::feedback::{
     hgo, Adrc, AdrcConfig, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
@@ -10,18 +9,24 @@ use piezo_core::feedback::{
 };
 use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf, MultiFeedforward};
 use piezo_core::hysteresis::Cbw;
-use piezo_core::pipeline::{
-    AxisConfig, Config, DacScale, Mode, OutputLimits, Pipeline, Sensor, Wave,
-};
+use piezo_core::pipeline::{AxisConfig, Config, DacScale, Mode, OutputLimits, Sensor, Wave};
 use piezo_core::recorder::{self, Recorder, Signal};
 use piezo_core::Real;
 
 /// The number type of the control path: `f32` with an FPU (thumbv7em-none-eabihf), the
 /// Q16.16 fixed point of [`piezo_core::fixed`] without one (thumbv7m-none-eabi, Cortex-M3).
-#[cfg(target_abi = "eabihf")]
+/// (A host build, the `same_pipeline` test, takes the f32 variant.)
+#[cfg(any(target_abi = "eabihf", not(target_os = "none")))]
 pub type R = f32;
-#[cfg(not(target_abi = "eabihf"))]
+#[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
 pub type R = piezo_core::fixed::Q16;
+
+/// The pipeline of the control task: [`piezo_core::pipeline::FirmwarePipeline`] (the type
+/// hal-sim runs) with an FPU, its Q16.16 twin without one.
+#[cfg(any(target_abi = "eabihf", not(target_os = "none")))]
+pub type LoopPipeline = piezo_core::pipeline::FirmwarePipeline;
+#[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
+pub type LoopPipeline = piezo_core::pipeline::Pipeline<R, 1>;
 
 /// A constant of the control path (folded at compile time).
 #[inline(always)]
@@ -29,8 +34,8 @@ pub fn c(x: f64) -> R {
     R::from_f64(x)
 }
 
-/// What the control path needs beyond [`Real`]: code values and printing.
-pub trait Sample: Real + core::fmt::Display {
+/// What the control path needs beyond [`Real`]: code values.
+pub trait Sample: Real {
     /// A converter code as a signal value (Q16.16 saturates above 32767).
     fn code_value(code: u32) -> Self;
 }
@@ -55,16 +60,16 @@ pub const REC_N: usize = 1024;
 
 /// Sample rate of the control loop (Hz). Q16.16 holds values below 32768 only, so the
 /// fixed-point build runs at 16 384 Hz (sample period exactly 4 units of 2^-16 s).
-#[cfg(target_abi = "eabihf")]
+#[cfg(any(target_abi = "eabihf", not(target_os = "none")))]
 pub const SAMPLE_HZ: u32 = 100_000;
-#[cfg(not(target_abi = "eabihf"))]
+#[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
 pub const SAMPLE_HZ: u32 = 16_384;
 
 /// ADC codes are shifted right by this before scaling: Q16.16 cannot represent 16-bit codes
 /// (the fixed-point build keeps 15 bits, 3 nm over 100 um).
-#[cfg(target_abi = "eabihf")]
+#[cfg(any(target_abi = "eabihf", not(target_os = "none")))]
 const ADC_SHIFT: u32 = 0;
-#[cfg(not(target_abi = "eabihf"))]
+#[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
 const ADC_SHIFT: u32 = 1;
 
 /// Largest DAC code (12-bit on-chip DAC).
@@ -106,7 +111,7 @@ pub fn on_chip_config(sample_hz: R) -> Config<R, 1> {
 /// One axis: the core pipeline (sensor scaling, reference, feedforward, feedback, limits,
 /// DAC code) plus the names of what is selected.
 pub struct Loop {
-    pub p: Pipeline<R, 1>,
+    pub p: LoopPipeline,
     pub sample_hz: R,
     /// Selected law (`open-loop`, `feedforward` or a law of [`LAWS`]) and feedforward.
     pub law: &'static str,
@@ -120,7 +125,7 @@ impl Loop {
             um_per_volt: c(0.16),
             offset_um: c(0.0),
         })]);
-        let p = Pipeline::new(
+        let p = LoopPipeline::new(
             on_chip_config(sample_hz),
             [Wave::Hold { y_um: c(0.0) }],
             ff,
@@ -159,18 +164,14 @@ impl Loop {
     }
 
     /// Selects `open-loop`, `feedforward` or a feedback law (bumpless).
-    pub fn set_law(
-        &mut self,
-        name: &str,
-        laws: fn(&str, R) -> Option<Feedback<R>>,
-    ) -> Result<(), Error> {
+    pub fn set_law(&mut self, name: &str) -> Result<(), Error> {
         match name {
             "open-loop" => self.p.set_mode(Mode::OpenLoop),
             "feedforward" => self.p.set_mode(Mode::Feedforward),
             _ => {
                 // A known law whose configuration this number type cannot hold (ADRC's
                 // gain in Q16.16) is "unsupported", not "unknown".
-                let fb = laws(name, self.sample_hz).ok_or(if LAWS.contains(&name) {
+                let fb = law_by_name(name, self.sample_hz).ok_or(if LAWS.contains(&name) {
                     Error::Unsupported
                 } else {
                     Error::UnknownMode
@@ -206,7 +207,7 @@ impl Loop {
         axis.safe_volts = u.clamp_to(axis.limits.volts_min, axis.limits.volts_max);
         let wave = *self.p.reference(0).ok_or(Error::OutOfRange)?.wave();
         let mode = self.p.state().mode;
-        let p = Pipeline::new(
+        let p = LoopPipeline::new(
             cfg,
             [wave],
             self.p.feedforward().clone(),
@@ -220,7 +221,8 @@ impl Loop {
 }
 
 /// Min/max/last of a cycle count, and how many samples there were.
-#[derive(Clone, Copy, Debug, defmt::Format)]
+#[derive(Clone, Copy, Debug)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct CycleStats {
     pub min: u32,
     pub max: u32,
@@ -247,7 +249,8 @@ impl CycleStats {
 }
 
 /// Timing of the control task, reported every second and reset by command.
-#[derive(Clone, Copy, Debug, defmt::Format)]
+#[derive(Clone, Copy, Debug)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub struct Timing {
     /// The pipeline step alone.
     pub step: CycleStats,
@@ -272,8 +275,6 @@ pub struct Ctl {
     pub lp: Loop,
     pub rec: Recorder<R, REC_CH, REC_N>,
     pub timing: Timing,
-    /// Feedback laws selectable by `mode` (name, constructor).
-    pub laws: fn(&str, R) -> Option<Feedback<R>>,
 }
 
 /// Names of the feedback laws `mode` accepts (the bench iterates over them); they are the
@@ -406,7 +407,6 @@ impl Ctl {
             lp: Loop::new(sample_hz),
             rec: Recorder::new(),
             timing: Timing::new(),
-            laws: law_by_name,
         }
     }
 
@@ -424,10 +424,12 @@ impl Ctl {
 
     /// Runs one command, writing its reply line (without newline) into `out`.
     /// `rec read` is not handled here (the caller streams frames under short locks).
+    /// Replies are written by [`command::Reply`]'s own number writers, not `core::fmt`:
+    /// no indirect calls, so the serial handler has a static stack bound.
     pub fn execute<const N: usize>(&mut self, cmd: Command<'_>, out: &mut command::Reply<N>) {
         if let Err(e) = self.try_execute(cmd, out) {
             out.clear();
-            write!(out, "{e}").ok();
+            out.push_error(e);
         }
     }
 
@@ -439,45 +441,49 @@ impl Ctl {
         let lp = &mut self.lp;
         match cmd {
             Command::Empty => {}
-            Command::Ping => {
-                write!(out, "ok pong").ok();
-            }
+            Command::Ping => out.push_str("ok pong"),
             Command::Help => {
-                write!(
-                    out,
-                    "ok ping help get set mode ff wave stats rec bench; params:"
-                )
-                .ok();
+                out.push_str("ok ping help get set mode ff wave stats rec bench; params:");
                 for p in PARAMS {
-                    write!(out, " {p}").ok();
+                    out.push_str(" ");
+                    out.push_str(p);
                 }
             }
             Command::Get(name) => {
                 let v = get_param(lp, name)?;
-                write!(out, "ok {name} {v}").ok();
+                out.push_str("ok ");
+                out.push_str(name);
+                out.push_str(" ");
+                push_real(out, v);
             }
             Command::Set(name, v) => {
                 set_param(lp, name, c(v as f64))?;
-                write!(out, "ok {name} {}", get_param(lp, name)?).ok();
+                out.push_str("ok ");
+                out.push_str(name);
+                out.push_str(" ");
+                push_real(out, get_param(lp, name)?);
             }
             Command::Mode(name) => {
-                lp.set_law(name, self.laws)?;
-                write!(out, "ok mode {}", lp.law).ok();
+                lp.set_law(name)?;
+                out.push_str("ok mode ");
+                out.push_str(lp.law);
             }
             Command::Feedforward(name) => {
                 lp.set_ff(name)?;
-                write!(out, "ok ff {}", lp.ff).ok();
+                out.push_str("ok ff ");
+                out.push_str(lp.ff);
             }
             Command::WaveOff => {
                 let y_um = lp.p.state().trace.setpoint[0].y_um;
                 lp.p.set_wave(0, Wave::Hold { y_um })
                     .map_err(|_| Error::OutOfRange)?;
-                write!(out, "ok wave off").ok();
+                out.push_str("ok wave off");
             }
             Command::WaveHold(y) => {
                 lp.p.set_wave(0, Wave::Hold { y_um: c(y as f64) })
                     .map_err(|_| Error::OutOfRange)?;
-                write!(out, "ok wave hold {y}").ok();
+                out.push_str("ok wave hold ");
+                out.push_f32(y);
             }
             Command::Wave {
                 shape,
@@ -507,27 +513,33 @@ impl Ctl {
                     },
                 };
                 lp.p.set_wave(0, wave).map_err(|_| Error::OutOfRange)?;
-                write!(out, "ok wave {} {a} {f} {o}", shape.name()).ok();
+                out.push_str("ok wave ");
+                out.push_str(shape.name());
+                for v in [a, f, o] {
+                    out.push_str(" ");
+                    push_real(out, v);
+                }
             }
             Command::Stats => {
                 let t = &self.timing;
-                write!(
-                    out,
-                    "ok step {} {} {} isr {} {} {} samples {} overruns {}",
-                    t.step.min,
-                    t.step.max,
-                    t.step.last,
-                    t.isr.min,
-                    t.isr.max,
-                    t.isr.last,
-                    t.isr.count,
-                    t.overruns
-                )
-                .ok();
+                out.push_str("ok step");
+                for v in [t.step.min, t.step.max, t.step.last] {
+                    out.push_str(" ");
+                    out.push_u32(v);
+                }
+                out.push_str(" isr");
+                for v in [t.isr.min, t.isr.max, t.isr.last] {
+                    out.push_str(" ");
+                    out.push_u32(v);
+                }
+                out.push_str(" samples ");
+                out.push_u32(t.isr.count);
+                out.push_str(" overruns ");
+                out.push_u32(t.overruns);
             }
             Command::StatsReset => {
                 self.timing = Timing::new();
-                write!(out, "ok").ok();
+                out.push_str("ok");
             }
             Command::Rec(r) => self.rec_command(r, out)?,
             Command::Bench => return Err(Error::Unsupported),
@@ -555,9 +567,10 @@ impl Ctl {
                     *slot = Signal::from_name(name).ok_or(Error::UnknownSignal)?;
                 }
                 self.rec.select(&sel).map_err(cfg)?;
-                write!(out, "ok rec sel").ok();
+                out.push_str("ok rec sel");
                 for s in self.rec.channels() {
-                    write!(out, " {}", s.name()).ok();
+                    out.push_str(" ");
+                    out.push_str(s.name());
                 }
             }
             RecCmd::Trigger(t) => {
@@ -598,18 +611,21 @@ impl Ctl {
                     ),
                 };
                 self.rec.set_trigger(trigger, pre).map_err(cfg)?;
-                write!(out, "ok").ok();
+                out.push_str("ok");
             }
             RecCmd::Arm => {
                 self.rec.arm();
-                write!(out, "ok").ok();
+                out.push_str("ok");
             }
             RecCmd::Stop => {
                 self.rec.stop();
-                write!(out, "ok").ok();
+                out.push_str("ok");
             }
             RecCmd::Status => {
-                write!(out, "ok rec {} {}", self.rec.state().name(), self.rec.len()).ok();
+                out.push_str("ok rec ");
+                out.push_str(self.rec.state().name());
+                out.push_str(" ");
+                out.push_usize(self.rec.len());
             }
             RecCmd::Read { .. } => return Err(Error::Unsupported),
         }
@@ -631,20 +647,27 @@ pub fn stream_frames(
             break;
         };
         let mut r = command::Reply::<96>::new();
-        write!(r, "{i}").ok();
+        r.push_usize(i);
         for v in f {
-            write!(r, " {v}").ok();
+            r.push_str(" ");
+            push_real(&mut r, v);
         }
         line(r.as_str());
         sent += 1;
     }
-    let mut r = command::Reply::<32>::new();
+    let mut r = command::Reply::<48>::new();
     if sent == 0 && count > 0 {
-        write!(r, "{}", Error::Busy).ok();
+        r.push_error(Error::Busy);
     } else {
-        write!(r, "ok rec read {sent}").ok();
+        r.push_str("ok rec read ");
+        r.push_usize(sent);
     }
     line(r.as_str());
+}
+
+/// A value of the control path as text (Q16.16 through f32: 24 significant bits).
+pub fn push_real<const N: usize>(out: &mut command::Reply<N>, v: R) {
+    out.push_f32(v.to_f64() as f32);
 }
 
 /// Parameter names of `get`/`set` (`sample_hz` and the scalings are read-only).
