@@ -39,7 +39,7 @@ INDIRECT = re.compile(r"\t(blx\s+r\d+|bx\s+r\d+|mov\s+pc,|ldr(\.w)?\s+pc,)")
 # Exception entry with lazy FPU stacking: 8 core + 18 FPU words.
 EXC_FRAME = 104
 # Priorities of the RTIC tasks bound to interrupts (board_h743.rs), for the system bound.
-PRIORITY = {"ADC1_2": 3, "USART3": 1}
+PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1}
 
 
 def tool(name):

@@ -1,10 +1,30 @@
 #!/usr/bin/env bash
 # Target: the firmware builds for the Nucleo-H743ZI2 (Cortex-M7, thumbv7em-none-eabihf),
-# linked through flip-link (stack overflow protection); print flash/RAM use.
+# linked through flip-link (stack overflow protection), in both converter variants: the
+# on-chip ADC/DAC (default) and the external SPI pair through the core's Ad4000/Ad5791
+# drivers (feature spi-converters). Prints flash/RAM use of each and checks in the ELF that
+# the control interrupt runs the core's pipeline step (and, with SPI, both drivers).
 set -euo pipefail
+cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
-cargo build --release --target thumbv7em-none-eabihf --bin firmware
 size="$(rustc --print sysroot)/lib/rustlib/x86_64-unknown-linux-gnu/bin/llvm-size"
 elf=target/thumbv7em-none-eabihf/release/firmware
-"$size" -A "$elf" | grep -E '^(section|\.vector_table|\.text|\.rodata|\.data|\.bss|\.uninit)' || true
-"$size" -B "$elf" | awk 'NR==2 {printf "firmware (H743): flash %d bytes (text+data), RAM %d bytes (data+bss, stack not included)\n", $1+$2, $2+$3}'
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+# build <name> <cargo features...>
+build() {
+  local name=$1
+  shift
+  cargo build --release --target thumbv7em-none-eabihf --bin firmware "$@"
+  cp "$elf" "$work/$name.elf"
+  "$size" -A "$work/$name.elf" | grep -E '^(section|\.vector_table|\.text|\.rodata|\.data|\.bss|\.uninit)' || true
+  "$size" -B "$work/$name.elf" | awk -v n="$name" 'NR==2 {printf "firmware (H743, %s): flash %d bytes (text+data), RAM %d bytes (data+bss, stack not included)\n", n, $1+$2, $2+$3}'
+}
+
+build on-chip
+build spi-converters --features spi-converters
+python3 .ci/firmware-code.py "$work/on-chip.elf" ADC1_2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}"
+python3 .ci/firmware-code.py "$work/spi-converters.elf" TIM2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
+  "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
+  piezo_core::drivers::ad5791::Ad5791::set_code

@@ -2,7 +2,8 @@
 # The RTIC firmware boots under QEMU with a simulated stage, twice:
 #   mps2-an386 (Cortex-M4F, thumbv7em-none-eabihf, f32) and
 #   mps2-an385 (Cortex-M3, thumbv7m-none-eabi, Q16.16 fixed point);
-# each runs >= 10 000 control periods (SysTick), answers commands on its serial port and
+# each runs >= 10 000 control periods (SysTick) through the core's Ad4000/Ad5791 drivers on
+# mock chips backed by the stage, answers commands on its serial port and
 # prints the instructions per control step of every feedback law x feedforward
 # (QEMU -icount shift=0: 1 instruction = 1 ns of virtual time). This script is also the
 # README's command for the instruction tables.
@@ -51,6 +52,10 @@ run() {
   periods=$(sed -n 's/^done periods \([0-9]*\) .*/\1/p' "$dir/uart.txt")
   [ -n "$periods" ] && [ "$periods" -ge 10000 ] || { echo "$name: too few control periods: '$periods'"; exit 1; }
   echo "=== $name: $periods control periods, commands answered"
+  # The control interrupt runs the pipeline and both converter drivers (on the mock chips).
+  python3 .ci/firmware-code.py "$elf" SysTick "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
+    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
+    piezo_core::drivers::ad5791::Ad5791::set_code
 }
 
 run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4

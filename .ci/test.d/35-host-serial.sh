@@ -119,7 +119,7 @@ awk -F, '
     n++
     if (n == 100) before = $3
     if (n == 101) { at = $3; t0 = $2 }
-    if ($6 < 0 || $6 > 4095 || $6 != int($6)) { print "row " n ": dac_code " $6; bad = 1 }
+    if ($6 < 0 || $6 > 1048575 || $6 != int($6)) { print "row " n ": dac_code " $6; bad = 1 }
   }
   END {
     printf "trig.csv: %d rows, ref_um %.4f -> %.4f at t_s %s\n", n, before, at, t0

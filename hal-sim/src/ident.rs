@@ -1,5 +1,6 @@
 //! Identification and model discovery (`piezo fit`, `piezo diagnose`).
 pub mod diagnose;
+pub mod fast;
 pub mod fit;
 pub mod generate;
 pub mod optim;

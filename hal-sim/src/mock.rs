@@ -99,6 +99,8 @@ pub struct AdcStats {
 #[derive(Debug)]
 struct AdcChip {
     spec: AdcSpec,
+    /// Codes per input volt, gain error included.
+    codes_per_volt: f64,
     clock: MockClock,
     rng: Rng,
     input_volts: f64,
@@ -113,20 +115,38 @@ struct AdcChip {
 }
 
 impl AdcChip {
-    fn quantise(&mut self, volts: f64) -> i32 {
-        let c = &self.spec.config;
-        let (lo, hi) = c.code_range();
+    fn codes_per_volt(spec: &AdcSpec) -> f64 {
+        let c = &spec.config;
         let full = (1u64 << c.bits) as f64;
         let span = match c.format {
-            CodeFormat::TwosComplement => 2.0 * self.spec.vref,
-            CodeFormat::StraightBinary => self.spec.vref,
+            CodeFormat::TwosComplement => 2.0 * spec.vref,
+            CodeFormat::StraightBinary => spec.vref,
         };
+        (1.0 + spec.gain_error) / span * full
+    }
+
+    /// The frame a read shifts out: the finished conversion, or the previous result if
+    /// the conversion is still running (counted).
+    #[inline]
+    fn conversion_frame(&mut self) -> [u8; 3] {
+        let now = self.clock.now_ns();
+        if !self.cnv_high && self.ready_at_ns <= now {
+            self.result = self.converting;
+        } else {
+            self.stats.early_reads += 1;
+        }
+        ad4000::encode(&self.spec.config, self.result)
+    }
+
+    #[inline]
+    fn quantise(&mut self, volts: f64) -> i32 {
+        let (lo, hi) = self.spec.config.code_range();
         let noise = if self.spec.noise_lsb > 0.0 {
             self.spec.noise_lsb * self.rng.gauss()
         } else {
             0.0
         };
-        let x = volts * (1.0 + self.spec.gain_error) / span * full + self.spec.offset_lsb + noise;
+        let x = volts * self.codes_per_volt + self.spec.offset_lsb + noise;
         if x.is_nan() {
             return lo;
         }
@@ -144,6 +164,7 @@ impl MockAdc {
     pub fn new(spec: AdcSpec, clock: MockClock) -> Self {
         let rng = Rng::new(spec.seed);
         Self(Rc::new(RefCell::new(AdcChip {
+            codes_per_volt: AdcChip::codes_per_volt(&spec),
             spec,
             clock,
             rng,
@@ -211,6 +232,14 @@ impl SpiDevice for MockAdcSpi {
             chip.stats.failed_transactions += 1;
             return Err(MockSpiError);
         }
+        // The loop's one read frame (SDI idle high): the conversion result.
+        if let [Operation::Read(r)] = ops {
+            let out = chip.conversion_frame();
+            r.iter_mut()
+                .enumerate()
+                .for_each(|(k, b)| *b = out.get(k).copied().unwrap_or(0));
+            return Ok(());
+        }
         // The first MOSI byte selects a register access; otherwise the frame shifts out
         // the conversion result (SDI idles high).
         let mut mosi = [0xFFu8; 2];
@@ -237,15 +266,7 @@ impl SpiDevice for MockAdcSpi {
                 [0xFF; 3]
             }
             ad4000::CMD_READ => [0xFF, chip.reg, 0xFF],
-            _ => {
-                let now = chip.clock.now_ns();
-                if !chip.cnv_high && chip.ready_at_ns <= now {
-                    chip.result = chip.converting;
-                } else {
-                    chip.stats.early_reads += 1;
-                }
-                ad4000::encode(&chip.spec.config, chip.result)
-            }
+            _ => chip.conversion_frame(),
         };
         let mut k = 0;
         for op in ops.iter_mut() {
@@ -329,6 +350,8 @@ const CTRL_POWER_ON: u32 = CTRL_OPGND | CTRL_DACTRI;
 #[derive(Debug)]
 struct DacChip {
     spec: DacSpec,
+    /// Volts per code.
+    lsb: f64,
     dac: u32,
     ctrl: u32,
     clearcode: u32,
@@ -352,8 +375,7 @@ impl DacChip {
             } else {
                 self.active ^ (1 << 19)
             };
-            let s = &self.spec;
-            let lsb = (s.vrefp - s.vrefn) / DATA_MASK as f64;
+            let (s, lsb) = (&self.spec, self.lsb);
             s.vrefn + (d as f64 * lsb) * (1.0 + s.gain_error) + s.offset_lsb * lsb
         };
     }
@@ -414,6 +436,7 @@ pub struct MockDac(Rc<RefCell<DacChip>>);
 impl MockDac {
     pub fn new(spec: DacSpec) -> Self {
         let mut chip = DacChip {
+            lsb: (spec.vrefp - spec.vrefn) / DATA_MASK as f64,
             spec,
             dac: 0,
             ctrl: CTRL_POWER_ON,

@@ -98,7 +98,7 @@ impl Default for Run {
         Self {
             duration_s: 0.3,
             loop_hz: 100_000.0,
-            substeps: 2,
+            substeps: 1,
             settle_s: None,
             seed: 1,
         }

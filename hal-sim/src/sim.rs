@@ -595,10 +595,11 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
     // of 37 % of the 100 um range (a 5 Hz sine: a 37 um step rings the 1.5 kHz structure to
     // ~74 um and out of the sensor range whatever the controller), +-20 % model parameter
     // error, 10x sensor noise.
+    // One full period of settling like every periodic scenario: the stage starts at rest
+    // on its virgin curve, which a shorter window would count as tracking error.
     add("sine-1hz", &|s| {
         s.reference.freq_hz = 1.0;
-        s.run.duration_s = 1.2;
-        s.run.settle_s = Some(0.2);
+        s.run.duration_s = 2.0;
     });
     add("sine-50hz", &|s| {
         s.reference.freq_hz = 50.0;

@@ -6,9 +6,13 @@
 //! damped resonance, external force through the stiffness) -> thermal drift -> pure delay
 //! -> sensor noise.
 //!
-//! Integration runs at `substeps` times the loop rate; every linear block is discretised
-//! exactly for an input held over one internal step, and the slew-limited amplifier is
-//! solved exactly, so the error comes only from holding the block inputs over one step.
+//! Integration runs at `substeps` times the loop rate (default: one step per loop period).
+//! The slew-limited amplifier is solved exactly; the hysteresis model is stepped once per
+//! loop period to the amplifier's end voltage (it is rate-independent) and interpolated in
+//! voltage inside it; creep and structure are discretised exactly for an input that moves
+//! linearly over one internal step (first-order hold, ramp-invariant), so the error comes
+//! only from the curvature of their inputs inside a step. A delay that is not a whole
+//! number of internal steps is interpolated linearly.
 
 use crate::scenario::{HysteresisModel, Scenario, StageConfig};
 use anyhow::{Context, Result};
@@ -118,6 +122,29 @@ impl Amp {
     }
 }
 
+/// One creep element's exact update over an internal step `h` for a linear input
+/// (ramp-invariant discretisation of `c' = (g*y - c)/tau`).
+#[derive(Debug, Clone, Copy)]
+struct CreepFh {
+    e: f64,
+    b0: f64,
+    b1: f64,
+}
+
+impl CreepFh {
+    fn new(gain: f64, tau: f64, h: f64) -> Self {
+        // c(h) = e*c0 + g*[(1 - r)*y1 + (r - e)*y0], e = exp(-h/tau), r = tau/h*(1 - e)
+        let one_minus_e = -(-h / tau).exp_m1();
+        let e = 1.0 - one_minus_e;
+        let r = tau / h * one_minus_e;
+        Self {
+            e,
+            b0: gain * (r - e),
+            b1: gain * (1.0 - r),
+        }
+    }
+}
+
 /// Everything of one axis.
 #[derive(Debug, Clone)]
 struct Axis {
@@ -125,8 +152,12 @@ struct Axis {
     stat: Static,
     asym: f64,
     creep_gain: Vec<f64>,
-    creep_alpha: Vec<f64>,
+    /// Exact first-order-hold update of each creep element over one internal step:
+    /// `c' = e*c + b0*y0 + b1*y1` for an input moving linearly from `y0` to `y1`.
+    creep_fh: Vec<CreepFh>,
     creep: Vec<f64>,
+    /// Input of the creep elements at the end of the last step.
+    y_in: f64,
     /// Output of the static part + creep (before coupling).
     y_hc: f64,
     /// Hysteresis model output at the amplifier voltage `v_stat`.
@@ -144,15 +175,54 @@ struct Axis {
     v: f64,
 }
 
+impl Axis {
+    /// Static output `ys` at amplifier voltage `v` -> quadratic term -> creep; sets `y_hc`.
+    #[inline(always)]
+    fn hammerstein(&mut self, v: f64, ys: f64) {
+        let y = ys + self.asym * v * v;
+        let y0 = self.y_in;
+        self.y_in = y;
+        let mut yc = y;
+        for (c, k) in self.creep.iter_mut().zip(&self.creep_fh) {
+            *c = k.e * *c + k.b0 * y0 + k.b1 * y;
+            yc += *c;
+        }
+        self.y_hc = yc;
+    }
+
+    /// One internal step of the structure to the new input. Exact for an input moving
+    /// linearly over the step: the ramp response follows the input with velocity `s` and lag
+    /// `2 zeta / w * s`; the rest decays freely.
+    #[inline(always)]
+    fn structure(&mut self, input: f64, ad: &Option<([[f64; 2]; 2], f64)>, inv_h: f64) {
+        match ad {
+            Some((ad, lag)) => {
+                let s = (input - self.u_struct) * inv_h;
+                let lag = lag * s;
+                let (dx, dv) = (self.x - (self.u_struct - lag), self.v - s);
+                self.x = input - lag + ad[0][0] * dx + ad[0][1] * dv;
+                self.v = s + ad[1][0] * dx + ad[1][1] * dv;
+            }
+            None => {
+                self.x = input;
+                self.v = 0.0;
+            }
+        }
+        self.u_struct = input;
+    }
+}
+
 /// The simulated stage.
 #[derive(Debug, Clone)]
 pub struct Stage {
     axes: Vec<Axis>,
-    /// Internal step (s).
+    /// Internal step (s) and its inverse.
     h: f64,
+    inv_h: f64,
     substeps: usize,
-    /// Exact transition matrix of the structure over `h`; `None`: structure off.
-    ad: Option<[[f64; 2]; 2]>,
+    /// Exact transition matrix of the structure over `h`, and `2 zeta / w` (the lag of
+    /// its ramp response); `None`: structure off.
+    ad: Option<([[f64; 2]; 2], f64)>,
     coupling: Option<Vec<Vec<f64>>>,
     force: Option<(f64, f64, f64, f64)>, // (um at full force, at_s, freq_hz, stiffness)
     drift: Option<(f64, f64, f64)>,      // (um, tau_s, rate)
@@ -160,9 +230,12 @@ pub struct Stage {
     drift_exp_um: f64,
     drift_decay: f64,
     noise_sigma_um: f64,
-    /// Delay line of positions at the internal rate, per axis.
+    /// Delay line of positions at the internal rate, per axis (length a power of two).
     delay: Vec<Vec<f64>>,
     delay_pos: usize,
+    /// The delay in internal steps: whole part and fraction (linear interpolation).
+    delay_steps: usize,
+    delay_frac: f64,
     rng: Rng,
     t: f64,
     steps: u64,
@@ -229,8 +302,13 @@ impl Stage {
                 },
                 stat,
                 asym: hy.asym_um_per_v2,
-                creep_alpha: taus.iter().map(|t| -(-h / t).exp_m1()).collect(),
+                creep_fh: gains
+                    .iter()
+                    .zip(&taus)
+                    .map(|(&g, &t)| CreepFh::new(g, t, h))
+                    .collect(),
                 creep: vec![0.0; gains.len()],
+                y_in: 0.0,
                 creep_gain: gains,
                 y_hc: 0.0,
                 y_stat: 0.0,
@@ -250,22 +328,35 @@ impl Stage {
             let wd = w * (1.0 - z * z).sqrt();
             let e = (-s * h).exp();
             let (sn, cs) = (wd * h).sin_cos();
-            [
-                [e * (cs + s / wd * sn), e * sn / wd],
-                [-e * w * w / wd * sn, e * (cs - s / wd * sn)],
-            ]
+            (
+                [
+                    [e * (cs + s / wd * sn), e * sn / wd],
+                    [-e * w * w / wd * sn, e * (cs - s / wd * sn)],
+                ],
+                2.0 * z / w,
+            )
         });
         let f = &cfg.force;
-        let delay_steps = if cfg.delay.enabled {
-            (cfg.delay.seconds / h).round() as usize
+        let delay = if cfg.delay.enabled {
+            cfg.delay.seconds / h
         } else {
-            0
+            0.0
+        };
+        // Whole steps; a fraction within rounding of a whole step counts as whole.
+        let near = delay.round();
+        let (delay_steps, delay_frac) = if (delay - near).abs() < 1e-9 * near.max(1.0) {
+            (near as usize, 0.0)
+        } else {
+            (delay.floor() as usize, delay - delay.floor())
         };
         let mut st = Self {
-            delay: vec![vec![0.0; delay_steps + 1]; cfg.axes],
+            delay: vec![vec![0.0; (delay_steps + 2).next_power_of_two()]; cfg.axes],
             delay_pos: 0,
+            delay_steps,
+            delay_frac,
             axes,
             h,
+            inv_h: 1.0 / h,
             substeps,
             ad,
             coupling: cfg.coupling.enabled.then(|| cfg.coupling.matrix.clone()),
@@ -310,6 +401,7 @@ impl Stage {
                 .iter_mut()
                 .zip(&ax.creep_gain)
                 .for_each(|(c, g)| *c = g * y);
+            ax.y_in = y;
             ax.y_hc = y + ax.creep.iter().sum::<f64>();
             ax.x = ax.y_hc;
             ax.u_struct = ax.y_hc;
@@ -360,12 +452,16 @@ impl Stage {
         let Some(line) = self.delay.get(axis) else {
             return f64::NAN;
         };
-        let n = line.len();
-        let next = self.delay_pos + 1;
-        let old = line
-            .get(if next == n { 0 } else { next })
-            .copied()
-            .unwrap_or(f64::NAN);
+        let mask = line.len() - 1; // a power of two
+        let at = |back: usize| {
+            line.get(self.delay_pos.wrapping_sub(back) & mask)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        let mut old = at(self.delay_steps);
+        if self.delay_frac != 0.0 {
+            old += (at(self.delay_steps + 1) - old) * self.delay_frac;
+        }
         let noise = if self.noise_sigma_um > 0.0 {
             self.noise_sigma_um * self.rng.gauss()
         } else {
@@ -387,6 +483,48 @@ impl Stage {
         // the hysteresis models are rate-independent: one exact model step to the end
         // voltage, and linear interpolation in voltage inside the period (error ~
         // curvature * dv^2 / 8, about 1e-6 um at full speed).
+        if self.substeps == 1 && self.coupling.is_none() {
+            self.advance_one(dac_volts);
+            return;
+        }
+        self.advance_general(dac_volts);
+    }
+
+    /// [`Self::advance`] with one internal step per period and no coupling: every block of
+    /// an axis in one pass (the same arithmetic as [`Self::advance_general`]).
+    #[inline]
+    fn advance_one(&mut self, dac_volts: &[f64]) {
+        let f_um = self.force_um();
+        let (h, inv_h) = (self.h, self.inv_h);
+        self.advance_time();
+        let drift = self.drift_um();
+        let ad = &self.ad;
+        for ((ax, &u), line) in self.axes.iter_mut().zip(dac_volts).zip(&mut self.delay) {
+            let v = ax.amp.step(u);
+            let ys = ax.stat.step(v, h);
+            (ax.v_end, ax.y_end, ax.v_stat, ax.y_stat) = (v, ys, v, ys);
+            ax.hammerstein(v, ys);
+            ax.structure(ax.y_hc + f_um, ad, inv_h);
+            let mask = line.len() - 1; // a power of two
+            if let Some(p) = line.get_mut(self.delay_pos & mask) {
+                *p = ax.x + drift;
+            }
+        }
+    }
+
+    /// Time, drift and the delay line's write position, one internal step on.
+    #[inline(always)]
+    fn advance_time(&mut self) {
+        self.steps += 1;
+        self.t = self.steps as f64 * self.h;
+        if let Some((um, _, _)) = self.drift {
+            // um * (1 - exp(-t/tau)), advanced without an exp per step.
+            self.drift_exp_um = um - (um - self.drift_exp_um) * self.drift_decay;
+        }
+        self.delay_pos = self.delay_pos.wrapping_add(1);
+    }
+
+    fn advance_general(&mut self, dac_volts: &[f64]) {
         let h_loop = self.h * self.substeps as f64;
         for (ax, &u) in self.axes.iter_mut().zip(dac_volts) {
             for v in ax.v_traj.iter_mut().take(self.substeps) {
@@ -436,7 +574,7 @@ impl Stage {
                     ax.v_stat = v;
                     (v, ax.y_stat)
                 }
-                Some(j) => {
+                Some(j) if j + 1 < self.substeps => {
                     let v = ax.v_traj.get(j).copied().unwrap_or(ax.v_end);
                     let dv = ax.v_end - ax.v_stat;
                     let ys = if dv != 0.0 {
@@ -446,14 +584,10 @@ impl Stage {
                     };
                     (v, ys)
                 }
+                // The last step of the period ends at the model's own end point.
+                Some(_) => (ax.v_end, ax.y_end),
             };
-            let y = ys + ax.asym * v * v;
-            let mut yc = y;
-            for ((c, g), a) in ax.creep.iter_mut().zip(&ax.creep_gain).zip(&ax.creep_alpha) {
-                *c += (g * y - *c) * a;
-                yc += *c;
-            }
-            ax.y_hc = yc;
+            ax.hammerstein(v, ys);
         }
         let f_um = self.force_um();
         let n = self.axes.len();
@@ -466,37 +600,15 @@ impl Stage {
                     }
                 }
             }
-            let ax = &mut self.axes[i];
-            // The structure sees the mean of its input over the step (trapezoid: second
-            // order in h, where holding either end would be first order).
-            let mid = 0.5 * (ax.u_struct + input);
-            ax.u_struct = input;
-            match &self.ad {
-                Some(ad) => {
-                    let (dx, dv) = (ax.x - mid, ax.v);
-                    ax.x = mid + ad[0][0] * dx + ad[0][1] * dv;
-                    ax.v = ad[1][0] * dx + ad[1][1] * dv;
-                }
-                None => {
-                    ax.x = input;
-                    ax.v = 0.0;
-                }
+            if let Some(ax) = self.axes.get_mut(i) {
+                ax.structure(input, &self.ad, self.inv_h);
             }
         }
-        self.steps += 1;
-        self.t = self.steps as f64 * h;
-        if let Some((um, _, _)) = self.drift {
-            // um * (1 - exp(-t/tau)), advanced without an exp per step.
-            self.drift_exp_um = um - (um - self.drift_exp_um) * self.drift_decay;
-        }
+        self.advance_time();
         let drift = self.drift_um();
-        let len = self.delay.first().map_or(1, |l| l.len());
-        self.delay_pos += 1;
-        if self.delay_pos >= len {
-            self.delay_pos = 0;
-        }
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
-            if let Some(p) = line.get_mut(self.delay_pos) {
+            let mask = line.len() - 1; // a power of two
+            if let Some(p) = line.get_mut(self.delay_pos & mask) {
                 *p = ax.x + drift;
             }
         }
@@ -606,6 +718,45 @@ mod tests {
         assert!((1.0 / period - fd).abs() < 10.0, "{}", 1.0 / period);
         let overshoot = y.iter().cloned().fold(0.0, f64::max) / fin - 1.0;
         assert!(overshoot > 0.8, "lightly damped: overshoot {overshoot}");
+    }
+
+    #[test]
+    fn one_step_fast_path_equals_the_general_path() {
+        let mut s = Scenario::default();
+        s.stage.force.enabled = true;
+        s.stage.force.at_s = 1e-3;
+        s.stage.force.freq_hz = 50.0;
+        let mut fast = Stage::new(&s).unwrap();
+        let mut general = fast.clone();
+        for k in 0..5_000 {
+            let dac = 5.0 - 4.9 * (k as f64 * 2e-3).cos() + if k % 700 < 5 { 3.0 } else { 0.0 };
+            fast.advance(&[dac]);
+            general.advance_general(&[dac]);
+            assert_eq!(fast.position_um(0), general.position_um(0), "step {k}");
+            assert_eq!(fast.sensor_um(0), general.sensor_um(0), "step {k}");
+        }
+    }
+
+    #[test]
+    fn fractional_delay_interpolates() {
+        let mut s = quasi_static();
+        s.stage.hysteresis.model = HysteresisModel::None;
+        s.stage.hysteresis.asym_um_per_v2 = 0.0;
+        s.stage.resonance.enabled = false;
+        s.stage.amplifier.bandwidth_hz = 1e7;
+        s.stage.amplifier.current_limit_a = 1e3;
+        s.stage.delay.enabled = true;
+        s.stage.delay.seconds = 2.5e-4; // 2.5 loop periods at 10 kHz, one step each
+        let mut st = Stage::new(&s).unwrap();
+        let mut pos = vec![];
+        for k in 0..20 {
+            st.advance(&[0.01 * k as f64]);
+            pos.push(st.position_um(0));
+            if k >= 3 {
+                let want = 0.5 * (pos[k - 2] + pos[k - 3]);
+                assert!((st.sensor_um(0) - want).abs() < 1e-12, "{k}");
+            }
+        }
     }
 
     #[test]

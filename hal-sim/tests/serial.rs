@@ -31,7 +31,7 @@ const PERIODS_PER_LINE: usize = 300;
 struct Fake {
     ctl: control::Ctl,
     y_um: f64,
-    dac: u16,
+    dac: i32,
 }
 
 impl Fake {
@@ -47,7 +47,7 @@ impl Fake {
         for _ in 0..periods {
             let volts = self.dac as f64 * 150.0 / control::DAC_MAX as f64;
             self.y_um += 0.3 * (0.16 * volts - self.y_um);
-            let code = (self.y_um * 655.35).clamp(0.0, 65535.0) as u32;
+            let code = (self.y_um * 655.35).clamp(0.0, 65535.0) as i32;
             self.dac = self.ctl.lp.step(code);
             self.ctl.record(code, self.dac);
             self.ctl.timing.step.record(40);

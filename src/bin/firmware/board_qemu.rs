@@ -1,15 +1,21 @@
 //! QEMU `mps2-an386` (Cortex-M4F) board: the RTIC app boots in CI with a simulated stage.
 //!
 //! * SysTick (25 MHz in QEMU's mps2 model) fires at the sample rate and runs the control
-//!   step at the highest priority. The converters are replaced by [`SimStage`]: the CBW model
-//!   of the core plus a first-order lag, quantised like the on-chip 16-bit ADC / 12-bit DAC.
+//!   step at the highest priority. The stage is [`SimStage`]: the CBW model of the core plus
+//!   a first-order lag. It sits behind the firmware's real converter drivers: the control
+//!   task runs `Ad4000::start_conversion` + `Ad4000::read` and `Ad5791::set_code` (the
+//!   drivers of `piezo_core::drivers`, the ones hal-sim runs) over the no_std mock chips of
+//!   [`chips`] (an AD4020 whose CNV edge samples the stage, an AD5791 whose LDAC edge sets
+//!   the stage's voltage), with the 20-bit codes of the SPI converter pair.
 //! * The CMSDK UART0 (0x4000_4000, QEMU `-serial`) carries the command protocol, polled from
 //!   the idle task (lowest priority).
 //! * defmt logs go out over semihosting (decode with `defmt-print -e <elf>`).
 //! * Before the loop starts, `init` measures the instructions per control step of every
 //!   feedback law x feedforward combination (run QEMU with `-icount shift=0`: one instruction
 //!   per virtual ns, so SysTick ticks over N steps count instructions; a loop of known length
-//!   calibrates ticks to instructions). The `bench` command prints that table.
+//!   calibrates ticks to instructions). The `bench` command prints that table. The table
+//!   counts the pipeline step (ADC code in, DAC code out) without the driver calls; one
+//!   extra line counts the driver path per sample (both drivers and the mock chips).
 //! * After at least [`PERIODS_MIN`] periods, one answered command and [`QUIET_PERIODS`]
 //!   without a received byte the app exits through semihosting with status 0 (1 if no
 //!   command arrived within [`PERIODS_MAX`] periods), so a host (`piezo serial`) can hold a
@@ -89,15 +95,15 @@ mod uart {
 
 use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 
-/// The stage the converters would see: CBW hysteresis (000 eq. 1-2) followed by a
-/// first-order lag (mechanical bandwidth), sampled by a 16-bit ADC from a 12-bit DAC.
+/// The stage the converters see: CBW hysteresis (000 eq. 1-2) followed by a first-order
+/// lag (mechanical bandwidth), driven by a 20-bit DAC code over 0..150 V and sampled as an
+/// AD4020 code (two's complement, the full scale over [`crate::control::SPI_SPAN_UM`]).
 pub struct SimStage {
     model: Cbw<f32>,
     state: BwState<f32>,
     /// Lag factor per sample, `1 - exp(-2 pi f_c / f_s)`.
     lag: f32,
     y_um: f32,
-    /// Converter scaling (the same as [`Io::on_chip`], in f32 on every target).
     volts_per_code: f32,
     codes_per_um: f32,
 }
@@ -112,24 +118,167 @@ impl SimStage {
             state: model.init(0.0),
             lag,
             y_um: 0.0,
-            volts_per_code: 150.0 / 4095.0,
-            codes_per_um: 65535.0 / 100.0,
+            volts_per_code: 150.0 / crate::control::DAC_FULL as f32,
+            codes_per_um: (1u32 << crate::control::ADC_BITS) as f32
+                / crate::control::SPI_SPAN_UM as f32,
         }
     }
 
     /// DAC code in, ADC code out (one sample).
-    pub fn step(&mut self, dac_code: u16) -> u32 {
+    pub fn step(&mut self, dac_code: i32) -> i32 {
         let u = dac_code as f32 * self.volts_per_code;
         let y = self.model.step(&mut self.state, u, 1.0 / SAMPLE_HZ as f32);
         self.y_um += self.lag * (y - self.y_um);
-        let code = self.y_um * self.codes_per_um + 0.5;
-        if code >= 65535.0 {
-            65535
-        } else if code >= 0.0 {
-            code as u32
+        let half = (1i32 << (crate::control::ADC_BITS - 1)) as f32;
+        let centre = crate::control::SPI_CENTER_UM as f32;
+        let code = libm::floorf((self.y_um - centre) * self.codes_per_um + 0.5);
+        if code >= half - 1.0 {
+            half as i32 - 1
+        } else if code >= -half {
+            code as i32
         } else {
-            0
+            -half as i32
         }
+    }
+}
+
+/// No_std mock converter chips on a simulated SPI bus, for the firmware's own drivers.
+/// They keep their state in atomics (one chip of each kind), so the pins and the bus of a
+/// chip are separate handles like on a board.
+pub mod chips {
+    use crate::control::{ADC_CONFIG, DAC_CONFIG};
+    use core::convert::Infallible;
+    use core::sync::atomic::{AtomicI32, AtomicU32, Ordering::Relaxed};
+    use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
+    use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
+    use piezo_core::drivers::{ad4000, ad5791};
+
+    /// The code the ADC's input corresponds to now (the stage writes it every sample).
+    pub static INPUT_CODE: AtomicI32 = AtomicI32::new(0);
+    /// The code sampled at the last CNV rising edge (what the next read shifts out).
+    static SAMPLED: AtomicI32 = AtomicI32::new(0);
+    static ADC_REG: AtomicU32 = AtomicU32::new(0);
+    /// AD5791 registers (DAC, control) and the code the output holds (set at LDAC falls).
+    static DAC_REG: AtomicU32 = AtomicU32::new(0);
+    static DAC_CTRL: AtomicU32 = AtomicU32::new(0);
+    static DAC_READ: AtomicU32 = AtomicU32::new(0);
+    pub static DAC_OUT: AtomicU32 = AtomicU32::new(0);
+
+    /// The AD4020's CNV pin: the rising edge samples the input.
+    pub struct Cnv;
+    /// The AD5791's LDAC pin: the falling edge loads the DAC register into the output.
+    pub struct Ldac;
+
+    impl PinErrorType for Cnv {
+        type Error = Infallible;
+    }
+    impl OutputPin for Cnv {
+        fn set_low(&mut self) -> Result<(), Infallible> {
+            Ok(())
+        }
+        fn set_high(&mut self) -> Result<(), Infallible> {
+            SAMPLED.store(INPUT_CODE.load(Relaxed), Relaxed);
+            Ok(())
+        }
+    }
+    impl PinErrorType for Ldac {
+        type Error = Infallible;
+    }
+    impl OutputPin for Ldac {
+        fn set_low(&mut self) -> Result<(), Infallible> {
+            DAC_OUT.store(DAC_REG.load(Relaxed), Relaxed);
+            Ok(())
+        }
+        fn set_high(&mut self) -> Result<(), Infallible> {
+            Ok(())
+        }
+    }
+
+    /// The AD4020's serial interface: register write (`0x14`, value), register read
+    /// (`0x54`), and the conversion result as a left-aligned frame.
+    pub struct AdcSpi;
+    /// The AD5791's serial interface: 24-bit frames, a read answered in the next frame.
+    pub struct DacSpi;
+
+    impl ErrorType for AdcSpi {
+        type Error = Infallible;
+    }
+    impl SpiDevice for AdcSpi {
+        fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
+            for op in ops.iter_mut() {
+                match op {
+                    Operation::Write([ad4000::CMD_WRITE, v]) => ADC_REG.store(*v as u32, Relaxed),
+                    Operation::Transfer(read, [ad4000::CMD_READ, ..]) => {
+                        if let Some(r) = read.get_mut(1) {
+                            *r = ADC_REG.load(Relaxed) as u8;
+                        }
+                    }
+                    Operation::Read(buf) => {
+                        let frame = ad4000::encode(&ADC_CONFIG, SAMPLED.load(Relaxed));
+                        for (b, f) in buf.iter_mut().zip(frame) {
+                            *b = f;
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            Ok(())
+        }
+    }
+
+    impl ErrorType for DacSpi {
+        type Error = Infallible;
+    }
+    impl SpiDevice for DacSpi {
+        fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
+            for op in ops.iter_mut() {
+                match op {
+                    Operation::Write([a, b, c]) => {
+                        let word = u32::from_be_bytes([0, *a, *b, *c]);
+                        let (reg, data) = ((word >> 20) & 0b111, word & ad5791::DATA_MASK);
+                        if word & ad5791::READ != 0 {
+                            let v = match reg {
+                                ad5791::REG_DAC => DAC_REG.load(Relaxed),
+                                ad5791::REG_CTRL => DAC_CTRL.load(Relaxed),
+                                _ => 0,
+                            };
+                            DAC_READ.store(v | (reg << 20) | ad5791::READ, Relaxed);
+                        } else {
+                            match reg {
+                                ad5791::REG_DAC => DAC_REG.store(data, Relaxed),
+                                ad5791::REG_CTRL => DAC_CTRL.store(data, Relaxed),
+                                _ => {}
+                            }
+                        }
+                    }
+                    Operation::Transfer(read, _) => {
+                        let b = DAC_READ.load(Relaxed).to_be_bytes();
+                        for (r, v) in read.iter_mut().zip([b[1], b[2], b[3]]) {
+                            *r = v;
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            Ok(())
+        }
+    }
+
+    pub type Adc = crate::control::PositionAdc<AdcSpi, Cnv>;
+    pub type Dac = crate::control::ActuatorDac<DacSpi, Ldac>;
+
+    /// The drivers on the mock chips, initialised (register written and read back).
+    pub fn drivers() -> (Adc, Dac) {
+        let mut adc = Adc::new(AdcSpi, Cnv, ADC_CONFIG).expect("AD4020 driver");
+        adc.init().expect("AD4020 mock answers");
+        let mut dac = Dac::new(DacSpi, Ldac, DAC_CONFIG).expect("AD5791 driver");
+        dac.init(0).expect("AD5791 mock answers");
+        (adc, dac)
+    }
+
+    /// The DAC output code (what the stage sees).
+    pub fn dac_out() -> i32 {
+        DAC_OUT.load(Relaxed) as i32
     }
 }
 
@@ -162,6 +311,9 @@ pub mod bench {
         pub instr_per_tick_x1000: u32,
         /// Loop overhead subtracted (ticks over BENCH_STEPS).
         pub overhead_ticks: u32,
+        /// The driver path per sample x 100: `Ad4000::start_conversion` + `Ad4000::read` +
+        /// `Ad5791::set_code`, mock chips included (not part of the rows).
+        pub drivers_x100: u32,
     }
 
     /// Ticks elapsed on the down-counting SysTick between two readings.
@@ -220,12 +372,12 @@ pub mod bench {
         let instr_per_tick_x1000 = ((2 * CAL as u64 * 1000) / cal_ticks as u64) as u32;
 
         // ADC codes of a closed-loop run, replayed identically to every timed run.
-        let mut codes = [0u32; BENCH_STEPS];
+        let mut codes = [0i32; BENCH_STEPS];
         let mut overhead_ticks = 0;
         {
             let t0 = SYST::get_current();
             for c in codes.iter() {
-                black_box(black_box(*c) as u16);
+                black_box(black_box(*c));
             }
             overhead_ticks = overhead_ticks.max(ticks(t0, SYST::get_current()));
         }
@@ -242,7 +394,7 @@ pub mod bench {
                     continue;
                 };
                 let mut stage = SimStage::new(SAMPLE_HZ as f32);
-                let mut dac = 0u16;
+                let mut dac = 0;
                 for c in codes.iter_mut() {
                     *c = stage.step(dac);
                     dac = ctl.lp.step(*c);
@@ -270,10 +422,24 @@ pub mod bench {
                 row.max_instr = ((worst as u64 * instr_per_tick_x1000 as u64) / 1000) as u32;
             }
         }
+        // The driver path alone, on the codes of the last row.
+        let (mut adc, mut dac) = super::chips::drivers();
+        let (adc, dac) = (black_box(&mut adc), black_box(&mut dac));
+        let t0 = SYST::get_current();
+        for c in codes.iter() {
+            super::chips::INPUT_CODE.store(*c, core::sync::atomic::Ordering::Relaxed);
+            adc.start_conversion().ok();
+            let code = adc.read().unwrap_or(i32::MIN);
+            dac.set_code(black_box(code.max(0))).ok();
+        }
+        let dt = ticks(t0, SYST::get_current()).saturating_sub(overhead_ticks);
+        let drivers_x100 =
+            ((dt as u64 * instr_per_tick_x1000 as u64) / (10 * BENCH_STEPS as u64)) as u32;
         Table {
             rows,
             instr_per_tick_x1000,
             overhead_ticks,
+            drivers_x100,
         }
     }
 
@@ -288,6 +454,11 @@ pub mod bench {
         r.push_str(" instr/SysTick tick, loop overhead ");
         r.push_u32(t.overhead_ticks);
         r.push_str(" ticks");
+        uart::line(r.as_str());
+        r.clear();
+        r.push_str("bench: the rows count the pipeline step only; SPI driver path per sample (Ad4000 start+read, Ad5791 set_code, mock chips included): ");
+        r.push_fixed(t.drivers_x100, 2);
+        r.push_str(" instr");
         uart::line(r.as_str());
         uart::line("mode               feedforward        instr/step  first-50-max");
         for row in &t.rows {
@@ -324,7 +495,8 @@ pub mod bench {
 #[rtic::app(device = crate::board_qemu::pac, peripherals = false)]
 mod app {
     use super::{
-        bench, uart, SimStage, PERIODS_MAX, PERIODS_MIN, QUIET_PERIODS, SAMPLE_HZ, SYSTICK_HZ,
+        bench, chips, uart, SimStage, PERIODS_MAX, PERIODS_MIN, QUIET_PERIODS, SAMPLE_HZ,
+        SYSTICK_HZ,
     };
     use crate::control::{c, stream_frames, Ctl};
     use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
@@ -339,7 +511,8 @@ mod app {
     #[local]
     struct Local {
         stage: SimStage,
-        dac: u16,
+        adc: chips::Adc,
+        dac: chips::Dac,
         line: LineBuffer,
         table: bench::Table,
     }
@@ -359,6 +532,7 @@ mod app {
         syst.enable_counter();
         defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
         uart::line("ready");
+        let (adc, dac) = chips::drivers();
         let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
         ctl.lp
             .p
@@ -368,7 +542,8 @@ mod app {
             Shared { ctl, periods: 0 },
             Local {
                 stage: SimStage::new(SAMPLE_HZ as f32),
-                dac: 0,
+                adc,
+                dac,
                 line: LineBuffer::new(),
                 table,
             },
@@ -376,17 +551,28 @@ mod app {
     }
 
     /// The control period. SysTick ticks stand in for cycles (x40 = instructions with
-    /// `-icount shift=0`).
-    #[task(binds = SysTick, priority = 2, shared = [ctl, periods], local = [stage, dac])]
+    /// `-icount shift=0`). The stage moves under the voltage of the DAC's output, the ADC
+    /// driver samples and reads it, the DAC driver writes and loads the new code.
+    #[task(binds = SysTick, priority = 2, shared = [ctl, periods], local = [stage, adc, dac])]
     fn sample(cx: sample::Context) {
+        use core::sync::atomic::Ordering::Relaxed;
         let t0 = SYST::get_current();
-        let code = cx.local.stage.step(*cx.local.dac);
-        let dac = cx.local.dac;
+        let y = cx.local.stage.step(chips::dac_out());
+        chips::INPUT_CODE.store(y, Relaxed);
+        let (adc, dac) = (cx.local.adc, cx.local.dac);
+        // A failed read gives a code outside every sensor window: the safe state.
+        let code = match adc.start_conversion() {
+            Ok(()) => adc.read().unwrap_or(i32::MIN),
+            Err(_) => i32::MIN,
+        };
         (cx.shared.ctl, cx.shared.periods).lock(|ctl, periods| {
             let t1 = SYST::get_current();
-            *dac = ctl.lp.step(code);
+            let dac_code = ctl.lp.step(code);
             let t2 = SYST::get_current();
-            ctl.record(code, *dac);
+            if dac.set_code(dac_code).is_err() {
+                ctl.lp.dac_write_failed(chips::dac_out());
+            }
+            ctl.record(code, dac_code);
             let overrun = SCB::is_pendst_pending();
             let t = &mut ctl.timing;
             t.step.record(elapsed(t1, t2));

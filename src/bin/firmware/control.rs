@@ -3,6 +3,7 @@
 //! [`Ctl::step`] from their highest-priority task and [`Ctl::execute`] from a low-priority one.
 
 use piezo_core::command::{self, Command, Error, RecCmd, Shape, TriggerCmd};
+use piezo_core::drivers::{Ad4000Config, Ad5791Config};
 use piezo_core::feedback::{
     hgo, Adrc, AdrcConfig, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
     PidConfig, Robust, RobustConfig,
@@ -34,26 +35,6 @@ pub fn c(x: f64) -> R {
     R::from_f64(x)
 }
 
-/// What the control path needs beyond [`Real`]: code values.
-pub trait Sample: Real {
-    /// A converter code as a signal value (Q16.16 saturates above 32767).
-    fn code_value(code: u32) -> Self;
-}
-
-impl Sample for f32 {
-    #[inline(always)]
-    fn code_value(code: u32) -> Self {
-        code as f32
-    }
-}
-
-impl Sample for piezo_core::fixed::Q16 {
-    #[inline(always)]
-    fn code_value(code: u32) -> Self {
-        Self::from_usize(code as usize)
-    }
-}
-
 /// Recorder size: 4 channels x 1024 frames of R (16 KiB).
 pub const REC_CH: usize = 4;
 pub const REC_N: usize = 1024;
@@ -65,29 +46,88 @@ pub const SAMPLE_HZ: u32 = 100_000;
 #[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
 pub const SAMPLE_HZ: u32 = 16_384;
 
-/// ADC codes are shifted right by this before scaling: Q16.16 cannot represent 16-bit codes
-/// (the fixed-point build keeps 15 bits, 3 nm over 100 um).
-#[cfg(any(target_abi = "eabihf", not(target_os = "none")))]
-const ADC_SHIFT: u32 = 0;
-#[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
-const ADC_SHIFT: u32 = 1;
+/// The number type is Q16.16 (no FPU): it holds values below 32768, so codes keep 15 bits.
+const FIXED: bool = cfg!(not(any(target_abi = "eabihf", not(target_os = "none"))));
 
-/// Largest DAC code (12-bit on-chip DAC).
-pub const DAC_MAX: i32 = 4095;
+/// The converter pair: the on-chip 16-bit ADC and 12-bit DAC, or the external SPI pair
+/// through the drivers of [`piezo_core::drivers`] (the ones hal-sim's mock chips run): an
+/// AD4020 (20 bit, two's complement) and an AD5791 (20 bit, offset binary). Feature
+/// `spi-converters` on the H743; always on the QEMU board, whose simulated stage sits
+/// behind the same drivers.
+pub const SPI_CONVERTERS: bool = cfg!(any(feature = "spi-converters", feature = "board-qemu"));
 
-/// The on-chip converters: 16-bit ADC over 0..100 um, 12-bit DAC over 0..150 V
-/// (amplifier gain 45 V/V at 3.3 V), slew limit 20 V/ms, safe state 0 V.
-pub fn on_chip_config(sample_hz: R) -> Config<R, 1> {
-    let codes = (65_535 >> ADC_SHIFT) as f64;
+/// The position ADC's configuration (SPI converters).
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
+pub const ADC_CONFIG: Ad4000Config = Ad4000Config::AD4020;
+/// The DAC's configuration (SPI converters).
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
+pub const DAC_CONFIG: Ad5791Config = Ad5791Config::DEFAULT;
+/// The firmware's position ADC driver on a board's SPI device and CNV pin: the type
+/// hal-sim runs on its mock chip (`hal_sim::sim::SimAdc`).
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
+pub type PositionAdc<SPI, CNV> = piezo_core::drivers::FirmwareAdc<SPI, CNV>;
+/// The firmware's DAC driver on a board's SPI device and LDAC pin (`hal_sim::sim::SimDac`).
+#[cfg_attr(
+    not(any(feature = "spi-converters", feature = "board-qemu")),
+    allow(dead_code)
+)]
+pub type ActuatorDac<SPI, LDAC> = piezo_core::drivers::FirmwareDac<SPI, LDAC>;
+
+/// Bits of a converter code.
+pub const ADC_BITS: u32 = if SPI_CONVERTERS { 20 } else { 16 };
+pub const DAC_BITS: u32 = if SPI_CONVERTERS { 20 } else { 12 };
+/// Bits the pipeline sees: all of them in f32, 15 in Q16.16 (3 nm over 100 um at 15 bits).
+const ADC_KEEP: u32 = if FIXED { 15 } else { ADC_BITS };
+const DAC_KEEP: u32 = if FIXED && DAC_BITS > 15 { 15 } else { DAC_BITS };
+/// ADC codes are shifted right by this before scaling, DAC codes left after it.
+const ADC_SHIFT: u32 = ADC_BITS - ADC_KEEP;
+const DAC_SHIFT: u32 = DAC_BITS - DAC_KEEP;
+
+/// Largest DAC code the pipeline computes (before [`DAC_SHIFT`]).
+pub const DAC_MAX: i32 = (1 << DAC_KEEP) - 1;
+/// Largest code of the DAC itself.
+#[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
+pub const DAC_FULL: i32 = (1 << DAC_BITS) - 1;
+
+/// Span and centre of the SPI ADC's full scale (um): -10..110 um, so the stage at rest
+/// (0 um) and at full stroke stays inside the sensor window.
+pub const SPI_SPAN_UM: f64 = 120.0;
+pub const SPI_CENTER_UM: f64 = 50.0;
+
+/// The converters over the stage: ADC over 0..100 um (on-chip straight binary from 0 um;
+/// SPI two's complement over [`SPI_SPAN_UM`], a clipped code is out of range), DAC over
+/// 0..150 V (amplifier gain 45 V/V at 3.3 V on-chip), slew limit 20 V/ms, safe state 0 V.
+pub fn converter_config(sample_hz: R) -> Config<R, 1> {
+    let sensor = if SPI_CONVERTERS {
+        let half = 1i32 << (ADC_KEEP - 1);
+        Sensor {
+            um_per_code: c(SPI_SPAN_UM / (2 * half) as f64),
+            offset_um: c(SPI_CENTER_UM),
+            code_min: -half + 1,
+            code_max: half - 2,
+        }
+    } else {
+        let codes = (65_535 >> ADC_SHIFT) as f64;
+        Sensor {
+            um_per_code: c(100.0 / codes),
+            offset_um: c(0.0),
+            code_min: 0,
+            code_max: codes as i32,
+        }
+    };
     Config {
         sample_hz,
         axes: [AxisConfig {
-            sensor: Sensor {
-                um_per_code: c(100.0 / codes),
-                offset_um: c(0.0),
-                code_min: 0,
-                code_max: codes as i32,
-            },
+            sensor,
             open_loop: LinearFf {
                 um_per_volt: c(0.16),
                 offset_um: c(0.0),
@@ -126,12 +166,12 @@ impl Loop {
             offset_um: c(0.0),
         })]);
         let p = LoopPipeline::new(
-            on_chip_config(sample_hz),
+            converter_config(sample_hz),
             [Wave::Hold { y_um: c(0.0) }],
             ff,
             [Feedback::OpenLoop],
         )
-        .expect("the on-chip configuration is valid");
+        .expect("the converter configuration is valid");
         Self {
             p,
             sample_hz,
@@ -140,16 +180,28 @@ impl Loop {
         }
     }
 
-    /// One control period: ADC code in, DAC code out. No panic, bounded, NaN-safe.
+    /// One control period: ADC code in, DAC code out (the converters' own codes, 0 ..=
+    /// [`DAC_FULL`]). No panic, bounded, NaN-safe.
     #[inline(always)]
-    pub fn step(&mut self, adc_code: u32) -> u16 {
-        let [code] = self.p.step([(adc_code >> ADC_SHIFT) as i32]);
-        code.clamp(0, DAC_MAX) as u16
+    pub fn step(&mut self, adc_code: i32) -> i32 {
+        let [code] = self.p.step([adc_code >> ADC_SHIFT]);
+        // max/min, not clamp: clamp asserts min <= max (a panic path in the handler).
+        #[allow(clippy::manual_clamp)]
+        let code = code.max(0).min(DAC_MAX);
+        code << DAC_SHIFT
     }
 
-    /// This period's signals, indexed by [`Signal::index`] (recorder input).
+    /// The DAC write of this period failed; the converter still holds `held_code` (its own
+    /// code): the pipeline takes that as applied and latches the safe state.
     #[inline(always)]
-    pub fn signals(&self, adc_code: u32, dac_code: u16) -> [R; Signal::COUNT] {
+    pub fn dac_write_failed(&mut self, held_code: i32) {
+        self.p.dac_write_failed(0, held_code >> DAC_SHIFT);
+    }
+
+    /// This period's signals, indexed by [`Signal::index`] (recorder input). Codes as the
+    /// pipeline sees them (Q16.16: shifted to 15 bits).
+    #[inline(always)]
+    pub fn signals(&self, adc_code: i32, dac_code: i32) -> [R; Signal::COUNT] {
         let st = self.p.state();
         let (r, y) = (st.trace.setpoint[0].y_um, st.trace.y_um[0]);
         [
@@ -158,8 +210,8 @@ impl Loop {
             r - y,
             st.trace.u_ff[0],
             st.u_applied[0],
-            R::code_value(adc_code),
-            R::code_value(dac_code as u32),
+            R::from_i32(adc_code >> ADC_SHIFT),
+            R::from_i32(dac_code >> DAC_SHIFT),
         ]
     }
 
@@ -412,7 +464,7 @@ impl Ctl {
 
     /// Feeds the recorder (only while it captures: the signals cost a few instructions).
     #[inline(always)]
-    pub fn record(&mut self, adc_code: u32, dac_code: u16) {
+    pub fn record(&mut self, adc_code: i32, dac_code: i32) {
         if matches!(
             self.rec.state(),
             recorder::State::Armed | recorder::State::Triggered

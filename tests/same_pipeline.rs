@@ -1,0 +1,73 @@
+//! The firmware binary and hal-sim run the same pipeline type and the same converter
+//! drivers (issue #3). The firmware's board-independent module (`src/bin/firmware/control.rs`,
+//! which both boards build on) is compiled here as it is in the binary; its pipeline and
+//! driver types are compared by `TypeId` with the fields of the bench `piezo sim` runs. The
+//! machine-code side (the ELF holds the pipeline step and the driver code in the control
+//! interrupt) is checked by `.ci/test.d/20-firmware.sh`.
+
+#[path = "../src/bin/firmware/control.rs"]
+#[allow(dead_code)]
+mod control;
+
+use hal_sim::mock::{MockAdcSpi, MockCnv, MockDacSpi, MockLdac};
+use hal_sim::scenario::Scenario;
+use hal_sim::sim::controllers::open_loop;
+use hal_sim::sim::{adc_config, calibrate, Bench, StageInfo};
+use piezo_core::drivers::{Ad4000, Ad5791};
+use piezo_core::pipeline::Pipeline;
+use std::any::{Any, TypeId};
+
+fn type_of<T: Any>(_: &T) -> TypeId {
+    TypeId::of::<T>()
+}
+
+fn bench() -> (Scenario, Bench<1>) {
+    let sc = Scenario::default();
+    let linear = calibrate(&sc).unwrap();
+    let info = StageInfo {
+        scenario: &sc,
+        linear,
+    };
+    let controller = open_loop::<1>(&info).unwrap();
+    let bench = Bench::new(&sc, controller, &linear).unwrap();
+    (sc, bench)
+}
+
+#[test]
+fn firmware_and_hal_sim_run_the_same_pipeline_type() {
+    let (_, bench) = bench();
+    let ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let firmware = type_of(&ctl.lp.p);
+    assert_eq!(firmware, type_of(&bench.pipeline), "pipeline types differ");
+    assert_eq!(firmware, TypeId::of::<control::LoopPipeline>());
+    // The comparison tells types apart: another number type or axis count fails it.
+    assert_ne!(firmware, TypeId::of::<Pipeline<f64, 1>>());
+    assert_ne!(firmware, TypeId::of::<Pipeline<f32, 2>>());
+}
+
+#[test]
+fn firmware_and_hal_sim_run_the_same_converter_drivers() {
+    let (sc, bench) = bench();
+    // The firmware's driver aliases, on hal-sim's mock buses and pins, are the types of the
+    // bench's drivers: the same generic driver code runs on the board's buses.
+    let adc = TypeId::of::<control::PositionAdc<MockAdcSpi, MockCnv>>();
+    let dac = TypeId::of::<control::ActuatorDac<MockDacSpi, MockLdac>>();
+    assert_eq!(
+        adc,
+        type_of(&bench.adcs[0].driver),
+        "ADC driver types differ"
+    );
+    assert_eq!(
+        dac,
+        type_of(&bench.dacs[0].driver),
+        "DAC driver types differ"
+    );
+    assert_eq!(adc, TypeId::of::<Ad4000<MockAdcSpi, MockCnv>>());
+    assert_eq!(dac, TypeId::of::<Ad5791<MockDacSpi, MockLdac>>());
+    assert_ne!(adc, dac);
+    // ... configured as the mock chips are: the AD4020 of the default scenario, the AD5791
+    // in the configuration the bench initialises.
+    assert_eq!(control::ADC_CONFIG, adc_config(&sc));
+    assert_eq!(*bench.adcs[0].driver.config(), control::ADC_CONFIG);
+    assert_eq!(*bench.dacs[0].driver.config(), control::DAC_CONFIG);
+}
