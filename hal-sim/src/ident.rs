@@ -1,4 +1,5 @@
 //! Identification and model discovery (`piezo fit`, `piezo diagnose`).
 pub mod diagnose;
+pub mod fast;
 pub mod fit;
 pub mod optim;

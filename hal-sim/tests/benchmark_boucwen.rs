@@ -72,3 +72,42 @@ fn structural_bw_beats_pnlss_on_both_test_records() {
         "sweep e_RMS {e_sw:.3e} m, PNLSS {PNLSS_M:.2e} m"
     );
 }
+
+/// Why the test multisine is scored in steady state: the benchmark's own system (the
+/// parameters its document states) reproduces the record only in steady state. Simulated
+/// from rest over the one given period it misses by the decaying start-up transient, which
+/// no model can avoid: the record starts moving (y(0) = 1.9e-4 m, y'(0) about 0.3 m/s).
+#[test]
+fn the_test_multisine_is_one_steady_state_period() {
+    let dir = data_dir().join("boucwen-benchmark");
+    let ms = Record::read(dir.join("test_multisine.csv")).unwrap();
+    let def = models::find("structural-bw").unwrap();
+    // m, c, k, alpha, beta*gamma, beta*delta, nu (Noel & Schoukens 2016, table 1).
+    let truth = hal_sim::ident::fit::Fitted::from_params(
+        def,
+        &[2.0, 10.0, 5e4, 5e4, 800.0, -1100.0, 1.0],
+        1.0,
+        0.0,
+        20,
+    )
+    .unwrap();
+    let steady = metrics(
+        &ms.y[0],
+        &truth.simulate_periodic(&ms.u[0], ms.dt(), 2).unwrap(),
+    );
+    let rest = metrics(
+        &ms.y[0],
+        &truth.simulate(&ms.u[0], ms.dt(), Edge::Hold).unwrap(),
+    );
+    let n = ms.y[0].len();
+    let head = metrics(
+        &ms.y[0][..n / 10],
+        &truth.simulate(&ms.u[0], ms.dt(), Edge::Hold).unwrap()[..n / 10],
+    );
+    eprintln!(
+        "true system on test_multisine: steady state e_RMS {:.3e} m, from rest {:.3e} m (first tenth {:.3e} m)",
+        steady.rmse, rest.rmse, head.rmse
+    );
+    assert!(steady.rmse < 1e-6, "{steady:?}");
+    assert!(rest.rmse > PNLSS_M, "{rest:?}");
+}

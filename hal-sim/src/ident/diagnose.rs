@@ -284,11 +284,17 @@ pub fn rmse_all(y: &[Vec<f64>], y_model: &[Vec<f64>]) -> f64 {
     }
 }
 
+/// A fitted extension, its validation prediction and RMSE.
+type Tried = (Fitted, Vec<Vec<f64>>, f64);
+
 /// One tried extension.
 #[derive(Debug, Clone, Serialize)]
 pub struct Candidate {
     pub cause: Cause,
     pub round: usize,
+    /// False when the cause's signature explained less than [`MIN_R2`] of the residual: it
+    /// could not be significant, so it was not fitted (`rmse_*` and `gain` are NaN).
+    pub fitted: bool,
     pub rmse_train: f64,
     pub rmse_valid: f64,
     /// `1 - rmse_valid / (current model's rmse_valid)`.
@@ -353,6 +359,7 @@ impl Diagnosis {
                 "rmse_train": c.rmse_train,
                 "gain": c.gain,
                 "evidence_r2": c.evidence.r2,
+                "fitted": c.fitted,
                 "significant": c.significant,
             })).collect::<Vec<_>>(),
             "findings": self.findings,
@@ -483,15 +490,15 @@ fn fit_output(
     } else {
         opt.global_evals.0
     };
-    let mut best: Option<(Vec<f64>, f64)> = None;
-    for (x0, _) in &ranked {
-        let (x, _) = search::nelder_mead(&mut |x| cost_on(coarse, x), x0, &steps, global, 1e-7);
-        // A restart with fresh steps: a collapsed simplex is the usual Nelder-Mead failure.
-        let (x, c) = search::nelder_mead(&mut |x| cost_on(coarse, x), &x, &steps, global / 3, 1e-7);
-        if best.as_ref().is_none_or(|b| c < b.1) {
-            best = Some((x, c));
-        }
-    }
+    // The starts run in parallel (the other core is idle while the control fits).
+    let best = ranked
+        .par_iter()
+        .map(|(x0, _)| {
+            let (x, _) = search::nelder_mead(&mut |x| cost_on(coarse, x), x0, &steps, global, 1e-7);
+            // A restart with fresh steps: a collapsed simplex is the usual Nelder-Mead failure.
+            search::nelder_mead(&mut |x| cost_on(coarse, x), &x, &steps, global / 3, 1e-7)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1));
     let x = best.map_or_else(|| coords.coords(&starts[0]), |b| b.0);
     let fine_steps: Vec<f64> = steps.iter().map(|s| 0.1 * s).collect();
     let local = opt.local_evals.0 + opt.local_evals.1 * dim;
@@ -668,20 +675,14 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             break;
         }
         // The current causes refitted by the same search are the control: a cause must gain
-        // more than what a longer search alone gives.
-        let runs: Vec<Option<Cause>> = std::iter::once(None)
-            .chain(todo.iter().copied().map(Some))
-            .collect();
-        let mut tried: Vec<(Fitted, Vec<Vec<f64>>, f64)> = runs
-            .par_iter()
-            .map(|&c| {
-                let f = extend(&current, c, &tiers, opt);
-                let pred = f.predict(valid);
-                let e = rmse_all(&scored.y, &pred);
-                (f, pred, e)
-            })
-            .collect();
-        let control = tried.remove(0);
+        // more than what a longer search alone gives. It runs first, so the residual
+        // signatures below are those of the model the causes are measured against.
+        let control = {
+            let f = extend(&current, None, &tiers, opt);
+            let pred = f.predict(valid);
+            let e = rmse_all(&scored.y, &pred);
+            (f, pred, e)
+        };
         if control.2 < current_valid {
             (current, current_pred, current_valid) = control;
             if findings.is_empty() {
@@ -690,16 +691,29 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
                 base_valid = current_valid;
             }
         }
-        let tried: Vec<(Fitted, Vec<Vec<f64>>, f64, Evidence)> = tried
-            .into_iter()
-            .zip(&todo)
-            .map(|((f, p, e), &c)| {
-                let ev = evidence_for(&scored, c, &current_pred);
-                (f, p, e, ev)
+        // Screen by signature: a cause whose signature explains less than MIN_R2 of the
+        // residual cannot be significant whatever its fit gains, so it is not fitted.
+        let mut evidence: Vec<Evidence> = todo
+            .par_iter()
+            .map(|&c| evidence_for(&scored, c, &current_pred))
+            .collect();
+        let tried: Vec<Option<Tried>> = todo
+            .par_iter()
+            .zip(&evidence)
+            .map(|(&c, ev)| {
+                (ev.r2 >= MIN_R2).then(|| {
+                    let f = extend(&current, Some(c), &tiers, opt);
+                    let pred = f.predict(valid);
+                    let e = rmse_all(&scored.y, &pred);
+                    (f, pred, e)
+                })
             })
             .collect();
         let mut best: Option<usize> = None;
-        for (k, (f, _, e, ev)) in tried.iter().enumerate() {
+        for (k, (t, ev)) in tried.iter().zip(&evidence).enumerate() {
+            let (rmse_train, e) = t
+                .as_ref()
+                .map_or((f64::NAN, f64::NAN), |t| (t.0.rmse_train, t.2));
             let gain = 1.0 - e / current_valid;
             let significant = gain.is_finite()
                 && gain >= MIN_GAIN
@@ -708,18 +722,24 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             candidates.push(Candidate {
                 cause: todo[k],
                 round,
-                rmse_train: f.rmse_train,
-                rmse_valid: *e,
+                fitted: t.is_some(),
+                rmse_train,
+                rmse_valid: e,
                 gain,
                 evidence: ev.clone(),
                 significant,
             });
-            if significant && best.is_none_or(|b| *e < tried[b].2) {
+            if significant
+                && best.is_none_or(|b: usize| e < tried[b].as_ref().map_or(f64::INFINITY, |t| t.2))
+            {
                 best = Some(k);
             }
         }
         let Some(b) = best else { break };
-        let (f, pred, e, ev) = tried.into_iter().nth(b).expect("index from the same list");
+        let Some((f, pred, e)) = tried.into_iter().nth(b).flatten() else {
+            break;
+        };
+        let ev = evidence.swap_remove(b);
         findings.push(Finding {
             cause: todo[b],
             round,

@@ -8,7 +8,6 @@
 //! linearly, so the linear coefficients are solved by least squares for every trial of the
 //! few nonlinear ones (variable projection): the search space stays 2 to 6 dimensional.
 
-use piezo_core::hysteresis::{Cbw, Hysteresis};
 use serde::Serialize;
 
 use super::Signals;
@@ -354,13 +353,11 @@ pub fn effective_input(u: &[f64], dt: f64, shape: &Shape) -> Vec<f64> {
 }
 
 /// CBW hysteresis variable with unit `alpha`, from rest at the first input.
+/// (`Cbw::with_n1(0, 1, beta, gamma)`, through its f64 fast path.)
 pub fn hysteresis(v: &[f64], beta: f64, gamma: f64) -> Vec<f64> {
-    let Ok(m) = Cbw::with_n1(0.0, 1.0, beta, gamma) else {
-        return vec![0.0; v.len()];
-    };
-    let mut s = m.init(v.first().copied().unwrap_or(0.0));
-    // y = d*u - h with d = 0: the model returns -h.
-    v.iter().map(|&x| -m.step(&mut s, x, 0.0)).collect()
+    let mut g = Vec::new();
+    crate::ident::fast::cbw_unit(v, beta, gamma, &mut g);
+    g
 }
 
 /// First-order low-pass with time constant `tau_s`, starting at rest.

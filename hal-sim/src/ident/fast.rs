@@ -1,0 +1,183 @@
+//! Fit-time fast paths: the model simulations the searches evaluate thousands of times,
+//! specialised to f64 with their per-evaluation constants hoisted out of the sample loop.
+//!
+//! Each kernel computes what the generic model step of `piezo_core::hysteresis` computes
+//! (the tests compare them sample by sample); it only avoids the generic path's per-sample
+//! overhead (parameter checks, `Real` dispatch to `libm`, the generic piece selection).
+
+/// Classical Bouc-Wen with `n = 1` and unit `alpha` (000 eq. 1, `d = 0`): the hysteresis
+/// variable `h` after every sample of `v`, from rest (`h = 0`) at the first sample.
+///
+/// Exactly the closed-form input-domain update of `Cbw::advance_h` (`dh/du = 1 - kappa*h` on
+/// each piece of fixed `sgn(du)`, `sgn(h)`, with `kappa*|du| = (beta +- gamma)*|du|`), so
+/// the result equals `-Cbw::with_n1(0, 1, beta, gamma).step(..)` to rounding. Parameters
+/// that `Cbw` rejects (004 eq. 3) give zeros, as the caller's generic path did.
+pub fn cbw_unit(v: &[f64], beta: f64, gamma: f64, out: &mut Vec<f64>) {
+    out.clear();
+    let valid = beta.is_finite()
+        && gamma.is_finite()
+        && beta + gamma > 0.0
+        && beta - gamma >= 0.0
+        && (0.1 / (beta + gamma.abs())).is_finite();
+    if !valid {
+        out.resize(v.len(), 0.0);
+        return;
+    }
+    // Pass 1, no loop-carried dependency: the piece factors `q = |du| * phi(kappa*|du|)` of
+    // both pieces (moving away from h = 0: kappa = beta + gamma; towards it: beta - gamma).
+    let (k_away, k_toward) = (beta + gamma, beta - gamma);
+    out.resize(v.len(), 0.0);
+    SCRATCH.with_borrow_mut(|q| {
+        q.clear();
+        q.resize(v.len(), [0.0; 2]);
+        let mut m_max = 0.0f64;
+        for (w, qi) in v.windows(2).zip(q.iter_mut().skip(1)) {
+            let m = (w[1] - w[0]).abs();
+            m_max = m_max.max(m);
+            *qi = [m * phi_series(k_away * m), m * phi_series(k_toward * m)];
+        }
+        // The series is exact to rounding for both pieces up to here; exp_m1 beyond.
+        let k_max = k_away.max(k_toward);
+        if k_max * m_max >= PHI_SERIES_MAX {
+            for (w, qi) in v.windows(2).zip(q.iter_mut().skip(1)) {
+                let m = (w[1] - w[0]).abs();
+                if k_max * m >= PHI_SERIES_MAX {
+                    *qi = [m * phi(k_away * m), m * phi(k_toward * m)];
+                }
+            }
+        }
+        // Pass 2, the recurrence `h = a*h + b` on the piece `h` is on (the branch changes only
+        // at reversals and zero crossings, so it stays off the dependency chain).
+        let mut h = 0.0f64;
+        let mut prev = v.first().copied().unwrap_or(0.0);
+        for ((&x, &[q_away, q_toward]), o) in v.iter().zip(q.iter()).zip(out.iter_mut()) {
+            let du = x - prev;
+            prev = x;
+            let s = if du > 0.0 { 1.0 } else { -1.0 };
+            // dh/du = s*(s - kappa*h) on a piece: h1 = (1 - kappa*q)*h + s*q; du = 0 gives q = 0.
+            // At h = 0 the piece is the one h moves into (same sign as du).
+            h = if h * s < 0.0 {
+                let h1 = (1.0 - k_toward * q_toward) * h + s * q_toward;
+                if h1 * s > 0.0 {
+                    cross_zero(h, du, k_toward, k_away)
+                } else {
+                    h1
+                }
+            } else {
+                (1.0 - k_away * q_away) * h + s * q_away
+            };
+            *o = h;
+        }
+    });
+}
+
+/// Below this argument [`phi_series`] is exact to rounding.
+const PHI_SERIES_MAX: f64 = 0.1;
+
+/// `(1 - exp(-x)) / x` by its Taylor series to `x^8` (error below `x^9/10!`, 3e-16 at
+/// [`PHI_SERIES_MAX`]); branch-free so the sample loop vectorises.
+#[inline(always)]
+fn phi_series(x: f64) -> f64 {
+    const C: [f64; 9] = [
+        1.0,
+        -1.0 / 2.0,
+        1.0 / 6.0,
+        -1.0 / 24.0,
+        1.0 / 120.0,
+        -1.0 / 720.0,
+        1.0 / 5040.0,
+        -1.0 / 40320.0,
+        1.0 / 362880.0,
+    ];
+    let x2 = x * x;
+    let x4 = x2 * x2;
+    // Estrin's scheme: shorter dependency chains than Horner.
+    let p01 = C[0] + C[1] * x;
+    let p23 = C[2] + C[3] * x;
+    let p45 = C[4] + C[5] * x;
+    let p67 = C[6] + C[7] * x;
+    let p03 = p01 + p23 * x2;
+    let p47 = p45 + p67 * x2;
+    p03 + (p47 + C[8] * x4) * x4
+}
+
+std::thread_local! {
+    static SCRATCH: std::cell::RefCell<Vec<[f64; 2]>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// `(1 - exp(-x)) / x` for `x >= 0`.
+#[inline]
+fn phi(x: f64) -> f64 {
+    if x < PHI_SERIES_MAX {
+        phi_series(x)
+    } else {
+        -(-x).exp_m1() / x
+    }
+}
+
+/// A sample whose update towards zero overshoots it: the input distance to `h = 0` on the
+/// `k_toward` piece, then the rest from zero on the `k_away` piece.
+#[cold]
+fn cross_zero(h: f64, du: f64, k_toward: f64, k_away: f64) -> f64 {
+    let (s, m, a) = (du.signum(), du.abs(), h.abs());
+    let to_zero = if k_toward == 0.0 {
+        a
+    } else {
+        (k_toward * a).ln_1p() / k_toward
+    };
+    // (also when to_zero is NaN)
+    if to_zero.partial_cmp(&m) != Some(core::cmp::Ordering::Less) {
+        return 0.0;
+    }
+    let r = m - to_zero;
+    s * r * phi(k_away * r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use piezo_core::hysteresis::{Cbw, Hysteresis};
+
+    fn reference(v: &[f64], beta: f64, gamma: f64) -> Vec<f64> {
+        let Ok(m) = Cbw::with_n1(0.0, 1.0, beta, gamma) else {
+            return vec![0.0; v.len()];
+        };
+        let mut s = m.init(v[0]);
+        v.iter().map(|&x| -m.step(&mut s, x, 0.0)).collect()
+    }
+
+    #[test]
+    fn cbw_unit_equals_the_core_model() {
+        let mut out = Vec::new();
+        // Smooth input with reversals, steps, a held input, and coarse decimation.
+        for (n, step_v) in [(20_000, 0.0), (400, 0.0), (3000, 40.0)] {
+            let v: Vec<f64> = (0..n)
+                .map(|k| {
+                    let t = k as f64 / n as f64;
+                    let w = 60.0 * (12.0 * t).sin() + 25.0 * (41.0 * t).cos();
+                    let hold = if (k / 97) % 5 == 0 { 0.0 } else { w };
+                    hold + if k % 331 == 0 { step_v } else { 0.0 }
+                })
+                .collect();
+            for (beta, gamma) in [
+                (0.02, 0.01),
+                (0.05, -0.04),
+                (0.3, 0.3),
+                (1e-4, 5e-5),
+                (2.0, -1.5),
+                (0.01, 0.02),
+                (f64::NAN, 0.0),
+            ] {
+                cbw_unit(&v, beta, gamma, &mut out);
+                let r = reference(&v, beta, gamma);
+                let scale = r.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
+                for (k, (a, b)) in out.iter().zip(&r).enumerate() {
+                    assert!(
+                        (a - b).abs() <= 1e-11 * scale,
+                        "n {n} beta {beta} gamma {gamma} sample {k}: {a} vs {b}"
+                    );
+                }
+            }
+        }
+    }
+}
