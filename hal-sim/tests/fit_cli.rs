@@ -18,11 +18,11 @@ fn records(dir: &std::path::Path) {
     let t = |n: usize| (0..n).map(|k| k as f64 * dt).collect::<Vec<_>>();
     Record::new(t(4 * n), vec![u.clone()], vec![y.clone()])
         .unwrap()
-        .write(&dir.join("train.csv"))
+        .write(dir.join("train.csv"))
         .unwrap();
     Record::new(t(n), vec![u[3 * n..].to_vec()], vec![y[3 * n..].to_vec()])
         .unwrap()
-        .write(&dir.join("valid.csv"))
+        .write(dir.join("valid.csv"))
         .unwrap();
 }
 
