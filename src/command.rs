@@ -24,6 +24,8 @@
 //! | `rec arm` / `rec stop` | start / abort a capture | `ok` |
 //! | `rec status` | `idle`, `armed`, `triggered` or `done` and frame count | `ok rec <state> <n>` |
 //! | `rec read <start> <count>` | frames as `<i> <v0> <v1> ...` lines | `ok rec read <n>` |
+//! | `fault` | latched fault (`none`, `sensor-range`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
+//! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
 //!
 //! Parameter, law and signal names are checked by whoever executes the command (the
@@ -201,6 +203,10 @@ pub enum Command<'a> {
     Stats,
     StatsReset,
     Rec(RecCmd<'a>),
+    /// Latched fault and fault counters.
+    Fault,
+    /// Leave the safe state a fault latched.
+    FaultClear,
     Bench,
 }
 
@@ -639,6 +645,14 @@ fn parse_words<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
             Some(_) => return Err(Error::BadKeyword),
         },
         "rec" => Command::Rec(parse_rec(w)?),
+        "fault" => match w.get(1) {
+            None => Command::Fault,
+            Some("clear") => {
+                w.at_most(2)?;
+                Command::FaultClear
+            }
+            Some(_) => return Err(Error::BadKeyword),
+        },
         _ => return Err(Error::UnknownCommand),
     };
     Ok(c)
@@ -1054,6 +1068,10 @@ mod tests {
         );
         assert_eq!(p("stats"), Ok(Command::Stats));
         assert_eq!(p("stats reset"), Ok(Command::StatsReset));
+        assert_eq!(p("fault"), Ok(Command::Fault));
+        assert_eq!(p("fault clear"), Ok(Command::FaultClear));
+        assert_eq!(p("fault reset"), Err(Error::BadKeyword));
+        assert_eq!(p("fault clear now"), Err(Error::TooManyArguments));
         assert_eq!(p("rec arm"), Ok(Command::Rec(RecCmd::Arm)));
         assert_eq!(
             p("rec trig rise 1 2.5 100"),

@@ -30,7 +30,7 @@ run() {
     -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$dir/defmt.bin" &
   local qemu=$!
-  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nstats\n' \
+  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\n' \
     >"$dir/uart.in"
   wait $qemu
   status=$?
@@ -49,6 +49,7 @@ run() {
   grep -q '^err 8 value out of range$' "$dir/uart.txt" || { echo "$name: bad set not rejected"; exit 1; }
   grep -q '^ok mode ff+hgo-robust$' "$dir/uart.txt" || { echo "$name: mode switch failed"; exit 1; }
   grep -q '^ok rec sel ref_um y_um u_volts error_um$' "$dir/uart.txt" || { echo "$name: recorder setup failed"; exit 1; }
+  grep -q '^ok fault none sensor 0 nonfinite 0 dac 0$' "$dir/uart.txt" || { echo "$name: fault state not clean"; exit 1; }
   periods=$(sed -n 's/^done periods \([0-9]*\) .*/\1/p' "$dir/uart.txt")
   [ -n "$periods" ] && [ "$periods" -ge 10000 ] || { echo "$name: too few control periods: '$periods'"; exit 1; }
   echo "=== $name: $periods control periods, commands answered"

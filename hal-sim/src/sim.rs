@@ -601,6 +601,14 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
         s.reference.freq_hz = 1.0;
         s.run.duration_s = 2.0;
     });
+    // The lab's hysteresis characterisation: a quasi-static sine over (nearly) the full
+    // stroke, where the loop is widest (about 15 % of the stroke).
+    add("sine-1hz-full-stroke", &|s| {
+        s.reference.freq_hz = 1.0;
+        s.reference.offset_um = 50.0;
+        s.reference.amplitude_um = 48.0;
+        s.run.duration_s = 2.0;
+    });
     add("sine-50hz", &|s| {
         s.reference.freq_hz = 50.0;
         s.run.duration_s = 0.12;

@@ -88,6 +88,9 @@ pub struct Report {
     pub parts: Vec<Part>,
     pub train_metrics: Vec<ChannelMetrics>,
     pub valid_metrics: Vec<ChannelMetrics>,
+    /// With `--valid-periodic`: the same validation record simulated from rest, for
+    /// comparison (scored over the same samples).
+    pub valid_from_rest_metrics: Vec<ChannelMetrics>,
     pub seconds: f64,
 }
 
@@ -301,6 +304,10 @@ pub fn run(args: Args) -> Result<()> {
         .as_ref()
         .map(|v| simulate(&parts, v, args.valid_periodic))
         .transpose()?;
+    let valid_rest_sim = match &valid {
+        Some(v) if args.valid_periodic > 0 => Some(simulate(&parts, v, 0)?),
+        _ => None,
+    };
     let report = Report {
         model: def.name.into(),
         train: train_path.display().to_string(),
@@ -308,6 +315,10 @@ pub fn run(args: Args) -> Result<()> {
         linear_step,
         train_metrics: all_metrics(&train, &train_sim),
         valid_metrics: match (&valid, &valid_sim) {
+            (Some(v), Some(s)) => all_metrics(v, s),
+            _ => Vec::new(),
+        },
+        valid_from_rest_metrics: match (&valid, &valid_rest_sim) {
             (Some(v), Some(s)) => all_metrics(v, s),
             _ => Vec::new(),
         },
@@ -319,7 +330,7 @@ pub fn run(args: Args) -> Result<()> {
             (Some(v), Some(s)) => (v, s),
             _ => (&train, &train_sim),
         };
-        write_prediction(path, rec, sim, def.name)?;
+        write_prediction(path, rec, sim, valid_rest_sim.as_deref(), def.name)?;
     }
     if let Some(dir) = &args.out {
         write_plots(dir, &train, &train_sim, "train")?;
@@ -337,11 +348,23 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-fn write_prediction(path: &Path, rec: &Record, sim: &[Vec<f64>], model: &str) -> Result<()> {
+fn write_prediction(
+    path: &Path,
+    rec: &Record,
+    sim: &[Vec<f64>],
+    from_rest: Option<&[Vec<f64>]>,
+    model: &str,
+) -> Result<()> {
+    let mut comments = vec![format!(
+        " piezo fit --model {model}: simulated output y (model), measured output y_meas"
+    )];
+    if from_rest.is_some() {
+        comments.push(
+            " y: periodic steady state (--valid-periodic); y_rest: the same input from rest".into(),
+        );
+    }
     let mut out = Record {
-        comments: vec![format!(
-            " piezo fit --model {model}: simulated output y (model), measured output y_meas"
-        )],
+        comments,
         t: rec.t.clone(),
         u: rec.u.clone(),
         y: sim.to_vec(),
@@ -350,6 +373,12 @@ fn write_prediction(path: &Path, rec: &Record, sim: &[Vec<f64>], model: &str) ->
     for (i, y) in rec.y.iter().enumerate() {
         out.extra.push((
             format!("{}_meas", name_channel('y', i, rec.y.len())),
+            y.clone(),
+        ));
+    }
+    for (i, y) in from_rest.unwrap_or_default().iter().enumerate() {
+        out.extra.push((
+            format!("{}_rest", name_channel('y', i, rec.y.len())),
             y.clone(),
         ));
     }
@@ -429,4 +458,5 @@ fn print_report(r: &Report) {
     };
     show("train", &r.train_metrics);
     show("valid", &r.valid_metrics);
+    show("valid from rest", &r.valid_from_rest_metrics);
 }

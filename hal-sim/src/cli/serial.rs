@@ -89,6 +89,8 @@ pub fn format_command(cmd: &Command<'_>) -> String {
             RecCmd::Status => "rec status".into(),
             RecCmd::Read { start, count } => format!("rec read {start} {count}"),
         },
+        Command::Fault => "fault".into(),
+        Command::FaultClear => "fault clear".into(),
         Command::Bench => "bench".into(),
     }
 }

@@ -495,7 +495,7 @@ impl Ctl {
             Command::Empty => {}
             Command::Ping => out.push_str("ok pong"),
             Command::Help => {
-                out.push_str("ok ping help get set mode ff wave stats rec bench; params:");
+                out.push_str("ok ping help get set mode ff wave stats rec fault bench; params:");
                 for p in PARAMS {
                     out.push_str(" ");
                     out.push_str(p);
@@ -594,6 +594,11 @@ impl Ctl {
                 out.push_str("ok");
             }
             Command::Rec(r) => self.rec_command(r, out)?,
+            Command::Fault => push_fault(out, &lp.p),
+            Command::FaultClear => {
+                lp.p.clear_fault();
+                push_fault(out, &lp.p);
+            }
             Command::Bench => return Err(Error::Unsupported),
         }
         Ok(())
@@ -715,6 +720,28 @@ pub fn stream_frames(
         r.push_usize(sent);
     }
     line(r.as_str());
+}
+
+/// `ok fault <state> sensor <n> nonfinite <n> dac <n>`: the latched fault and the counters.
+fn push_fault<const N: usize>(out: &mut command::Reply<N>, p: &LoopPipeline) {
+    use piezo_core::pipeline::Fault;
+    let st = p.state();
+    out.push_str("ok fault ");
+    out.push_str(match st.fault {
+        None => "none",
+        Some(Fault::SensorRange { .. }) => "sensor-range",
+        Some(Fault::NonFiniteCommand { .. }) => "non-finite",
+        Some(Fault::DacWrite { .. }) => "dac-write",
+    });
+    let c = &st.counters;
+    for (name, n) in [
+        (" sensor ", c.sensor_faults),
+        (" nonfinite ", c.nonfinite_commands),
+        (" dac ", c.dac_faults),
+    ] {
+        out.push_str(name);
+        out.push_u32(n);
+    }
 }
 
 /// A value of the control path as text (Q16.16 through f32: 24 significant bits).
