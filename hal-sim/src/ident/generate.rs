@@ -54,6 +54,12 @@ impl Rng {
     pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
+    /// Standard normal (Box-Muller).
+    pub fn normal(&mut self) -> f64 {
+        let a = self.uniform(1e-12, 1.0);
+        let b = self.uniform(0.0, 1.0);
+        (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
+    }
     /// Log-uniform in `[lo, hi)`.
     pub fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
         self.uniform(lo.ln(), hi.ln()).exp()
