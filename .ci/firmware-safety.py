@@ -11,17 +11,26 @@ Builds the firmware with nightly `-Z emit-stack-sizes` (same link flags as
     failures. A path from ANY handler fails the check; the shortest call chain is printed.
     Reset (init, then idle in thread mode) is reported, not failed: defmt logs only from
     there, so its logger lock is never contended;
-  * indirect calls (`blx rN`, `bx rN`, loads into pc) in a handler's reach fail the check:
-    they hide callees from the graph and make the stack bound unknown;
-  * stack: worst-case stack per handler = max over call paths of the sum of the frames
-    from `llvm-readobj --stack-sizes`; recursion, an indirect call or a function without a
-    stack record makes the bound unknown, which fails the check.
-The worst case of the whole system adds, per preemption level, the largest handler of
-that level plus the 104-byte exception frame (FPU state) to thread mode.
+  * indirect calls (`blx rN`, `bx rN`, loads into pc) in a handler's reach fail the check.
+    In thread mode they are resolved conservatively: a site whose register, on every path
+    back, comes from movw/movt constants of its own function calls only those functions;
+    any other site may call every address-taken function (start address with the Thumb
+    bit found as a word anywhere in the flash image except the vector table, as a movw/movt
+    pair, or as an `adr` target). The script prints each site's candidates;
+  * stack: worst-case stack per handler/task = max over call paths of the sum of the
+    frames from `llvm-readobj --stack-sizes`; recursion (also through indirect-call
+    candidates) or a function without a stack record makes the bound unknown, which fails
+    the check for a handler. Thread mode is reported per task (init, idle), with and
+    without its panic paths (panic-probe logs through core::fmt, whose candidate set
+    recurses, then halts).
+The worst case of the whole system: init runs alone (interrupts off until its last
+instruction); afterwards thread mode (idle, or init's own frame before it returns) plus,
+per preemption level, the largest handler of that level and the 104-byte exception frame.
 Usage: python3 .ci/firmware-safety.py [--no-build] [--features F] [--elf PATH]
 """
 import os
 import re
+import struct
 import subprocess
 import sys
 import tomllib
@@ -107,21 +116,139 @@ def stack_sizes(elf):
 def call_graph(elf):
     # Mangled names: demangled generics contain '<', '>' and ', ' that break the parse.
     out = subprocess.check_output([tool("llvm-objdump"), "-d", "--no-show-raw-insn", elf], text=True)
-    graph, indirect, cur = {}, {}, None
+    graph, indirect, consts, code, cur = {}, {}, {}, {}, None
+    lo, hi = set(), set()
     for line in out.splitlines():
         m = re.match(r"^[0-9a-f]+ <(.*)>:$", line)
         if m:
+            if cur is not None:
+                consts[cur] = {h << 16 | low for h in hi for low in lo}
+            lo, hi = set(), set()
             cur = m.group(1)
             graph.setdefault(cur, set())
             continue
         if cur is None:
             continue
+        m = re.search(r"\tmov([wt])\s+r\d+, #(0x[0-9a-f]+|\d+)", line)
+        if m:
+            (lo if m.group(1) == "w" else hi).add(int(m.group(2), 0))
         m = re.search(r"\t(bl|blx|b|b\.w|bx|b\w\w|b\w\w\.w|cbz|cbnz)\s.*<([^>+]+)(\+0x[0-9a-f]+)?>", line)
         if m and m.group(2) != cur:
             graph[cur].add(m.group(2))
-        elif INDIRECT.search(line) and not re.search(r"\tbx\s+lr", line):
-            indirect.setdefault(cur, line.split("\t", 1)[-1].strip())
-    return graph, indirect
+        m = re.match(r"^\s*([0-9a-f]+):\s*\t(\S+)\s*([^@]*)", line)
+        if m and m.group(2).startswith("adr"):  # pc-relative address: counted as taken
+            t = ((int(m.group(1), 16) + 4) & ~3) + int(m.group(3).split("#")[1].split()[0], 0)
+            consts.setdefault("<adr>", set()).update({t, t | 1})
+        elif m and re.match(r"(add|sub)", m.group(2)) and re.search(r",\s*pc\b", m.group(3)):
+            consts.setdefault("<pc-relative>", set()).add(int(m.group(1), 16))
+        if m:
+            code.setdefault(cur, []).append((int(m.group(1), 16), m.group(2), m.group(3).strip()))
+        if INDIRECT.search(line) and not re.search(r"\tbx\s+lr", line) and not re.search(r"\t(bl|b)\s.*<", line):
+            indirect.setdefault(cur, []).append(line.split("\t", 1)[-1].strip())
+    consts[cur] = {h << 16 | low for h in hi for low in lo}
+    local = {f: local_targets(code.get(f, [])) for f in indirect}
+    return graph, indirect, consts, local
+
+
+# Instructions that write no core register other than through base writeback.
+NOWRITE = re.compile(r"^(str|cmp|cmn|tst|teq|cbn?z|push|it|dmb|dsb|isb|nop|cps|msr|vstr|vpush|vcmp|wfi|udf|bkpt"
+                     r"|b(l|x|lx)?(eq|ne|cs|cc|hs|lo|mi|pl|vs|vc|hi|ls|ge|lt|gt|le|al)?(\.w|\.n)?$)")
+
+
+def local_targets(code):
+    """Constants every indirect call of a function can hold, or None. Per site, walks back
+    over all paths (branch sources and fall-through) from the call to the writes of its
+    register: movw/movt give the value, `mov rN, rM` follows rM, `mov<cond> rN, rM` follows
+    both; reaching the entry or any other write of a followed register gives up."""
+    where = {a: k for k, (a, _, _) in enumerate(code)}
+    ends = lambda mn, ops: mn in ("b", "b.w", "bx") or mn in ("pop", "pop.w") and "pc" in ops or mn.startswith(("ldr", "mov")) and ops.startswith("pc,")
+    # Reachable instructions (bytes after a return can decode as stray branches).
+    live, todo = set(), [0] if code else []
+    while todo:
+        k = todo.pop()
+        if k in live or k >= len(code):
+            continue
+        live.add(k)
+        a, mn, ops = code[k]
+        if re.match(r"tb[bh]", mn):
+            return None
+        if re.match(r"(b|cb)", mn):
+            todo += [where[int(t, 16)] for t in re.findall(r"0x([0-9a-f]+) <", ops) if int(t, 16) in where]
+        if not ends(mn, ops):
+            todo.append(k + 1)
+    srcs = {}
+    for k in live:
+        a, mn, ops = code[k]
+        if re.match(r"(b|cb)", mn):
+            for t in re.findall(r"0x([0-9a-f]+) <", ops):
+                srcs.setdefault(int(t, 16), []).append(k)
+
+    def preds(k):
+        out = [where[0] for _ in ()] + srcs.get(code[k][0], [])
+        if k > 0 and k - 1 in live and not ends(*code[k - 1][1:]):
+            out.append(k - 1)
+        return out
+
+    found = set()
+    for i in sorted(live):
+        at, mn, ops = code[i]
+        if not INDIRECT.search(f"\t{mn} {ops}") or mn == "bx" and ops == "lr":
+            continue
+        if not re.fullmatch(r"blx|bx", mn):
+            return None
+        states, seen = [(p, ops, None) for p in preds(i)], set()
+        if not states:
+            return None
+        while states:
+            k, r, hi = states.pop()
+            if (k, r, hi) in seen:
+                continue
+            seen.add((k, r, hi))
+            if len(seen) > 20000:
+                return None
+            a, m, o = code[k]
+            regs = re.findall(r"\b(r\d+|sp|lr|pc)\b", o)
+            nxt = [(p, r, hi) for p in preds(k)]
+            if r in regs and (regs[0] == r and not NOWRITE.match(m) or re.search(r"!|\], #|^(ldm|pop|ldrd|umull|smull|umlal|smlal|vmov)", m + " " + o)):
+                if m == "movt" and hi is None:
+                    nxt = [(p, r, int(o.split("#")[-1], 0)) for p in preds(k)]
+                elif m == "movw":
+                    found.add((hi or 0) << 16 | int(o.split("#")[-1], 0))
+                    nxt = []
+                elif m in ("mov", "mov.w") and len(regs) == 2 and hi is None:
+                    nxt = [(p, regs[1], None) for p in preds(k)]
+                elif re.fullmatch(r"mov(eq|ne|cs|cc|hs|lo|mi|pl|vs|vc|hi|ls|ge|lt|gt|le)", m) and len(regs) == 2 and hi is None:
+                    nxt += [(p, regs[1], None) for p in preds(k)]
+                else:
+                    return None
+            elif not nxt:
+                return None  # function entry with the register still open
+            states += nxt
+    return found
+
+def address_taken(elf, addr, consts):
+    """Functions whose start address (Thumb bit set) can reach a register other than by a
+    direct branch: as a 32-bit word at any byte offset of an allocated section except the
+    vector table (literal pools, vtables, fmt::Arguments, statics), or as a movw/movt pair
+    of one function (every low half combined with every high half, a superset of the
+    pairs). Only such a function can be the target of `blx rN`."""
+    with open(elf, "rb") as f:
+        data = f.read()
+    shoff, = struct.unpack_from("<I", data, 0x20)
+    shentsize, shnum, shstrndx = struct.unpack_from("<HHH", data, 0x2E)
+    secs = [struct.unpack_from("<10I", data, shoff + i * shentsize) for i in range(shnum)]
+    strtab = secs[shstrndx][4]
+    words = set().union(*consts.values())
+    for name_off, typ, flags, _, off, size, *_ in secs:
+        nm = data[strtab + name_off:data.index(b"\0", strtab + name_off)].decode()
+        # SHT_PROGBITS with SHF_ALLOC: the bytes in flash (.data holds its initial values).
+        if typ != 1 or not flags & 2 or nm == ".vector_table":
+            continue
+        blob = data[off:off + size]
+        words |= {int.from_bytes(blob[i:i + 4], "little") for i in range(len(blob) - 3)}
+    if consts.get("<pc-relative>"):  # add rN, pc: addresses not seen as constants
+        return sorted(addr.values())
+    return sorted(f for a, f in addr.items() if a | 1 in words)
 
 
 def main():
@@ -136,7 +263,12 @@ def main():
     heap = sorted({l.split()[-1] for l in syms.splitlines() if HEAP.search(l)})
     print(f"firmware: {os.path.relpath(elf, ROOT)}{' (features ' + features + ')' if features else ''}")
     print(f"heap: {'none linked' if not heap else 'LINKED: ' + ', '.join(heap)}")
-    graph, indirect = call_graph(elf)
+    graph, indirect, consts, local = call_graph(elf)
+    cand = address_taken(elf, addr, consts)
+    # A function whose every indirect call takes its register from movw/movt constants of
+    # its own straight-line code calls only those; others may call any address-taken one.
+    targets = lambda f: cand if local.get(f) is None or not local[f] <= {a | 1 for a in addr} else sorted(addr[a & ~1] for a in local[f])
+    addr_of = {f: a for a, f in addr.items()}
     sizes = stack_sizes(elf)
     # Thread mode (Reset -> main: init, then idle) first, then the exception/interrupt handlers.
     handlers = vector_table(elf, addr)
@@ -149,7 +281,7 @@ def main():
         while todo:
             nxt = []
             for f in todo:
-                for g in sorted(graph.get(f, ())):
+                for g in sorted(graph.get(f, set()) | (set(targets(f)) if f in indirect else set())):
                     if g not in parent:
                         parent[g] = f
                         nxt.append(g)
@@ -165,29 +297,32 @@ def main():
 
     memo = {}
 
-    def worst(f, path):
+    def worst(f, path, nopanic=False):
         """Worst-case stack from f; None when unknown (recursion, indirect call, no size)."""
         if f in path:
             return None
-        if f in memo:
-            return memo[f]
+        if (f, nopanic) in memo:
+            return memo[f, nopanic]
         own = sizes.get(f)
         if own is None and BUILTIN.search(f):
             own = BUILTIN_FRAME
-        if own is None or f in indirect:
-            memo[f] = None
+        if own is None:
+            memo[f, nopanic] = None
             return None
         best, via = 0, None
-        for g in sorted(graph.get(f, ())):
-            w = worst(g, path | {f})
+        # An indirect call may reach any address-taken function.
+        for g in sorted(graph.get(f, set()) | (set(targets(f)) if f in indirect else set())):
+            if nopanic and PANIC.search(g):
+                continue
+            w = worst(g, path | {f}, nopanic)
             if w is None:
-                memo[f] = None
+                memo[f, nopanic] = None
                 return None
             if w > best:
                 best, via = w, g
-        memo[f] = own + best
+        memo[f, nopanic] = own + best
         deepest[f] = via
-        return memo[f]
+        return memo[f, nopanic]
 
     deepest = {}
 
@@ -225,21 +360,54 @@ def main():
         for p in panics[:4]:
             print(f"  panic path: {chain(r, p)}")
         for f in ind[:4]:
-            print(f"  indirect call `{indirect[f]}` in: {chain(r, f)}")
+            print(f"  indirect call `{indirect[f][0]}` in: {chain(r, f)}")
         if w is None:
             missing = sorted(f for f in r if f not in sizes and not BUILTIN.search(f))
             if missing:
                 print(f"  no stack record: {', '.join(name(f) for f in missing[:6])}")
-    # System bound: thread mode + per priority level the largest handler + exception frame.
+    # Indirect calls: every site may reach any address-taken function (sound, not precise).
+    sites = {f: len(v) for f, v in indirect.items() if f in reach(handlers[0])}
+    print(f"address-taken functions ({len(cand)}): {', '.join(name(f) for f in cand)}")
+    for f in sorted(sites, key=name):
+        t = targets(f)
+        print(f"indirect calls: {sites[f]} site(s) in {name(f)} -> {len(t)} candidate target(s)"
+              f"{': ' + ', '.join(name(g) for g in t) if t != cand else ' (all address-taken)'}")
+    # Per task. RTIC's main runs init (in __rtic_init_resources, interrupts disabled until its
+    # last instruction `cpsie i`, before its epilogue) and then idle; sizes include main's frame.
+    fmt = lambda v: "unknown" if v is None else f"{v} B"
+    calls = sorted(graph.get("main", ()))
+    init = next((g for g in calls if "__rtic_init_resources" in name(g)), None)
+    idle = next((g for g in calls if name(g).endswith("::idle")), None)
+    tasks = {}
+    own_main = sizes.get("main")
+    # Panic paths end in panic-probe (log, then halt); the "no panic" bounds hold up to the
+    # call of the panic entry point.
+    for label, f in (("init", init), ("idle", idle)):
+        for np in (False, True):
+            w = worst(f, frozenset({"main"}), np) if f and own_main is not None else None
+            tasks[label, np] = None if w is None else own_main + w
+    init_own = sizes.get(init) if init else None
     levels = {}
     for h, n, panics, ind, w, thread in rows:
-        if thread or h not in PRIORITY or w is None:
+        if thread or h not in PRIORITY:
             continue
-        levels[PRIORITY[h]] = max(levels.get(PRIORITY[h], 0), w)
-    base = rows[0][4] if rows else None
-    if base is not None and levels:
-        total = base + sum(v + EXC_FRAME for v in levels.values())
-        print(f"worst-case stack, all levels nested (thread mode {base} B + per level handler + {EXC_FRAME} B frame): {total} bytes")
+        levels[PRIORITY[h]] = None if w is None or levels.get(PRIORITY[h], 0) is None else max(levels.get(PRIORITY[h], 0), w)
+    print("stack per task (bytes):")
+    print(f"  thread mode, main as a whole: {fmt(rows[0][4])}")
+    for t in ("init", "idle"):
+        print(f"  {t} (with main's {own_main} B): {fmt(tasks[t, False])}; without panic paths: {fmt(tasks[t, True])}")
+    for h, n, panics, ind, w, thread in rows[1:]:
+        print(f"  {name(h)}{' (priority ' + str(PRIORITY[h]) + ')' if h in PRIORITY else ''}: {fmt(w)}")
+    # Handlers nest on thread mode once interrupts are on: during idle, or in the epilogue
+    # of __rtic_init_resources (its own frame still allocated). Init itself runs unpreempted.
+    for np in (False, True):
+        nested = total = None
+        if None not in levels.values() and tasks["idle", np] is not None and init_own is not None:
+            nested = max(tasks["idle", np], own_main + init_own) + sum(v + EXC_FRAME for v in levels.values())
+            total = None if tasks["init", np] is None else max(nested, tasks["init", np])
+        print(f"worst-case stack, whole system{' without thread-mode panic paths' if np else ''}: {fmt(total)}"
+              f" (interrupts on: max(idle, main+init frame {own_main + (init_own or 0)}) + per level handler"
+              f" + {EXC_FRAME} B frame = {fmt(nested)}; init runs with interrupts off)")
     print(f"(compiler_builtins leaf routines counted as {BUILTIN_FRAME} bytes each)")
     print(f"firmware safety: {'PASS' if ok else 'FAIL'}")
     sys.exit(0 if ok else 1)
