@@ -2,4 +2,5 @@
 pub mod diagnose;
 pub mod fast;
 pub mod fit;
+pub mod generate;
 pub mod optim;

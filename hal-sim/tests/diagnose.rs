@@ -1,39 +1,54 @@
-//! `diagnose` finds a cause hidden in generated data: at least five seeds per cause, pairs
-//! of causes, and clean data (`none`). Train and valid records have different excitations.
-mod diagnose_support;
-
-use diagnose_support::Plant;
+//! `diagnose` finds causes hidden in records of hal-sim's simulated actuator
+//! (`hal_sim::ident::generate`): every cause, pairs of causes and clean data (`none`), each
+//! with seeded random sizes; train and valid records have different excitations.
+//!
+//! Every seed is run and reported before a case fails, so one run shows the whole picture.
 use hal_sim::ident::diagnose::{diagnose, Cause, Options};
+use hal_sim::ident::generate::Hidden;
 
-/// Runs one seeded case; returns the named causes, and checks the validated gain.
-fn run(seed: u64, effects: &[Cause]) -> Vec<Cause> {
-    let plant = Plant::draw(seed, effects);
-    let train = plant.record(seed, 0);
-    let valid = plant.record(seed, 1);
-    let d = diagnose(&train, &valid, &Options::default()).expect("diagnose runs");
+/// Runs one seeded case; `Err` describes what went wrong.
+fn run(seed: u64, hidden: &[Cause]) -> Result<(), String> {
+    let h = Hidden::draw(seed, hidden);
+    let train = h.record(0);
+    let valid = h.record(1);
+    let d = diagnose(&train, &valid, &Options::default()).map_err(|e| format!("{e:#}"))?;
     let found: Vec<Cause> = d.findings.iter().map(|f| f.cause).collect();
+    let gains: Vec<String> = d
+        .findings
+        .iter()
+        .map(|f| format!("{} {:.3}", f.cause.name(), f.gain))
+        .collect();
     eprintln!(
-        "seed {seed} hidden {effects:?}: found {found:?}, gain {:.3} (base {:.4}, ext {:.4}, noise {:.4})",
+        "seed {seed:>3} hidden {:<32} found {:<40} gain {:.3} (base {:.4} um, ext {:.4} um) [{}]",
+        format!("{hidden:?}"),
+        format!("{found:?}"),
         d.gain(),
         d.base_valid,
         d.extended_valid,
-        plant.noise
+        h.sizes.join("; ")
     );
-    if effects.is_empty() {
-        assert_eq!(d.cause(), "none", "seed {seed}: {:#}", d.json());
-        assert_eq!(d.gain(), 0.0);
-    } else {
-        assert!(d.gain() > 0.0, "seed {seed}: no gain: {:#}", d.json());
-        let mut want = effects.to_vec();
-        want.sort();
-        let mut got = found.clone();
-        got.sort();
-        assert_eq!(got, want, "seed {seed}: {:#}", d.json());
+    let mut want = hidden.to_vec();
+    want.sort();
+    let mut got = found.clone();
+    got.sort();
+    if got != want {
+        return Err(format!(
+            "seed {seed}: hidden {hidden:?} ({}), found {found:?} [{}]",
+            h.sizes.join("; "),
+            gains.join(", ")
+        ));
     }
-    found
+    if hidden.is_empty() {
+        if d.gain() != 0.0 {
+            return Err(format!("seed {seed}: none but gain {}", d.gain()));
+        }
+    } else if d.gain().is_nan() || d.gain() <= 0.0 {
+        return Err(format!("seed {seed}: no validated gain ({})", d.gain()));
+    }
+    Ok(())
 }
 
-/// Seeds per cause: `DIAGNOSE_SEEDS` (CI runs 5 in release, `.ci/test.d/45-diagnose.sh`);
+/// Seeds per case: `DIAGNOSE_SEEDS` (CI runs 5 in release, `.ci/test.d/45-diagnose.sh`);
 /// the plain dev-profile `cargo test` runs 2 to stay quick.
 fn seed_count() -> u64 {
     std::env::var("DIAGNOSE_SEEDS")
@@ -42,10 +57,23 @@ fn seed_count() -> u64 {
         .unwrap_or(2)
 }
 
-fn seeds(effects: &[Cause]) {
-    for seed in 1..=seed_count() {
-        run(seed, effects);
-    }
+fn check(cases: &[(u64, Vec<Cause>)]) {
+    let failed: Vec<String> = cases
+        .iter()
+        .filter_map(|(seed, hidden)| run(*seed, hidden).err())
+        .collect();
+    assert!(
+        failed.is_empty(),
+        "{} of {} cases failed:\n{}",
+        failed.len(),
+        cases.len(),
+        failed.join("\n")
+    );
+}
+
+fn seeds(hidden: &[Cause]) {
+    let cases: Vec<(u64, Vec<Cause>)> = (1..=seed_count()).map(|s| (s, hidden.to_vec())).collect();
+    check(&cases);
 }
 
 #[test]
@@ -93,38 +121,57 @@ fn finds_drift() {
     seeds(&[Cause::Drift]);
 }
 
-#[test]
-fn finds_pairs() {
-    let pairs = [
-        [Cause::Dynamics, Cause::Drift],
-        [Cause::Saturation, Cause::Creep],
-        [Cause::Delay, Cause::Asymmetry],
-        [Cause::SlewLimit, Cause::Drift],
-        [Cause::CrossCoupling, Cause::Creep],
-    ];
-    for round in 0..seed_count().div_ceil(2) {
-        for (k, pair) in pairs.iter().enumerate() {
-            run(11 + 10 * round + k as u64, pair);
-        }
-    }
+const PAIRS: [[Cause; 2]; 5] = [
+    [Cause::Dynamics, Cause::Drift],
+    [Cause::Saturation, Cause::Creep],
+    [Cause::Delay, Cause::Asymmetry],
+    [Cause::SlewLimit, Cause::Drift],
+    [Cause::CrossCoupling, Cause::Creep],
+];
+
+fn pair(k: usize) {
+    let cases: Vec<(u64, Vec<Cause>)> = (1..=seed_count())
+        .map(|s| (100 + s, PAIRS[k].to_vec()))
+        .collect();
+    check(&cases);
 }
 
-/// `PROBE=seed:cause,cause cargo test --test diagnose probe -- --ignored --nocapture`
+#[test]
+fn finds_pair_dynamics_drift() {
+    pair(0);
+}
+
+#[test]
+fn finds_pair_saturation_creep() {
+    pair(1);
+}
+
+#[test]
+fn finds_pair_delay_asymmetry() {
+    pair(2);
+}
+
+#[test]
+fn finds_pair_slew_limit_drift() {
+    pair(3);
+}
+
+#[test]
+fn finds_pair_cross_coupling_creep() {
+    pair(4);
+}
+
+/// `PROBE=seed:cause,cause cargo test --release --test diagnose probe -- --ignored --nocapture`
 #[test]
 #[ignore]
 fn probe() {
     let spec = std::env::var("PROBE").unwrap_or_default();
     let (seed, causes) = spec.split_once(':').unwrap_or(("1", ""));
-    let effects: Vec<Cause> = causes.split(',').filter_map(Cause::from_name).collect();
+    let hidden: Vec<Cause> = causes.split(',').filter_map(Cause::from_name).collect();
     let seed: u64 = seed.parse().unwrap_or(1);
-    let plant = Plant::draw(seed, &effects);
-    eprintln!("{plant:?}");
-    let d = diagnose(
-        &plant.record(seed, 0),
-        &plant.record(seed, 1),
-        &Options::default(),
-    )
-    .unwrap();
+    let h = Hidden::draw(seed, &hidden);
+    eprintln!("{:?}", h.sizes);
+    let d = diagnose(&h.record(0), &h.record(1), &Options::default()).unwrap();
     for c in &d.candidates {
         eprintln!(
             "round {} {:>14} train {:.4} valid {:.4} gain {:+.3} r2 {:.3} {}",
@@ -137,25 +184,7 @@ fn probe() {
             c.evidence.text
         );
     }
+    eprintln!("noise {}", d.noise_rms);
     eprintln!("base {}", d.json()["base"]);
     eprintln!("{}", d.json()["extended"]);
-}
-
-/// Rough timing while iterating (the number to report comes from `benches/diagnose.rs`).
-#[test]
-#[ignore]
-fn timing_10khz_10s() {
-    for effects in [vec![], vec![Cause::Dynamics]] {
-        let plant = Plant::draw(3, &effects);
-        let train = plant.record_at(3, 0, 10_000.0, 10.0);
-        let valid = plant.record_at(3, 1, 10_000.0, 10.0);
-        let t0 = std::time::Instant::now();
-        let d = diagnose(&train, &valid, &Options::default()).unwrap();
-        eprintln!(
-            "{effects:?}: {} in {:?} gain {:.3}",
-            d.cause(),
-            t0.elapsed(),
-            d.gain()
-        );
-    }
 }

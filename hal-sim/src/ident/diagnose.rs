@@ -31,8 +31,9 @@ pub const MIN_GAIN: f64 = 0.03;
 /// Smallest fraction of the residual variance the cause's signature must explain.
 pub const MIN_R2: f64 = 0.02;
 /// Smallest RMSE reduction that counts, relative to the span of the measured output: a
-/// gain below 0.01 % of the range is numerical, whatever its relative size.
-pub const MIN_ABS_GAIN: f64 = 1e-4;
+/// gain below 0.002 % of the range (2 nm on 100 um, below a capacitive sensor's noise) is
+/// numerical, whatever its relative size.
+pub const MIN_ABS_GAIN: f64 = 2e-5;
 /// At most this many causes are added.
 pub const MAX_ROUNDS: usize = 4;
 
@@ -324,6 +325,8 @@ pub struct Diagnosis {
     pub findings: Vec<Finding>,
     pub candidates: Vec<Candidate>,
     pub noise_rms: f64,
+    /// Causes found, then dropped by the backward check (a later cause made them redundant).
+    pub dropped: Vec<Cause>,
 }
 
 impl Diagnosis {
@@ -364,6 +367,7 @@ impl Diagnosis {
             })).collect::<Vec<_>>(),
             "findings": self.findings,
             "noise_rms": self.noise_rms,
+            "dropped": self.dropped.iter().map(|c| c.name()).collect::<Vec<_>>(),
             "rule": {"min_gain": MIN_GAIN, "min_abs_gain_of_span": MIN_ABS_GAIN, "min_evidence_r2": MIN_R2},
         })
     }
@@ -558,10 +562,38 @@ fn assemble(
 /// Extends `current` by `cause` and refits every output from its current shape.
 fn extend(current: &Fitted, cause: Option<Cause>, tiers: &Tiers, opt: &Options) -> Fitted {
     let causes = cause.map_or(current.causes, |c| current.causes.with(c));
+    let mut scales = current.scales.clone();
+    if cause == Some(Cause::Creep) {
+        // Creep of the current model's static displacement `d*v - alpha*g`.
+        for (s, m) in scales.iter_mut().zip(&current.outputs) {
+            let coef = |n: &str| m.names.iter().position(|x| x == n).map(|k| m.coef[k]);
+            if let (Some(d), Some(a)) = (coef("d"), coef("alpha")) {
+                let rho = a / d;
+                s.creep_rho = if rho.is_finite() {
+                    rho.clamp(-2.0, 2.0)
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
     let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
         .into_par_iter()
         .map(|i| {
-            let st = starts(cause, &current.outputs[i].shape, &current.scales[i]);
+            let st = starts(cause, &current.outputs[i].shape, &scales[i]);
+            fit_output(tiers, i, causes, &st, &scales[i], &current.taus, opt)
+        })
+        .collect();
+    assemble(causes, outputs, scales, current.taus.clone(), tiers.full)
+}
+
+/// `current` refitted without `cause`, from its current shapes.
+fn reduce(current: &Fitted, cause: Cause, tiers: &Tiers, opt: &Options) -> Fitted {
+    let causes = current.causes.without(cause);
+    let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
+        .into_par_iter()
+        .map(|i| {
+            let st = [neutral(current.outputs[i].shape, cause)];
             fit_output(
                 tiers,
                 i,
@@ -582,9 +614,73 @@ fn extend(current: &Fitted, cause: Option<Cause>, tiers: &Tiers, opt: &Options) 
     )
 }
 
+/// `shape` without the input-side or dynamic extension of `cause`.
+fn neutral(mut shape: Shape, cause: Cause) -> Shape {
+    match cause {
+        Cause::Delay => shape.delay_s = 0.0,
+        Cause::Saturation => {
+            shape.rail_lo_v = f64::NEG_INFINITY;
+            shape.rail_hi_v = f64::INFINITY;
+        }
+        Cause::SlewLimit => shape.slew_v_per_s = f64::INFINITY,
+        Cause::Dynamics => {
+            shape.wn_hz = f64::INFINITY;
+            shape.zeta = 1.0;
+        }
+        Cause::Asymmetry | Cause::Creep | Cause::CrossCoupling | Cause::Drift => {}
+    }
+    shape
+}
+
+/// Coefficient-name prefix of the linear terms of `cause` (none for input-side causes).
+fn coef_prefix(cause: Cause) -> Option<&'static str> {
+    match cause {
+        Cause::Asymmetry => Some("asym_"),
+        Cause::Creep => Some("creep_"),
+        Cause::CrossCoupling => Some("couple_"),
+        Cause::Drift => Some("drift_"),
+        _ => None,
+    }
+}
+
+/// `f` with `cause` switched off and nothing refitted: its prediction shows what the cause's
+/// extension contributes.
+fn switched_off(f: &Fitted, cause: Cause) -> Fitted {
+    let mut g = f.clone();
+    for m in g.outputs.iter_mut() {
+        m.shape = neutral(m.shape, cause);
+        if let Some(p) = coef_prefix(cause) {
+            for (name, c) in m.names.iter().zip(m.coef.iter_mut()) {
+                if name.starts_with(p) {
+                    *c = 0.0;
+                }
+            }
+        }
+    }
+    g
+}
+
+/// `f` (fitted with `causes` plus `cause`) with `cause` switched off and the linear part
+/// refitted on the training record.
+fn ablate(f: &Fitted, causes: Causes, cause: Cause, tiers: &Tiers) -> Fitted {
+    let outputs: Vec<(OutputModel, f64)> = (0..f.outputs.len())
+        .map(|i| {
+            let shape = neutral(f.outputs[i].shape, cause);
+            fit_linear(tiers.full, i, causes, &shape, &f.scales[i], &f.taus)
+        })
+        .collect();
+    assemble(
+        causes,
+        outputs,
+        f.scales.clone(),
+        f.taus.clone(),
+        tiers.full,
+    )
+}
+
 /// Evidence for `cause` in the residual of `y_model` on `valid`; the output with the
 /// strongest signature speaks.
-fn evidence_for(valid: &Signals, cause: Cause, y_model: &[Vec<f64>]) -> Evidence {
+fn evidence_for(valid: &Signals, cause: Cause, y_model: &[Vec<f64>], fitted: &Fitted) -> Evidence {
     (0..valid.y.len())
         .map(|i| {
             let r: Vec<f64> = valid.y[i]
@@ -592,7 +688,7 @@ fn evidence_for(valid: &Signals, cause: Cause, y_model: &[Vec<f64>]) -> Evidence
                 .zip(&y_model[i])
                 .map(|(a, b)| a - b)
                 .collect();
-            evidence::evidence(valid, i, cause, &r, &y_model[i])
+            evidence::evidence(valid, i, cause, &r, &y_model[i], &fitted.outputs[i].shape)
         })
         .max_by(|a, b| a.r2.total_cmp(&b.r2))
         .unwrap_or(Evidence {
@@ -662,7 +758,6 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
         })
         .fold(0.0, f64::max);
     let mut current = base.clone();
-    let mut current_pred = base_pred;
     let mut current_valid = base_valid;
     let mut findings = Vec::new();
     let mut candidates = Vec::new();
@@ -675,40 +770,70 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             break;
         }
         // The current causes refitted by the same search are the control: a cause must gain
-        // more than what a longer search alone gives. It runs first, so the residual
-        // signatures below are those of the model the causes are measured against.
-        let control = {
-            let f = extend(&current, None, &tiers, opt);
-            let pred = f.predict(valid);
+        // more than what a longer search alone gives.
+        let runs: Vec<Option<Cause>> = std::iter::once(None)
+            .chain(todo.iter().copied().map(Some))
+            .collect();
+        let mut tried: Vec<(Fitted, Vec<Vec<f64>>, f64)> = runs
+            .par_iter()
+            .map(|&c| {
+                let f = extend(&current, c, &tiers, opt);
+                let pred = f.predict(valid);
+                let e = rmse_all(&scored.y, &pred);
+                (f, pred, e)
+            })
+            .collect();
+        let control = tried.remove(0);
+        // Each candidate without its cause (its refitted CBW shape, the cause's extension
+        // switched off, linear part refitted on train): a better fit of the current model that
+        // the candidate's search found. Gains are then measured against the best of these, so
+        // a cause never takes credit for a better converged hysteresis.
+        let ablated: Vec<Fitted> = tried
+            .par_iter()
+            .zip(&todo)
+            .map(|((f, _, _), &c)| ablate(f, current.causes, c, &tiers))
+            .collect();
+        let best_same = std::iter::once(control.0.clone())
+            .chain(ablated)
+            .min_by(|a, b| a.rmse_train.total_cmp(&b.rmse_train))
+            .expect("control is always there");
+        let control = if best_same.rmse_train < control.0.rmse_train {
+            let pred = best_same.predict(valid);
             let e = rmse_all(&scored.y, &pred);
-            (f, pred, e)
+            (best_same, pred, e)
+        } else {
+            control
         };
-        if control.2 < current_valid {
-            (current, current_pred, current_valid) = control;
+        if control.0.rmse_train < current.rmse_train && control.2.is_finite() {
+            (current, _, current_valid) = control;
             if findings.is_empty() {
                 // Still the base model, only better converged.
                 base = current.clone();
                 base_valid = current_valid;
             }
         }
-        // Screen by signature: a cause whose signature explains less than MIN_R2 of the
-        // residual cannot be significant whatever its fit gains, so it is not fitted.
-        let mut evidence: Vec<Evidence> = todo
-            .par_iter()
-            .map(|&c| evidence_for(&scored, c, &current_pred))
-            .collect();
-        let tried: Vec<Option<Tried>> = todo
-            .par_iter()
-            .zip(&evidence)
-            .map(|(&c, ev)| {
-                (ev.r2 >= MIN_R2).then(|| {
-                    let f = extend(&current, Some(c), &tiers, opt);
-                    let pred = f.predict(valid);
-                    let e = rmse_all(&scored.y, &pred);
-                    (f, pred, e)
-                })
+        // Every candidate is fitted: its evidence is measured in its own frame (below), and
+        // a cause can show in the training record only.
+        let (tried, mut evidence): (Vec<Option<Tried>>, Vec<Evidence>) = tried
+            .into_iter()
+            .zip(&todo)
+            .map(|((f, p, e), &c)| {
+                // The residual the candidate's own extension removes: the candidate with
+                // its cause switched off (everything else as fitted). On both records: a
+                // cause can distort the training fit (and so the validation) while showing
+                // little in the validation record itself.
+                let off = switched_off(&f, c);
+                let ev_valid = evidence_for(&scored, c, &off.predict(valid), &f);
+                let mut ev_train = evidence_for(train, c, &off.predict(train), &f);
+                let ev = if ev_train.r2 > ev_valid.r2 {
+                    ev_train.text.push_str(" (training record)");
+                    ev_train
+                } else {
+                    ev_valid
+                };
+                (Some((f, p, e)), ev)
             })
-            .collect();
+            .unzip();
         let mut best: Option<usize> = None;
         for (k, (t, ev)) in tried.iter().zip(&evidence).enumerate() {
             let (rmse_train, e) = t
@@ -736,7 +861,7 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             }
         }
         let Some(b) = best else { break };
-        let Some((f, pred, e)) = tried.into_iter().nth(b).flatten() else {
+        let Some((f, _, e)) = tried.into_iter().nth(b).flatten() else {
             break;
         };
         let ev = evidence.swap_remove(b);
@@ -749,10 +874,35 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             evidence: ev,
         });
         current = f;
-        current_pred = pred;
+        current_valid = e;
+    }
+    // Backward check: a cause found early can be made redundant by a later one (dynamics
+    // standing in for a delay before the asymmetry was modelled). Refit without each found
+    // cause; drop the cheapest to lose while losing it costs less than the rule for a gain.
+    let mut dropped = Vec::new();
+    while findings.len() > 1 {
+        let tried: Vec<(usize, Fitted, f64)> = findings
+            .par_iter()
+            .enumerate()
+            .map(|(k, fd)| {
+                let f = reduce(&current, fd.cause, &tiers, opt);
+                let e = rmse_all(&scored.y, &f.predict(valid));
+                (k, f, e)
+            })
+            .collect();
+        let Some((k, f, e)) = tried.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+            break;
+        };
+        let gain = 1.0 - current_valid / e;
+        if !e.is_finite() || (gain >= MIN_GAIN && e - current_valid >= MIN_ABS_GAIN * y_span) {
+            break;
+        }
+        dropped.push(findings.remove(k).cause);
+        current = f;
         current_valid = e;
     }
     Ok(Diagnosis {
+        dropped,
         base,
         base_valid,
         extended: current,

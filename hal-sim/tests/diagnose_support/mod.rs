@@ -6,31 +6,8 @@
 use hal_sim::ident::diagnose::model::{dynamics, effective_input, hysteresis, lowpass, Shape};
 use hal_sim::ident::diagnose::{Cause, Signals};
 
-/// SplitMix64: small, seedable, good enough for test data.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed ^ 0x9E37_79B9_7F4A_7C15)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Standard normal (Box-Muller).
-    pub fn normal(&mut self) -> f64 {
-        let a = self.uniform(1e-12, 1.0);
-        let b = self.uniform(0.0, 1.0);
-        (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
-    }
-}
+/// The generator's seeded RNG (SplitMix64).
+pub use hal_sim::ident::generate::Rng;
 
 pub const RATE_HZ: f64 = 2000.0;
 pub const DURATION_S: f64 = 2.0;

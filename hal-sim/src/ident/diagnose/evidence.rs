@@ -140,8 +140,16 @@ pub fn signal(
     }
 }
 
-/// Evidence for `cause` in residual `r = y - y_model` of output `i` on `data`.
-pub fn evidence(data: &Signals, i: usize, cause: Cause, r: &[f64], y_model: &[f64]) -> Evidence {
+/// Evidence for `cause` in residual `r = y - y_model` of output `i` on `data`; `fitted` is
+/// the candidate's shape (its fitted slew limit is one of the slew signatures).
+pub fn evidence(
+    data: &Signals,
+    i: usize,
+    cause: Cause,
+    r: &[f64],
+    y_model: &[f64],
+    fitted: &Shape,
+) -> Evidence {
     let a = own_input(i, data.u.len());
     let u = &data.u[a];
     let dt = data.dt();
@@ -226,10 +234,19 @@ pub fn evidence(data: &Signals, i: usize, cause: Cause, r: &[f64], y_model: &[f6
         Cause::SlewLimit => {
             let rate = derivative(u, dt);
             let abs: Vec<f64> = rate.iter().map(|v| v.abs()).collect();
+            // Limits at quantiles of the rate, and the candidate's fitted limit: the limit
+            // may act only on the rare fast steps.
+            let fitted_limit = if fitted.slew_v_per_s.is_finite() {
+                fitted.slew_v_per_s
+            } else {
+                quantile(&abs, 0.99)
+            };
             let sig: Vec<Vec<f64>> = [0.5, 0.8, 0.95]
                 .iter()
-                .map(|&q| {
-                    let limit = quantile(&abs, q).max(1e-12);
+                .map(|&q| quantile(&abs, q))
+                .chain(std::iter::once(fitted_limit))
+                .map(|limit| {
+                    let limit = limit.max(1e-12);
                     let shape = Shape {
                         slew_v_per_s: limit,
                         ..no_shape()

@@ -20,7 +20,7 @@ pub enum Cause {
     Dynamics,
     /// Asymmetric loop: output polynomial in the input and input-weighted hysteresis.
     Asymmetry,
-    /// First-order creep elements in parallel (time constants 20 ms to seconds).
+    /// First-order creep elements in parallel (time constants 20 ms to 5 s, at most half the record).
     Creep,
     /// Pure input delay.
     Delay,
@@ -30,7 +30,7 @@ pub enum Cause {
     SlewLimit,
     /// Multi-axis: the other axes' inputs reach this output.
     CrossCoupling,
-    /// Slow linear drift in time.
+    /// Slow drift in time: linear plus a settling exponential.
     Drift,
 }
 
@@ -79,6 +79,9 @@ impl Causes {
     pub fn with(self, c: Cause) -> Self {
         Self(self.0 | c.bit())
     }
+    pub fn without(self, c: Cause) -> Self {
+        Self(self.0 & !c.bit())
+    }
     pub fn iter(self) -> impl Iterator<Item = Cause> {
         Cause::ALL.into_iter().filter(move |c| self.has(*c))
     }
@@ -122,6 +125,9 @@ pub struct Scales {
     pub rate_max: f64,
     pub dt: f64,
     pub duration_s: f64,
+    /// Creep acts on `v - creep_rho * g`: the static displacement's shape, `alpha/d` of the
+    /// model the creep was added to (0: on the voltage alone).
+    pub creep_rho: f64,
 }
 
 impl Scales {
@@ -142,6 +148,7 @@ impl Scales {
             rate_max: rate_max.max(1e-12),
             dt,
             duration_s: dt * t.len() as f64,
+            creep_rho: 0.0,
         }
     }
     pub fn span(&self) -> f64 {
@@ -151,8 +158,9 @@ impl Scales {
     fn max_delay_s(&self) -> f64 {
         (0.1 * self.duration_s).min(0.05)
     }
+    /// Exact discretisation: up to the sample rate (above it `G` is near unity).
     fn max_wn_hz(&self) -> f64 {
-        0.4 / self.dt
+        1.0 / self.dt
     }
 }
 
@@ -287,9 +295,15 @@ impl Coords {
 /// never hit.
 const RAIL_UNSEEN: f64 = 2e-3;
 
+/// Creep time constants: about three per decade, 20 ms to 5 s.
+pub const CREEP_TAUS_S: [f64; 8] = [0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0];
+
+/// Time constant of the drift's settling term, in training-record lengths.
+pub const DRIFT_TAU_RECORDS: f64 = 3.0;
+
 /// Fixed creep time constants for a record of `duration_s` sampled at `dt`.
 pub fn creep_taus(duration_s: f64, dt: f64) -> Vec<f64> {
-    [0.02, 0.1, 0.5, 2.5]
+    CREEP_TAUS_S
         .into_iter()
         .filter(|&tau| tau >= 20.0 * dt && tau <= 0.5 * duration_s)
         .collect()
@@ -372,28 +386,41 @@ pub fn lowpass(x: &[f64], tau_s: f64, dt: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Second-order low-pass with unit DC gain (004 eq. 8 with n = 2, m = 0), Tustin,
-/// starting at rest at the first sample.
+/// Second-order low-pass with unit DC gain (004 eq. 8 with n = 2, m = 0), discretised
+/// exactly for an input held over each sample (a DAC drives the stage), output at the end of
+/// the hold; starting at rest at the first sample. `wn_hz` infinite: no dynamics.
 pub fn dynamics(x: &mut [f64], wn_hz: f64, zeta: f64, dt: f64) {
     if !wn_hz.is_finite() || x.is_empty() {
         return;
     }
     let wn = 2.0 * std::f64::consts::PI * wn_hz;
-    let k = 2.0 / dt;
-    let a0 = k * k + 2.0 * zeta * wn * k + wn * wn;
-    let b0 = wn * wn / a0;
-    let a1 = (2.0 * wn * wn - 2.0 * k * k) / a0;
-    let a2 = (k * k - 2.0 * zeta * wn * k + wn * wn) / a0;
-    let (mut x1, mut x2) = (x[0], x[0]);
-    let (mut y1, mut y2) = (x[0], x[0]);
-    for v in x.iter_mut() {
-        let x0 = *v;
-        let y = b0 * (x0 + 2.0 * x1 + x2) - a1 * y1 - a2 * y2;
-        x2 = x1;
-        x1 = x0;
-        y2 = y1;
-        y1 = y;
-        *v = y;
+    // exp(A h) for A = [[0, 1], [-wn^2, -2 zeta wn]]: e^(s h) (c I + sn (A - s I)), s = -zeta wn.
+    let s = -zeta * wn;
+    let q2 = wn * wn * (zeta * zeta - 1.0);
+    let (c, sn) = if q2.abs() < 1e-12 * wn * wn {
+        (1.0, dt)
+    } else if q2 > 0.0 {
+        let q = q2.sqrt();
+        ((q * dt).cosh(), (q * dt).sinh() / q)
+    } else {
+        let q = (-q2).sqrt();
+        ((q * dt).cos(), (q * dt).sin() / q)
+    };
+    let e = (s * dt).exp();
+    let phi = [
+        [e * (c - s * sn), e * sn],
+        [-e * sn * wn * wn, e * (c + sn * (-2.0 * zeta * wn - s))],
+    ];
+    if !phi.iter().flatten().all(|v| v.is_finite()) {
+        return;
+    }
+    // Deviation from the held input's rest point decays by phi.
+    let (mut p, mut v) = (x[0], 0.0);
+    for u in x.iter_mut() {
+        let d = p - *u;
+        p = *u + phi[0][0] * d + phi[0][1] * v;
+        v = phi[1][0] * d + phi[1][1] * v;
+        *u = p;
     }
 }
 
@@ -427,13 +454,26 @@ pub fn regressors(
         names.extend(["asym_u2", "asym_u3", "asym_wh"]);
     }
     if causes.has(Cause::Creep) {
-        const NAMES: [&str; 4] = ["creep_20ms", "creep_100ms", "creep_500ms", "creep_2500ms"];
+        const NAMES: [&str; 8] = [
+            "creep_20ms",
+            "creep_50ms",
+            "creep_100ms",
+            "creep_200ms",
+            "creep_500ms",
+            "creep_1000ms",
+            "creep_2000ms",
+            "creep_5000ms",
+        ];
+        // Creep follows the displacement (hysteresis included), not only the voltage.
+        let rho = scales.creep_rho;
+        let src: Vec<f64> = if rho != 0.0 {
+            v.iter().zip(&g).map(|(v, g)| v - rho * g).collect()
+        } else {
+            v.clone()
+        };
         for &tau in taus {
-            cols.push(lowpass(&v, tau, dt));
-            let k = [0.02, 0.1, 0.5, 2.5]
-                .iter()
-                .position(|&t| t == tau)
-                .unwrap_or(0);
+            cols.push(lowpass(&src, tau, dt));
+            let k = CREEP_TAUS_S.iter().position(|&t| t == tau).unwrap_or(0);
             names.push(NAMES[k]);
         }
     }
@@ -448,11 +488,26 @@ pub fn regressors(
             "couple_u7",
             "couple_u8",
         ];
+        const H_NAMES: [&str; 8] = [
+            "couple_h1",
+            "couple_h2",
+            "couple_h3",
+            "couple_h4",
+            "couple_h5",
+            "couple_h6",
+            "couple_h7",
+            "couple_h8",
+        ];
         for (j, uj) in data.u.iter().enumerate().take(8) {
             if j == a {
                 continue;
             }
-            cols.push(effective_input(uj, dt, shape));
+            // The other axis' input, and its hysteresis (with this axis' shape): coupling of
+            // the other axis' displacement, not only of its voltage.
+            let vj = effective_input(uj, dt, shape);
+            cols.push(hysteresis(&vj, shape.beta, shape.gamma));
+            cols.push(vj);
+            names.push(H_NAMES[j]);
             names.push(NAMES[j]);
         }
     }
@@ -466,8 +521,13 @@ pub fn regressors(
     all.push(vec![1.0; data.t.len()]);
     names.push("y0");
     if causes.has(Cause::Drift) {
+        // Linear, plus a slow settling (thermal drift approaches equilibrium): bounded
+        // beyond the training record, unlike a polynomial.
+        let tau = DRIFT_TAU_RECORDS * scales.duration_s;
         all.push(data.t.clone());
+        all.push(data.t.iter().map(|t| -(-t / tau).exp_m1()).collect());
         names.push("drift_per_s");
+        names.push("drift_settling");
     }
     (names, all)
 }
@@ -651,6 +711,7 @@ mod tests {
             rate_max: 500.0,
             dt: 1e-3,
             duration_s: 4.0,
+            creep_rho: 0.0,
         };
         let causes = Causes::default()
             .with(Cause::Delay)
