@@ -10,13 +10,18 @@
 //! | command | effect | reply |
 //! |---|---|---|
 //! | `ping` | liveness | `ok pong` |
-//! | `help` | list of commands | `ok ping help get set mode ff wave stats rec bench` |
+//! | `help` | list of commands | `ok ping help get set mode ff wave table stats rec fault bench; params: ...` |
 //! | `get <param>` | read a parameter | `ok <param> <value>` |
 //! | `set <param> <value>` | write a parameter (range-checked) | `ok <param> <value>` |
 //! | `mode <law>` | select the feedback law (bumpless) | `ok mode <law>` |
 //! | `ff <compensator>` | select the feedforward compensator | `ok ff <name>` |
 //! | `wave off` / `wave hold <um>` | stop the waveform / hold a position | `ok wave ...` |
 //! | `wave sine\|triangle\|square <amp_um> <freq_hz> [<offset_um>]` | start a waveform | `ok wave ...` |
+//! | `wave steps <low_um> <high_um> <levels> <freq_hz>` | staircase low..high..low, `levels` in 2..=[`MAX_LEVELS`] (2: square) | `ok wave steps ...` |
+//! | `table clear` | empty the point table | `ok table 0` |
+//! | `table add <um> [<um>...]` | append up to [`TABLE_ADD_MAX`] points (all or none; at most [`TABLE_LEN`] in all, else `err 8`) | `ok table <n>` |
+//! | `table len` | points in the table | `ok table <n>` |
+//! | `wave table <freq_hz>` | periodic spline through the table's points, one period per `1/freq_hz` (fewer than 2 points: `err 12`) | `ok wave table <freq_hz> <n>` |
 //! | `stats` / `stats reset` | timing (cycles min/max/last, overruns) / reset it | `ok ...` |
 //! | `rec sel <signal>...` | recorder channels (up to its channel count) | `ok rec sel ...` |
 //! | `rec trig now` | trigger at once when armed | `ok` |
@@ -41,6 +46,12 @@ use core::fmt;
 pub const MAX_LINE: usize = 96;
 /// Most words in one line (the command word included).
 pub const MAX_WORDS: usize = 10;
+/// Most levels of `wave steps`.
+pub const MAX_LEVELS: u16 = 64;
+/// Most points of one `table add` line.
+pub const TABLE_ADD_MAX: usize = MAX_WORDS - 2;
+/// Capacity of the point table of `wave table` (the reference generator's).
+pub use crate::pipeline::TABLE_LEN;
 
 /// Everything that can be wrong with a command line. Codes are stable.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -181,6 +192,40 @@ pub enum RecCmd<'a> {
     },
 }
 
+/// The points of one `table add` line (1..=[`TABLE_ADD_MAX`]), without allocation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Points {
+    values: [f32; TABLE_ADD_MAX],
+    len: usize,
+}
+
+impl Points {
+    /// `None` unless `values` has 1..=[`TABLE_ADD_MAX`] points.
+    pub fn from_slice(values: &[f32]) -> Option<Self> {
+        if values.is_empty() || values.len() > TABLE_ADD_MAX {
+            return None;
+        }
+        let mut p = Self {
+            values: [0.0; TABLE_ADD_MAX],
+            len: values.len(),
+        };
+        p.values.iter_mut().zip(values).for_each(|(d, s)| *d = *s);
+        Some(p)
+    }
+
+    pub fn as_slice(&self) -> &[f32] {
+        self.values.get(..self.len).unwrap_or(&[])
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
 /// A parsed command; names borrow from the line.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Command<'a> {
@@ -200,6 +245,21 @@ pub enum Command<'a> {
         freq_hz: f32,
         offset_um: f32,
     },
+    /// Staircase `low_um` .. `high_um` in `levels` (2..=[`MAX_LEVELS`]) levels and back.
+    WaveSteps {
+        low_um: f32,
+        high_um: f32,
+        levels: u16,
+        freq_hz: f32,
+    },
+    /// Periodic spline through the point table, at this frequency (Hz).
+    WaveTable(f32),
+    /// Empty the point table.
+    TableClear,
+    /// Append points (um) to the table.
+    TableAdd(Points),
+    /// Number of points in the table.
+    TableLen,
     Stats,
     StatsReset,
     Rec(RecCmd<'a>),
@@ -636,6 +696,30 @@ fn parse_words<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
             Command::Feedforward(w.arg(1)?)
         }
         "wave" => parse_wave(w)?,
+        "table" => match w.arg(1)? {
+            "clear" => {
+                w.at_most(2)?;
+                Command::TableClear
+            }
+            "len" => {
+                w.at_most(2)?;
+                Command::TableLen
+            }
+            "add" => {
+                let mut values = [0.0; TABLE_ADD_MAX];
+                let mut len = 0;
+                for (slot, word) in values.iter_mut().zip(w.iter().skip(2)) {
+                    *slot = parse_f32(word)?;
+                    len += 1;
+                }
+                w.at_most(2 + TABLE_ADD_MAX)?;
+                if len == 0 {
+                    return Err(Error::MissingArgument);
+                }
+                Command::TableAdd(Points { values, len })
+            }
+            _ => return Err(Error::BadKeyword),
+        },
         "stats" => match w.get(1) {
             None => Command::Stats,
             Some("reset") => {
@@ -667,6 +751,29 @@ fn parse_wave<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
         "hold" => {
             w.at_most(3)?;
             return Ok(Command::WaveHold(w.num(2)?));
+        }
+        "steps" => {
+            w.at_most(6)?;
+            let (low_um, high_um) = (w.num(2)?, w.num(3)?);
+            let levels = w.index(4)?;
+            let freq_hz = w.num(5)?;
+            if !(2..=MAX_LEVELS as usize).contains(&levels) || !(freq_hz >= 0.0) {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveSteps {
+                low_um,
+                high_um,
+                levels: levels as u16,
+                freq_hz,
+            });
+        }
+        "table" => {
+            w.at_most(3)?;
+            let freq_hz = w.num(2)?;
+            if !(freq_hz >= 0.0) {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveTable(freq_hz));
         }
         "sine" => Shape::Sine,
         "triangle" => Shape::Triangle,
@@ -1125,6 +1232,57 @@ mod tests {
     }
 
     #[test]
+    fn parses_steps_and_table_commands() {
+        assert_eq!(
+            p("wave steps 10 30 5 2.5"),
+            Ok(Command::WaveSteps {
+                low_um: 10.0,
+                high_um: 30.0,
+                levels: 5,
+                freq_hz: 2.5
+            })
+        );
+        assert_eq!(p("wave steps 1 2 64 1").map(|_| ()), Ok(()));
+        assert_eq!(p("wave steps 1 2 1 1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave steps 1 2 65 1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave steps 1 2 4 -1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave steps 1 2 4.5 1"), Err(Error::BadNumber));
+        assert_eq!(p("wave steps 1 2 4"), Err(Error::MissingArgument));
+        assert_eq!(p("wave steps 1 2 4 1 0"), Err(Error::TooManyArguments));
+        assert_eq!(p("wave table 10"), Ok(Command::WaveTable(10.0)));
+        assert_eq!(p("wave table"), Err(Error::MissingArgument));
+        assert_eq!(p("wave table -1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave table 1 2"), Err(Error::TooManyArguments));
+        assert_eq!(p("table clear"), Ok(Command::TableClear));
+        assert_eq!(p("table len"), Ok(Command::TableLen));
+        assert_eq!(p("table"), Err(Error::MissingArgument));
+        assert_eq!(p("table drop"), Err(Error::BadKeyword));
+        assert_eq!(p("table len 3"), Err(Error::TooManyArguments));
+        assert_eq!(p("table add"), Err(Error::MissingArgument));
+        assert_eq!(p("table add 1 x"), Err(Error::BadNumber));
+        assert_eq!(
+            p("table add 1.5 -2 3e1"),
+            Ok(Command::TableAdd(
+                Points::from_slice(&[1.5, -2.0, 30.0]).unwrap()
+            ))
+        );
+        let full = "table add 1 2 3 4 5 6 7 8";
+        match p(full) {
+            Ok(Command::TableAdd(pts)) => {
+                assert_eq!(pts.len(), TABLE_ADD_MAX);
+                assert_eq!(pts.as_slice(), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(
+            p("table add 1 2 3 4 5 6 7 8 9"),
+            Err(Error::TooManyArguments)
+        );
+        assert!(Points::from_slice(&[]).is_none());
+        assert!(Points::from_slice(&[0.0; TABLE_ADD_MAX + 1]).is_none());
+    }
+
+    #[test]
     fn line_buffer_splits_lines_and_rejects_long_ones() {
         let mut lb = LineBuffer::new();
         let mut lines = std::vec::Vec::new();
@@ -1380,7 +1538,8 @@ mod tests {
             prop_oneof![
                 proptest::sample::select(&[
                     "rec", "trig", "sel", "wave", "sine", "set", "1e3", "-1", "read", "3",
-                    "rise", "stats", "reset", "hold", "now", "arm",
+                    "rise", "stats", "reset", "hold", "now", "arm", "steps", "table",
+                    "add", "clear", "len",
                 ][..]).prop_map(|s| s.to_string()),
                 "[a-z0-9.]{0,6}",
             ],

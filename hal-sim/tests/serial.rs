@@ -19,7 +19,7 @@ use std::thread;
 use std::time::Duration;
 
 use hal_sim::cli::serial::{
-    connect, execute, record, Action, Conn, RecordArgs, SerialError, WaveArgs, WaveCmd,
+    connect, execute, record, Action, Conn, RecordArgs, SerialError, TableArgs, WaveArgs, WaveCmd,
 };
 use piezo_core::command::{self, Command, LineBuffer, RecCmd};
 
@@ -483,4 +483,78 @@ fn the_binary_speaks_over_a_serial_port() {
         "{stdout}"
     );
     drop(slave);
+}
+
+#[test]
+fn a_table_from_a_file_is_loaded_in_lines_and_the_reference_follows_it() {
+    let addr = spawn_firmware();
+    // 20 points: three `table add` lines.
+    let pts: Vec<f64> = (0..20)
+        .map(|k| 20.0 + 15.0 * ((k * 7 % 20) as f64 / 19.0))
+        .collect();
+    let file = tmp("points.csv");
+    let text: Vec<String> = pts.iter().map(|v| format!("{v}")).collect();
+    std::fs::write(&file, format!("# um\n{}\n", text.join(",\n"))).unwrap();
+    let table = |file: Option<PathBuf>, points: Vec<f64>| {
+        Action::Wave(WaveCmd::Table(TableArgs {
+            freq: 200.0,
+            points,
+            file,
+        }))
+    };
+    let out = run(&addr, table(Some(file), vec![])).unwrap();
+    assert_eq!(out, "ok table 20\nok wave table 200 20\n");
+    let mut c = connect(&conn(&addr)).unwrap();
+    let rec = record(
+        &mut c,
+        &RecordArgs {
+            signals: vec!["ref_um".into()],
+            trigger: "now".into(),
+            pre: 0,
+            wait_s: 10.0,
+            no_arm: false,
+            out: tmp("table.csv"),
+            svg: None,
+        },
+    )
+    .unwrap();
+    drop(c);
+    // Two periods of 500 samples: every point is passed (within one sample's travel).
+    let r: Vec<f64> = rec.frames.iter().map(|f| f[0]).collect();
+    let travel = r
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .fold(0.0, f64::max);
+    assert!(travel > 0.0 && travel < 1.0, "{travel}");
+    for p in &pts {
+        let near = r
+            .iter()
+            .map(|y| (y - p).abs())
+            .fold(f64::INFINITY, f64::min);
+        assert!(near <= travel, "{p} um: nearest {near} um");
+    }
+
+    // Too many points: refused before anything is sent (the table keeps its 20).
+    let e = run(&addr, table(None, vec![1.0; 65])).unwrap_err();
+    assert!(e.to_string().contains("65 points"), "{e}");
+    let out = run(
+        &addr,
+        Action::Send {
+            lines: vec!["table len".into()],
+        },
+    )
+    .unwrap();
+    assert_eq!(out, "ok table 20\n");
+
+    let out = run(
+        &addr,
+        Action::Wave(WaveCmd::Steps {
+            low: 10.0,
+            high: 30.0,
+            levels: 5,
+            freq: 2.0,
+        }),
+    )
+    .unwrap();
+    assert_eq!(out, "ok wave steps 10 30 5 2\n");
 }

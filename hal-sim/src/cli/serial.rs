@@ -13,6 +13,8 @@
 //! ```text
 //! piezo serial --tcp 127.0.0.1:4444 -- "mode ff+pid" "wave sine 5 100 10"
 //! piezo serial --port /dev/ttyACM0 wave sine 5um 100Hz --offset 10um
+//! piezo serial --tcp 127.0.0.1:4444 wave steps 10um 30um 5 2Hz
+//! piezo serial --tcp 127.0.0.1:4444 wave table --freq 10Hz --points 0,20,5,15
 //! piezo serial --tcp 127.0.0.1:4444 record --signals ref_um,y_um,u_volts --out rec.csv --svg rec.svg
 //! ```
 use std::fmt;
@@ -22,7 +24,10 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
-use piezo_core::command::{self, Command, RecCmd, Shape, TriggerCmd, MAX_LINE, MAX_WORDS};
+use piezo_core::command::{
+    self, Command, Points, RecCmd, Shape, TriggerCmd, MAX_LEVELS, MAX_LINE, MAX_WORDS,
+    TABLE_ADD_MAX, TABLE_LEN,
+};
 use piezo_core::recorder::Signal;
 
 use crate::plot::{write_grid, Plot};
@@ -55,6 +60,22 @@ pub fn format_command(cmd: &Command<'_>) -> String {
             freq_hz,
             offset_um,
         } => format!("wave {} {amp_um} {freq_hz} {offset_um}", shape.name()),
+        Command::WaveSteps {
+            low_um,
+            high_um,
+            levels,
+            freq_hz,
+        } => format!("wave steps {low_um} {high_um} {levels} {freq_hz}"),
+        Command::WaveTable(freq_hz) => format!("wave table {freq_hz}"),
+        Command::TableClear => "table clear".into(),
+        Command::TableLen => "table len".into(),
+        Command::TableAdd(points) => {
+            let mut s = String::from("table add");
+            for v in points.as_slice() {
+                s.push_str(&format!(" {v}"));
+            }
+            s
+        }
         Command::Stats => "stats".into(),
         Command::StatsReset => "stats reset".into(),
         Command::Rec(r) => match r {
@@ -142,6 +163,66 @@ pub fn select_line(signals: &[Signal]) -> Result<String, SerialError> {
     }
     check_built(&line, None)?;
     Ok(line)
+}
+
+/// The `table add` lines that load `points_um` (after a `table clear`): as many points
+/// per line as fit [`MAX_LINE`] and [`TABLE_ADD_MAX`], each line checked by the firmware's
+/// parser. Refuses fewer than 2 or more than [`TABLE_LEN`] points before anything is sent.
+pub fn table_lines(points_um: &[f32]) -> Result<Vec<String>, SerialError> {
+    if !(2..=TABLE_LEN).contains(&points_um.len()) {
+        return Err(SerialError::BadCommand {
+            command: "wave table".into(),
+            why: format!(
+                "{} points; the firmware's table takes 2 to {TABLE_LEN}",
+                points_um.len()
+            ),
+        });
+    }
+    let mut lines = Vec::new();
+    let mut chunk: Vec<f32> = Vec::new();
+    let line_of = |chunk: &[f32]| -> Result<String, SerialError> {
+        let pts = Points::from_slice(chunk).ok_or_else(|| SerialError::BadCommand {
+            command: "table add".into(),
+            why: format!("1 to {TABLE_ADD_MAX} points per line"),
+        })?;
+        checked_line(&Command::TableAdd(pts))
+    };
+    for &v in points_um {
+        chunk.push(v);
+        let fits = chunk.len() <= TABLE_ADD_MAX
+            && format_command(&Command::TableAdd(
+                Points::from_slice(&chunk).expect("1..=TABLE_ADD_MAX points"),
+            ))
+            .len()
+                <= MAX_LINE;
+        if !fits {
+            chunk.pop();
+            lines.push(line_of(&chunk)?);
+            chunk.clear();
+            chunk.push(v);
+        }
+    }
+    lines.push(line_of(&chunk)?);
+    Ok(lines)
+}
+
+/// Points (um) from a file: numbers (optionally with a length unit) separated by commas,
+/// spaces or newlines; `#` starts a comment.
+pub fn read_points(path: &std::path::Path) -> Result<Vec<f64>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut points = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let data = line.split('#').next().unwrap_or("");
+        for field in data.split(|c: char| c == ',' || c.is_whitespace()) {
+            if field.is_empty() {
+                continue;
+            }
+            let v = parse_um(field).map_err(|e| anyhow!("{}:{}: {e}", path.display(), n + 1))?;
+            points.push(v);
+        }
+    }
+    Ok(points)
 }
 
 /// Every protocol error, for mapping a reply's code back to its meaning. The match below
@@ -845,6 +926,23 @@ pub enum WaveCmd {
     Triangle(WaveArgs),
     /// Square between offset - amplitude and offset + amplitude.
     Square(WaveArgs),
+    /// Staircase from LOW up to HIGH in LEVELS levels and back down, once per period
+    /// (`wave steps 10um 30um 5 2Hz`; 2 levels is a square wave).
+    Steps {
+        #[arg(value_parser = parse_um, allow_hyphen_values = true)]
+        low: f64,
+        #[arg(value_parser = parse_um, allow_hyphen_values = true)]
+        high: f64,
+        /// Number of levels, 2 to 64.
+        #[arg(value_parser = clap::value_parser!(u16).range(2..=MAX_LEVELS as i64))]
+        levels: u16,
+        #[arg(value_parser = parse_hz)]
+        freq: f64,
+    },
+    /// Periodic spline through 2 to 64 points, one period per 1/--freq (`wave table
+    /// --freq 10Hz --points 0,20,5,15` or `--file points.csv`). Loads the firmware's table
+    /// (`table clear`, `table add ...`) and starts it (`wave table`).
+    Table(TableArgs),
     /// Hold a position (`wave hold 12.5um`).
     Hold {
         #[arg(value_parser = parse_um, allow_hyphen_values = true)]
@@ -865,6 +963,25 @@ pub struct WaveArgs {
     /// Centre position.
     #[arg(long, default_value = "0um", value_parser = parse_um, allow_hyphen_values = true)]
     pub offset: f64,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TableArgs {
+    /// Frequency of one pass through the points (`10Hz`).
+    #[arg(long, value_parser = parse_hz)]
+    pub freq: f64,
+    /// Points, comma separated (`0,20,5um,15`; bare numbers in um).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_parser = parse_um,
+        allow_hyphen_values = true,
+        required_unless_present = "file"
+    )]
+    pub points: Vec<f64>,
+    /// File of points: numbers separated by commas, spaces or newlines, `#` comments.
+    #[arg(long, conflicts_with = "points")]
+    pub file: Option<PathBuf>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -1031,6 +1148,41 @@ pub fn execute(
                 }
                 WaveCmd::Off => {
                     let r = c.send(&Command::WaveOff)?;
+                    writeln!(out, "{}", r.reply_line())?;
+                    return Ok(());
+                }
+                WaveCmd::Steps {
+                    low,
+                    high,
+                    levels,
+                    freq,
+                } => {
+                    let r = c.send(&Command::WaveSteps {
+                        low_um: f32_of(low),
+                        high_um: f32_of(high),
+                        levels,
+                        freq_hz: f32_of(freq),
+                    })?;
+                    writeln!(out, "{}", r.reply_line())?;
+                    return Ok(());
+                }
+                WaveCmd::Table(t) => {
+                    let points = match &t.file {
+                        Some(f) => read_points(f)?,
+                        None => t.points.clone(),
+                    };
+                    let points: Vec<f32> = points.into_iter().map(f32_of).collect();
+                    // Every line is built and checked before the first is sent.
+                    let lines = table_lines(&points)?;
+                    c.send(&Command::TableClear)?;
+                    let mut last = None;
+                    for l in &lines {
+                        last = Some(c.raw(l)?);
+                    }
+                    if let Some(r) = last {
+                        writeln!(out, "{}", r.reply_line())?;
+                    }
+                    let r = c.send(&Command::WaveTable(f32_of(t.freq)))?;
                     writeln!(out, "{}", r.reply_line())?;
                     return Ok(());
                 }
@@ -1528,6 +1680,45 @@ mod tests {
         assert!(a.action.is_none());
         let e = Cli::try_parse_from(["serial", "limits", "--slew", "5 parsecs"]).unwrap_err();
         assert!(e.to_string().contains("unknown unit"), "{e}");
+        let a = Cli::try_parse_from(["serial", "wave", "steps", "-1um", "2um", "5", "3Hz"])
+            .unwrap()
+            .args;
+        match a.action {
+            Some(Action::Wave(WaveCmd::Steps {
+                low,
+                high,
+                levels,
+                freq,
+            })) => assert_eq!((low, high, levels, freq), (-1.0, 2.0, 5, 3.0)),
+            other => panic!("{other:?}"),
+        }
+        assert!(Cli::try_parse_from(["serial", "wave", "steps", "1", "2", "65", "3"]).is_err());
+        let a = Cli::try_parse_from([
+            "serial",
+            "wave",
+            "table",
+            "--freq",
+            "10Hz",
+            "--points",
+            "-1,2um,300nm",
+        ])
+        .unwrap()
+        .args;
+        match a.action {
+            Some(Action::Wave(WaveCmd::Table(t))) => {
+                assert_eq!(
+                    (t.freq, t.points, t.file),
+                    (10.0, vec![-1.0, 2.0, 0.3], None)
+                )
+            }
+            other => panic!("{other:?}"),
+        }
+        // One source of points, exactly.
+        assert!(Cli::try_parse_from(["serial", "wave", "table", "--freq", "1"]).is_err());
+        assert!(Cli::try_parse_from([
+            "serial", "wave", "table", "--freq", "1", "--points", "1,2", "--file", "p.csv"
+        ])
+        .is_err());
     }
 
     #[test]
@@ -1695,6 +1886,29 @@ mod tests {
     }
 
     #[test]
+    fn table_lines_refuse_bad_counts_and_pack_lines() {
+        assert!(table_lines(&[1.0]).is_err());
+        assert!(table_lines(&[0.0; TABLE_LEN + 1]).is_err());
+        let lines = table_lines(&[1.0; 20]).unwrap();
+        assert_eq!(lines.len(), 3);
+        assert_eq!(lines[0], "table add 1 1 1 1 1 1 1 1");
+        assert_eq!(lines[2], "table add 1 1 1 1");
+        // Long numbers: the line length limits a line before the word count does.
+        let long = [-1.2345678e-12f32; 8];
+        let lines = table_lines(&long).unwrap();
+        assert!(lines.len() > 1, "{lines:?}");
+        assert!(lines.iter().all(|l| l.len() <= MAX_LINE));
+        let dir = std::env::temp_dir().join(format!("piezo-points-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("points.csv");
+        std::fs::write(&f, "# um\n0, 20\n5um 1.5e1\n\n300nm # last\n").unwrap();
+        assert_eq!(read_points(&f).unwrap(), vec![0.0, 20.0, 5.0, 15.0, 0.3]);
+        std::fs::write(&f, "1\n2,x\n").unwrap();
+        let e = read_points(&f).unwrap_err().to_string();
+        assert!(e.contains("points.csv:2:") && e.contains("`x`"), "{e}");
+    }
+
+    #[test]
     fn trigger_spec_resolves_channels() {
         let ch: Vec<String> = ["ref_um", "y_um", "u_volts", "error_um"]
             .map(String::from)
@@ -1740,7 +1954,7 @@ mod tests {
         /// parser (or the host refuses it before sending).
         #[test]
         fn every_built_command_round_trips(
-            which in 0usize..20, a in finite(), b in finite(), d in finite(),
+            which in 0usize..25, a in finite(), b in finite(), d in finite(),
             n in name(), i in 0usize..5000, k in 0usize..5000,
         ) {
             let shape = [Shape::Sine, Shape::Triangle, Shape::Square][which % 3];
@@ -1762,6 +1976,16 @@ mod tests {
                 16 => Command::Rec(RecCmd::Trigger(TriggerCmd::Level { channel: i, level: a, pre: k })),
                 17 => Command::Rec(RecCmd::Read { start: i, count: k }),
                 18 => Command::Rec([RecCmd::Arm, RecCmd::Stop, RecCmd::Status][i % 3]),
+                19 => Command::WaveSteps {
+                    low_um: a,
+                    high_um: d,
+                    levels: 2 + (i % (MAX_LEVELS as usize - 1)) as u16,
+                    freq_hz: b.abs(),
+                },
+                20 => Command::WaveTable(b.abs()),
+                21 => Command::TableClear,
+                22 => Command::TableLen,
+                23 => Command::TableAdd(Points::from_slice(&[a, b, d][..1 + i % 3]).unwrap()),
                 _ => Command::Bench,
             };
             let line = format_command(&cmd);
@@ -1772,6 +1996,28 @@ mod tests {
                 }
                 // Only an overlong line may be refused.
                 Err(e) => prop_assert!(line.len() > MAX_LINE, "{e}"),
+            }
+        }
+
+        /// The table is loaded in lines the firmware reads back as exactly these points.
+        #[test]
+        fn table_lines_carry_every_point(points in proptest::collection::vec(finite(), 2..=TABLE_LEN)) {
+            let lines = table_lines(&points).unwrap();
+            let mut back = Vec::new();
+            for l in &lines {
+                prop_assert!(l.len() <= MAX_LINE);
+                match command::parse(l.as_bytes()) {
+                    Ok(Command::TableAdd(p)) => back.extend_from_slice(p.as_slice()),
+                    other => prop_assert!(false, "{l}: {other:?}"),
+                }
+            }
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&back), bits(&points));
+            // Greedy: the next line's first point would not have fitted in this one.
+            for w in lines.windows(2) {
+                let next = w[1].split(' ').nth(2).unwrap();
+                let full = w[0].split(' ').count() - 2 == TABLE_ADD_MAX;
+                prop_assert!(full || w[0].len() + 1 + next.len() > MAX_LINE, "{:?}", w);
             }
         }
 

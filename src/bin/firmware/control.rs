@@ -10,7 +10,9 @@ use piezo_core::feedback::{
 };
 use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf, MultiFeedforward};
 use piezo_core::hysteresis::Cbw;
-use piezo_core::pipeline::{AxisConfig, Config, DacScale, Mode, OutputLimits, Sensor, Wave};
+use piezo_core::pipeline::{
+    AxisConfig, Config, DacScale, Mode, OutputLimits, Sensor, Wave, TABLE_LEN,
+};
 use piezo_core::recorder::{self, Recorder, Signal};
 use piezo_core::Real;
 
@@ -322,11 +324,47 @@ impl Timing {
     }
 }
 
-/// Everything the control task owns: the loop, the recorder and the timing.
+/// Everything the control task owns: the loop, the recorder and the timing; and the point
+/// table the executor fills (`table add`) and hands to the reference on `wave table`
+/// (the control step never reads it).
 pub struct Ctl {
     pub lp: Loop,
     pub rec: Recorder<R, REC_CH, REC_N>,
     pub timing: Timing,
+    pub table: PointTable,
+}
+
+/// Points of `wave table` as `table add` appends them (um).
+pub struct PointTable {
+    points: [R; TABLE_LEN],
+    len: usize,
+}
+
+impl PointTable {
+    pub const fn new() -> Self {
+        Self {
+            points: [R::ZERO; TABLE_LEN],
+            len: 0,
+        }
+    }
+
+    /// The points so far.
+    pub fn points(&self) -> &[R] {
+        self.points.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Appends all of `values` or, if they do not fit, none.
+    fn add(&mut self, values: &[f32]) -> Result<(), Error> {
+        let free = self.points.get_mut(self.len..).unwrap_or(&mut []);
+        if values.len() > free.len() {
+            return Err(Error::OutOfRange);
+        }
+        for (d, v) in free.iter_mut().zip(values) {
+            *d = c(*v as f64);
+        }
+        self.len += values.len();
+        Ok(())
+    }
 }
 
 /// Names of the feedback laws `mode` accepts (the bench iterates over them); they are the
@@ -459,6 +497,7 @@ impl Ctl {
             lp: Loop::new(sample_hz),
             rec: Recorder::new(),
             timing: Timing::new(),
+            table: PointTable::new(),
         }
     }
 
@@ -495,7 +534,9 @@ impl Ctl {
             Command::Empty => {}
             Command::Ping => out.push_str("ok pong"),
             Command::Help => {
-                out.push_str("ok ping help get set mode ff wave stats rec fault bench; params:");
+                out.push_str(
+                    "ok ping help get set mode ff wave table stats rec fault bench; params:",
+                );
                 for p in PARAMS {
                     out.push_str(" ");
                     out.push_str(p);
@@ -571,6 +612,58 @@ impl Ctl {
                     out.push_str(" ");
                     push_real(out, v);
                 }
+            }
+            Command::WaveSteps {
+                low_um,
+                high_um,
+                levels,
+                freq_hz,
+            } => {
+                let (lo, hi, f) = (c(low_um as f64), c(high_um as f64), c(freq_hz as f64));
+                lp.p.set_wave(
+                    0,
+                    Wave::Steps {
+                        low_um: lo,
+                        high_um: hi,
+                        levels,
+                        freq_hz: f,
+                    },
+                )
+                .map_err(|_| Error::OutOfRange)?;
+                out.push_str("ok wave steps ");
+                push_real(out, lo);
+                out.push_str(" ");
+                push_real(out, hi);
+                out.push_str(" ");
+                out.push_u32(levels as u32);
+                out.push_str(" ");
+                push_real(out, f);
+            }
+            Command::TableClear => {
+                self.table.len = 0;
+                out.push_str("ok table 0");
+            }
+            Command::TableAdd(points) => {
+                self.table.add(points.as_slice())?;
+                out.push_str("ok table ");
+                out.push_usize(self.table.len);
+            }
+            Command::TableLen => {
+                out.push_str("ok table ");
+                out.push_usize(self.table.len);
+            }
+            Command::WaveTable(freq_hz) => {
+                let points = self.table.points();
+                if points.len() < 2 {
+                    return Err(Error::Busy);
+                }
+                let f = c(freq_hz as f64);
+                let wave = Wave::table(points, f).map_err(|_| Error::OutOfRange)?;
+                lp.p.set_wave(0, wave).map_err(|_| Error::OutOfRange)?;
+                out.push_str("ok wave table ");
+                push_real(out, f);
+                out.push_str(" ");
+                out.push_usize(points.len());
             }
             Command::Stats => {
                 let t = &self.timing;
