@@ -1197,13 +1197,7 @@ pub fn execute(
         }
         Action::Status => status(c, out)?,
         Action::Stats { reset, clock } => {
-            let r = c.send(&Command::Stats)?;
-            let s = parse_stats(&r.details).map_err(|why| SerialError::BadReply {
-                command: "stats".into(),
-                line: r.reply_line(),
-                why,
-            })?;
-            print_stats(out, &s, clock)?;
+            print_stats(out, &read_stats(c)?, clock)?;
             if reset {
                 c.send(&Command::StatsReset)?;
                 writeln!(out, "counters reset")?;
@@ -1277,6 +1271,18 @@ fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Result
     Ok(())
 }
 
+/// `stats`, parsed; a reply that does not parse is an error naming it.
+fn read_stats(c: &mut Client) -> Result<Stats> {
+    let r = c.send(&Command::Stats)?;
+    parse_stats(&r.details)
+        .map_err(|why| SerialError::BadReply {
+            command: "stats".into(),
+            line: r.reply_line(),
+            why,
+        })
+        .map_err(Into::into)
+}
+
 fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
     let t = Instant::now();
     c.send(&Command::Ping)?;
@@ -1296,13 +1302,7 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
         let v = get_param(c, p)?;
         writeln!(out, "{p:<15} {v}")?;
     }
-    let r = c.send(&Command::Stats)?;
-    let s = parse_stats(&r.details).map_err(|why| SerialError::BadReply {
-        command: "stats".into(),
-        line: r.reply_line(),
-        why,
-    })?;
-    print_stats(out, &s, None)?;
+    print_stats(out, &read_stats(c)?, None)?;
     let r = c.send(&Command::Rec(RecCmd::Status))?;
     let (state, n) = parse_rec_status(&r.details).map_err(|why| SerialError::BadReply {
         command: "rec status".into(),
