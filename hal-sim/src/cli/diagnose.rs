@@ -105,17 +105,6 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
         d.noise_rms
     );
     for c in &d.candidates {
-        if !c.fitted {
-            let _ = writeln!(
-                s,
-                "  round {} {:<14} not fitted: evidence R2 {:.2} < {}",
-                c.round,
-                c.cause.name(),
-                c.evidence.r2,
-                diagnose::MIN_R2
-            );
-            continue;
-        }
         let _ = writeln!(
             s,
             "  round {} {:<14} valid {:.4}  gain {:+6.1} %  evidence R2 {:.2}{}",

@@ -293,9 +293,6 @@ type Tried = (Fitted, Vec<Vec<f64>>, f64);
 pub struct Candidate {
     pub cause: Cause,
     pub round: usize,
-    /// False when the cause's signature explained less than [`MIN_R2`] of the residual: it
-    /// could not be significant, so it was not fitted (`rmse_*` and `gain` are NaN).
-    pub fitted: bool,
     pub rmse_train: f64,
     pub rmse_valid: f64,
     /// `1 - rmse_valid / (current model's rmse_valid)`.
@@ -362,7 +359,6 @@ impl Diagnosis {
                 "rmse_train": c.rmse_train,
                 "gain": c.gain,
                 "evidence_r2": c.evidence.r2,
-                "fitted": c.fitted,
                 "significant": c.significant,
             })).collect::<Vec<_>>(),
             "findings": self.findings,
@@ -814,7 +810,7 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
         }
         // Every candidate is fitted: its evidence is measured in its own frame (below), and
         // a cause can show in the training record only.
-        let (tried, mut evidence): (Vec<Option<Tried>>, Vec<Evidence>) = tried
+        let (tried, mut evidence): (Vec<Tried>, Vec<Evidence>) = tried
             .into_iter()
             .zip(&todo)
             .map(|((f, p, e), &c)| {
@@ -831,14 +827,12 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
                 } else {
                     ev_valid
                 };
-                (Some((f, p, e)), ev)
+                ((f, p, e), ev)
             })
             .unzip();
         let mut best: Option<usize> = None;
         for (k, (t, ev)) in tried.iter().zip(&evidence).enumerate() {
-            let (rmse_train, e) = t
-                .as_ref()
-                .map_or((f64::NAN, f64::NAN), |t| (t.0.rmse_train, t.2));
+            let (rmse_train, e) = (t.0.rmse_train, t.2);
             let gain = 1.0 - e / current_valid;
             let significant = gain.is_finite()
                 && gain >= MIN_GAIN
@@ -847,21 +841,18 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             candidates.push(Candidate {
                 cause: todo[k],
                 round,
-                fitted: t.is_some(),
                 rmse_train,
                 rmse_valid: e,
                 gain,
                 evidence: ev.clone(),
                 significant,
             });
-            if significant
-                && best.is_none_or(|b: usize| e < tried[b].as_ref().map_or(f64::INFINITY, |t| t.2))
-            {
+            if significant && best.is_none_or(|b: usize| e < tried[b].2) {
                 best = Some(k);
             }
         }
         let Some(b) = best else { break };
-        let Some((f, _, e)) = tried.into_iter().nth(b).flatten() else {
+        let Some((f, _, e)) = tried.into_iter().nth(b) else {
             break;
         };
         let ev = evidence.swap_remove(b);
