@@ -65,7 +65,8 @@ fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T) -> Option<(T, T, usize)> {
     let mut du = T::ZERO;
     let mut dh = T::ZERO;
     let mut e = T::ONE; // e^-(k du)
-    for i in 1..=CBW_NEWTON_MAX {
+                        // An exclusive range: `1..=MAX` costs a flag test per iteration on thumbv7.
+    for i in 1..CBW_NEWTON_MAX + 1 {
         let step = (d * du - dh - r) / (d - c * e);
         du -= step;
         let x = k * du;
@@ -105,55 +106,93 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
         if self.n() != T::ONE {
             return None;
         }
-        let (d, alpha, beta, gamma) = (self.d(), self.alpha(), self.beta(), self.gamma());
-        let h0 = state.h;
-        let r = y_ref - (d * state.u - h0);
-        // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) as selects, not `sgn`
-        // products: this runs every sample.
-        let up = r > T::ZERO;
-        if !(up || r < T::ZERO) {
-            // Already there (or NaN: the caller holds the output).
-            return if r == T::ZERO {
-                Some(Inverted {
-                    u: state.u,
-                    y: y_ref,
-                    state: *state,
-                    iterations: 0,
-                })
-            } else {
-                None
-            };
+        invert_cbw_n1(self, state, y_ref, tol)
+    }
+}
+
+/// [`ImsModel::invert_step`] of CBW for `n = 1` (the caller checks `n`).
+#[inline(always)]
+fn invert_cbw_n1<T: Real>(
+    m: &Cbw<T>,
+    state: &BwState<T>,
+    y_ref: T,
+    tol: T,
+) -> Option<Inverted<T, BwState<T>>> {
+    let (d, alpha, beta, gamma) = (m.d(), m.alpha(), m.beta(), m.gamma());
+    let h0 = state.h;
+    let r = y_ref - (d * state.u - h0);
+    // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) as selects, not `sgn`
+    // products: this runs every sample.
+    let up = r > T::ZERO;
+    if !(up || r < T::ZERO) {
+        // Already there (or NaN: the caller holds the output).
+        return if r == T::ZERO {
+            Some(Inverted {
+                u: state.u,
+                y: y_ref,
+                state: *state,
+                iterations: 0,
+            })
+        } else {
+            None
+        };
+    }
+    let s = if up { T::ONE } else { -T::ONE };
+    let beta_s = if up { beta } else { -beta };
+    let h_up = if h0 == T::ZERO { up } else { h0 > T::ZERO };
+    let k = beta_s + if h_up { gamma } else { -gamma };
+    let (mut du, mut dh, mut it) = cbw_piece(d, alpha - k * h0, k, r, tol)?;
+    if h0 * (h0 + dh) < T::ZERO {
+        // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
+        // moving in direction s, where sgn(h) = s.
+        let du0 = if k == T::ZERO {
+            -h0 / alpha
+        } else {
+            (-k * h0 / alpha).ln_1p() / k
+        };
+        let r2 = r - (d * du0 + h0);
+        if !(du0.is_finite() && du0.sgn() != -s && r2.sgn() != -s) {
+            return None;
         }
-        let s = if up { T::ONE } else { -T::ONE };
-        let beta_s = if up { beta } else { -beta };
-        let h_up = if h0 == T::ZERO { up } else { h0 > T::ZERO };
-        let k = beta_s + if h_up { gamma } else { -gamma };
-        let (mut du, mut dh, mut it) = cbw_piece(d, alpha - k * h0, k, r, tol)?;
-        if h0 * (h0 + dh) < T::ZERO {
-            // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
-            // moving in direction s, where sgn(h) = s.
-            let du0 = if k == T::ZERO {
-                -h0 / alpha
-            } else {
-                (-k * h0 / alpha).ln_1p() / k
-            };
-            let r2 = r - (d * du0 + h0);
-            if !(du0.is_finite() && du0.sgn() != -s && r2.sgn() != -s) {
-                return None;
+        let (du2, dh2, it2) = cbw_piece(d, alpha, (beta + gamma) * s, r2, tol)?;
+        du = du0 + du2;
+        dh = dh2 - h0;
+        it += it2;
+    }
+    let u = state.u + du;
+    let h = h0 + dh;
+    Some(Inverted {
+        u,
+        y: d * u - h,
+        state: BwState { u, h },
+        iterations: it,
+    })
+}
+
+impl<T: Real> Ims<T, Cbw<T>> {
+    /// The plain case the pipeline's fused step runs: solved loop, `n = 1`, no quadratic
+    /// term, no creep.
+    pub(crate) fn is_plain_cbw_n1(&self) -> bool {
+        self.closure == ImsLoop::Solved
+            && self.model.n() == T::ONE
+            && self.quad == T::ZERO
+            && self.creep.is_none()
+    }
+
+    /// [`Ims::compensate`] for [`Ims::is_plain_cbw_n1`] (same arithmetic, the checks of the
+    /// other cases left out).
+    #[inline(always)]
+    pub(crate) fn compensate_plain_cbw_n1(&mut self, y_ref_um: T) -> T {
+        if !y_ref_um.is_finite() {
+            return self.u;
+        }
+        let tol = self.tol(y_ref_um);
+        if let Some(inv) = invert_cbw_n1(&self.model, &self.state, y_ref_um, tol) {
+            if let Some(u) = self.take_inverted(inv) {
+                return u;
             }
-            let (du2, dh2, it2) = cbw_piece(d, alpha, (beta + gamma) * s, r2, tol)?;
-            du = du0 + du2;
-            dh = dh2 - h0;
-            it += it2;
         }
-        let u = state.u + du;
-        let h = h0 + dh;
-        Some(Inverted {
-            u,
-            y: d * u - h,
-            state: BwState { u, h },
-            iterations: it,
-        })
+        self.solve_bracketed(y_ref_um, tol)
     }
 }
 
@@ -286,6 +325,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.u
     }
 
+    /// The voltage range (V) every output lies in.
+    pub fn volts_range(&self) -> (T, T) {
+        (self.volts_min, self.volts_max)
+    }
+
     pub fn model(&self) -> &M {
         &self.model
     }
@@ -311,47 +355,75 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             Some(c) => c.static_target(y_ref_um),
             None => y_ref_um,
         };
-        let u = match self.closure {
+        match self.closure {
             ImsLoop::Solved => {
-                let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
-                let tol = T::from_f64(8.0) * T::EPSILON * scale;
+                let tol = self.tol(y_ref_um);
                 if self.quad == T::ZERO {
                     if let Some(inv) = self.model.invert_step(&self.state, y_ref_um, tol) {
-                        let (lo, hi) = (
-                            self.volts_min.max(self.u - self.max_step_volts),
-                            self.volts_max.min(self.u + self.max_step_volts),
-                        );
-                        if inv.u >= lo && inv.u <= hi {
-                            // Inside the limits: the solve's own step is the model's.
-                            self.evals = inv.iterations;
-                            self.state = inv.state;
-                            return self.commit(inv.u, inv.y);
+                        if let Some(u) = self.take_inverted(inv) {
+                            return u;
                         }
                     }
                 }
-                let (model, state, dt, quad) = (&self.model, self.state, self.dt_s, self.quad);
-                let f = |u: T| {
-                    let mut s = state;
-                    model.step(&mut s, u, dt) + quad * u * u - y_ref_um
-                };
-                // f at the held voltage: not `self.y - y_ref` for models with rate terms.
-                let f0 = f(self.u);
-                let root =
-                    solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
-                self.evals = root.evals + 1;
-                let secant = (root.fx - f0) / (root.x - self.u);
-                if secant.is_finite() && secant > self.min_slope {
-                    self.slope_hint = secant;
-                }
-                root.x
+                self.solve_bracketed(y_ref_um, tol)
             }
             ImsLoop::Delayed => {
                 self.evals = 0;
                 let d = self.model.d();
                 let h_prev = d * self.u - self.y;
-                (y_ref_um + h_prev) / d
+                self.finish((y_ref_um + h_prev) / d)
             }
+        }
+    }
+
+    /// Tolerance of the solve on `y` (um) for the reference `y_ref_um`.
+    #[inline(always)]
+    fn tol(&self, y_ref_um: T) -> T {
+        let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
+        T::from_f64(8.0) * T::EPSILON * scale
+    }
+
+    /// Takes a direct inversion if it lies inside the range and slew limits (the solve's own
+    /// step is then the model's); `None` leaves the state untouched.
+    #[inline(always)]
+    fn take_inverted(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
+        let (lo, hi) = (
+            self.volts_min.max(self.u - self.max_step_volts),
+            self.volts_max.min(self.u + self.max_step_volts),
+        );
+        if inv.u >= lo && inv.u <= hi {
+            self.evals = inv.iterations;
+            self.state = inv.state;
+            Some(self.commit(inv.u, inv.y))
+        } else {
+            None
+        }
+    }
+
+    /// The bracketed solve on the model's step (models without a direct inversion, or a
+    /// solution outside the limits), then the limits.
+    #[inline(never)]
+    fn solve_bracketed(&mut self, y_ref_um: T, tol: T) -> T {
+        let (model, state, dt, quad) = (&self.model, self.state, self.dt_s, self.quad);
+        let f = |u: T| {
+            let mut s = state;
+            model.step(&mut s, u, dt) + quad * u * u - y_ref_um
         };
+        // f at the held voltage: not `self.y - y_ref` for models with rate terms.
+        let f0 = f(self.u);
+        let root = solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
+        self.evals = root.evals + 1;
+        let secant = (root.fx - f0) / (root.x - self.u);
+        if secant.is_finite() && secant > self.min_slope {
+            self.slope_hint = secant;
+        }
+        self.finish(root.x)
+    }
+
+    /// Limits `u` (range, slew; NaN holds the previous voltage), steps the model there and
+    /// takes it.
+    #[inline]
+    fn finish(&mut self, u: T) -> T {
         // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
         let u = if u.is_finite() { u } else { self.u };
         let u = u
