@@ -68,9 +68,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
 
     /// One sample on the fused path; `None` (nothing changed) when it does not apply to
     /// this sample: the generic step runs it instead.
-    // Not inlined: its own frame, with the pipeline behind one pointer, is shorter code
-    // than the caller's (the bench's loop or the control task) addressing.
-    #[inline(never)]
+    #[inline(always)]
     pub(super) fn step_fused(&mut self, adc: [i32; N]) -> Option<[i32; N]> {
         let Self {
             config,
