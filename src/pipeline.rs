@@ -12,6 +12,7 @@
 //! Faults (an ADC code outside the sensor window, a non-finite command) latch the safe
 //! state: the output slews to `safe_volts` and stays there until [`Pipeline::clear_fault`].
 
+mod fused;
 pub mod output;
 pub mod reference;
 pub mod sensor;
@@ -152,6 +153,9 @@ pub struct Pipeline<T: Real, const N: usize> {
     feedforward: MultiFeedforward<T, N>,
     feedback: [Feedback<T>; N],
     state: State<T, N>,
+    /// [`Pipeline::step`] takes the fused path of `fused.rs` (decided when the mode, the
+    /// feedforward or the feedback changes).
+    fused: bool,
 }
 
 impl<T: Real, const N: usize> Pipeline<T, N> {
@@ -213,6 +217,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                     u_cmd: [T::ZERO; N],
                 },
             },
+            fused: false,
         };
         for i in 0..N {
             let (o, a) = (&p.output[i], &p.config.axes[i]);
@@ -223,6 +228,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             p.state.trace.u_ff[i] = a.safe_volts;
             p.state.trace.setpoint[i] = p.reference[i].current();
         }
+        p.fused = p.fusable();
         Ok(p)
     }
 
@@ -244,6 +250,11 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     /// The reference generator of `axis`.
     pub fn reference(&self, axis: usize) -> Option<&WaveGen<T>> {
         self.reference.get(axis)
+    }
+    /// The configuration runs the fused step (see [`Pipeline::step`]) while no fault is
+    /// latched.
+    pub fn is_fused(&self) -> bool {
+        self.fused
     }
     /// The DAC codes of the last sample (at start-up: the codes of `safe_volts`).
     pub fn codes(&self) -> [i32; N] {
@@ -344,11 +355,33 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                 u_applied: u,
             });
         }
+        self.fused = self.fusable();
     }
 
     /// One sample: ADC codes in, DAC codes out.
-    #[inline]
+    ///
+    /// The firmware's main mode (closed loop, HGO + robust law on IMS-CBW feedforward, one
+    /// axis, no fault) runs a fused step (`fused.rs`) with the same arithmetic as
+    /// [`Pipeline::step_generic`] and the same results, without the checks that cannot fire
+    /// in that configuration; every other case runs the generic step.
+    // Not inlined: with the pipeline behind one pointer the step addresses its state in
+    // one instruction per access, wherever the caller keeps it (the bench keeps it deep in
+    // a large stack frame).
+    #[inline(never)]
     pub fn step(&mut self, adc: [i32; N]) -> [i32; N] {
+        if self.fused && self.state.fault.is_none() {
+            if let Some(codes) = self.step_fused(adc) {
+                return codes;
+            }
+        }
+        self.step_generic(adc)
+    }
+
+    /// The generic step: any mode, feedforward, feedback and axis count.
+    /// [`Pipeline::step`] runs it whenever the fused step does not apply; public so tests
+    /// can run it as the reference of the fused step.
+    #[inline]
+    pub fn step_generic(&mut self, adc: [i32; N]) -> [i32; N] {
         let st = &mut self.state;
         st.counters.samples = st.counters.samples.saturating_add(1);
 

@@ -246,7 +246,7 @@ real_impl!(
 /// instructions, range reduction for any `x`) is mostly overhead: Taylor polynomials in
 /// Horner form, degree 5 for `|x| <= 1/32` and 8 for `|x| <= 1/4` (remainders below
 /// `5e-11` relative to `x` in both, far below half an ulp); elsewhere libm.
-#[inline]
+#[inline(always)]
 fn expm1_f32(x: f32) -> f32 {
     const C: [f32; 7] = [
         1.0 / 2.0,
@@ -273,8 +273,15 @@ fn expm1_f32(x: f32) -> f32 {
         let p = C[0] + x * p;
         x + (x * x) * p
     } else {
-        libm::expm1f(x)
+        expm1_f32_libm(x)
     }
+}
+
+/// The rare large arguments, out of line so the per-sample polynomial inlines.
+#[inline(never)]
+#[cold]
+fn expm1_f32_libm(x: f32) -> f32 {
+    libm::expm1f(x)
 }
 
 /// `|x|` in single precision: core's `abs` is the FPU's `vabs.f32` (one instruction);

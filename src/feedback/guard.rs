@@ -63,6 +63,34 @@ impl<T: Real> InputGuard<T> {
         out
     }
 
+    /// [`InputGuard::clean`] without a measurement filter, for inputs the caller knows to
+    /// be finite and inside [`INPUT_BOUND`] (measurement, feedforward and applied voltage:
+    /// the pipeline's fused step checks their ranges once per configuration), where `hold`
+    /// returns them unchanged: only the setpoint is held. The same result and the same
+    /// remembered values.
+    #[inline(always)]
+    pub(crate) fn clean_bounded(&mut self, io: &LoopSignals<T>) -> LoopSignals<T> {
+        let l = &self.last;
+        let c = LoopSignals {
+            setpoint: Setpoint {
+                y_um: hold(io.setpoint.y_um, l.setpoint.y_um),
+                dy: hold(io.setpoint.dy, l.setpoint.dy),
+                ddy: hold(io.setpoint.ddy, l.setpoint.ddy),
+            },
+            y_um: io.y_um,
+            u_ff: io.u_ff,
+            u_applied: io.u_applied,
+        };
+        self.last = c;
+        self.settled = true;
+        c
+    }
+
+    /// No measurement filter is set.
+    pub(crate) fn is_unfiltered(&self) -> bool {
+        self.notch.is_none()
+    }
+
     /// The filter restarts at the next measurement (bumpless reset).
     pub fn restart(&mut self) {
         self.settled = false;

@@ -54,10 +54,7 @@ impl<T: Real> ObserverModel<T> {
     #[inline]
     pub fn slope(&self, h: T, s: T) -> T {
         match self {
-            // n = 1: `beta s sgn(h) |h| = beta s h`, exactly (no sign tests).
-            ObserverModel::Cbw(m) if m.n() == T::ONE => {
-                m.alpha() - m.gamma() * h.abs() - m.beta() * s * h
-            }
+            ObserverModel::Cbw(m) if m.n() == T::ONE => cbw_n1_slope(m, h, s),
             ObserverModel::Cbw(m) => m.slope(h, s),
             ObserverModel::Gbw(m) => m.slope(h, s),
             ObserverModel::Dahl(m) => m.slope(h, s),
@@ -96,6 +93,19 @@ pub(crate) fn cbw_n1_piece<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
     if m.n() != T::ONE {
         return None;
     }
+    cbw_n1_piece_unchecked(m, h, du)
+}
+
+/// `dh/du` of CBW for `n = 1` at `h` moving in direction `s`: `beta s sgn(h) |h| = beta s
+/// h`, exactly (no sign tests).
+#[inline(always)]
+pub(crate) fn cbw_n1_slope<T: Real>(m: &Cbw<T>, h: T, s: T) -> T {
+    m.alpha() - m.gamma() * h.abs() - m.beta() * s * h
+}
+
+/// [`cbw_n1_piece`] for a model known to have `n = 1`.
+#[inline(always)]
+fn cbw_n1_piece_unchecked<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
     let up = du > T::ZERO;
     if !(up || du < T::ZERO) {
         return Some(h); // no move (NaN du is refused by the callers)
@@ -277,6 +287,29 @@ impl<T: Real> Hgo<T> {
     pub fn step(&self, s: &mut HgoState<T>, y: T, u: T) {
         // f(h, u') integrated over the input increment (000 eq. 6, second line).
         let h_pred = self.model.advance_h(s.h, s.u, u - s.u);
+        self.correct(s, y, u, h_pred);
+    }
+
+    /// The model is CBW with `n = 1`, the case [`Hgo::step_cbw_n1`] runs.
+    pub(crate) fn is_cbw_n1(&self) -> bool {
+        matches!(self.model, ObserverModel::Cbw(m) if m.n() == T::ONE)
+    }
+
+    /// [`Hgo::step`] for an observer whose model is CBW with `n = 1` (the pipeline's fused
+    /// step checks [`Hgo::is_cbw_n1`] once per configuration); the same arithmetic.
+    #[inline(always)]
+    pub(crate) fn step_cbw_n1(&self, m: &Cbw<T>, s: &mut HgoState<T>, y: T, u: T) {
+        let du = u - s.u;
+        let h_pred = match cbw_n1_piece_unchecked(m, s.h, du) {
+            Some(h1) => h1,
+            None => m.advance_h(s.h, s.u, du),
+        };
+        self.correct(s, y, u, h_pred);
+    }
+
+    /// The measurement update after the prediction `h_pred` of `h`.
+    #[inline(always)]
+    fn correct(&self, s: &mut HgoState<T>, y: T, u: T, h_pred: T) {
         let x_pred = self.ad * s.x + self.gd * (self.d_p * u - h_pred - s.d);
         let e = y - x_pred;
         s.x = x_pred + self.l1 * e;

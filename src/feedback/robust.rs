@@ -1,7 +1,7 @@
 //! Robust output-feedback law with virtual hysteresis control, 000 eq. (7)-(8), on the HGO.
 
 use super::guard::InputGuard;
-use super::hgo::{Hgo, HgoState};
+use super::hgo::{cbw_n1_slope, Hgo, HgoState, ObserverModel};
 use crate::hysteresis::{ensure, ensure_finite, ParamError};
 use crate::real::Real;
 use crate::signals::LoopSignals;
@@ -145,14 +145,16 @@ impl<T: Real> Robust<T> {
     /// observer's model: the `v` held over the next sample that brings `x` to
     /// `y_d(t + dt) + decay(x_hat - y_d)`, i.e. `(x_target - ad x_hat) / gd`. (The
     /// continuous `x_hat + (y_d' - lambda1 e)/a` is its limit `a dt -> 0`; at `a dt = 0.3` it
-    /// would leave 15 % of the velocity feedforward out.)
-    #[inline]
-    fn v_d(&self, io: &LoopSignals<T>, x_hat: T) -> T {
+    /// would leave 15 % of the velocity feedforward out.) `EXP`: the convergence is known
+    /// to be exponential.
+    #[inline(always)]
+    fn v_d<const EXP: bool>(&self, io: &LoopSignals<T>, x_hat: T) -> T {
         let dt = self.hgo.dt_s();
         let (_, gd) = self.hgo.linear_step();
         let sp = &io.setpoint;
         let e = x_hat - sp.y_um;
         let e_next = match self.cfg.convergence {
+            _ if EXP => self.p1 * e,
             Convergence::Exponential => self.p1 * e,
             Convergence::FiniteTime {
                 alpha1,
@@ -169,10 +171,11 @@ impl<T: Real> Robust<T> {
         x_hat + (y_next + e_next - x_hat) / gd
     }
 
-    /// What is left of the error `e_h` after one sample.
-    #[inline]
-    fn h_error_left(&self, e: T) -> T {
+    /// What is left of the error `e_h` after one sample (`EXP`: as in [`Robust::v_d`]).
+    #[inline(always)]
+    fn h_error_left<const EXP: bool>(&self, e: T) -> T {
         match self.cfg.convergence {
+            _ if EXP => (T::ONE - self.c2) * e,
             Convergence::Exponential => (T::ONE - self.c2) * e,
             Convergence::FiniteTime { alpha2, .. } => {
                 finite_time_decay(e, self.cfg.lambda2, alpha2, self.hgo.dt_s())
@@ -182,31 +185,76 @@ impl<T: Real> Robust<T> {
 
     #[inline]
     pub fn update(&mut self, io: &LoopSignals<T>) -> T {
-        let io = self.guard.clean(io);
+        self.update_impl::<false>(io)
+    }
+
+    /// The configuration [`Robust::update_fused`] runs: exponential convergence, no
+    /// measurement filter, the observer on CBW with `n = 1`.
+    pub(crate) fn fusable(&self) -> bool {
+        self.cfg.convergence == Convergence::Exponential
+            && self.guard.is_unfiltered()
+            && self.hgo.is_cbw_n1()
+    }
+
+    /// The law has not primed its observer yet (the next update does that).
+    #[inline(always)]
+    pub(crate) fn is_fresh(&self) -> bool {
+        self.state.fresh
+    }
+
+    /// [`Robust::update`] for a law with [`Robust::fusable`] and inputs whose measurement,
+    /// feedforward and applied voltage are finite and inside the input guard's bound (the
+    /// pipeline checks both once per configuration): the same arithmetic without the
+    /// checks that cannot fire then.
+    #[inline(always)]
+    pub(crate) fn update_fused(&mut self, io: &LoopSignals<T>) -> T {
+        self.update_impl::<true>(io)
+    }
+
+    #[inline(always)]
+    fn update_impl<const FUSED: bool>(&mut self, io: &LoopSignals<T>) -> T {
+        let io = if FUSED {
+            self.guard.clean_bounded(io)
+        } else {
+            self.guard.clean(io)
+        };
         if self.state.fresh {
             self.prime(&io);
             return io.u_applied;
         }
         let u0 = io.u_applied;
-        self.hgo.step(&mut self.state.obs, io.y_um, u0);
+        let cbw = match self.hgo.model() {
+            ObserverModel::Cbw(m) if FUSED => Some(m),
+            _ => None,
+        };
+        match cbw {
+            Some(m) => self.hgo.step_cbw_n1(m, &mut self.state.obs, io.y_um, u0),
+            None => self.hgo.step(&mut self.state.obs, io.y_um, u0),
+        }
         let d_p = self.hgo.d_p();
         let h_hat = self.state.obs.h_hat();
         let v_hat = d_p * u0 - h_hat;
-        let v_d = self.v_d(&io, self.state.obs.x);
+        let v_d = self.v_d::<FUSED>(&io, self.state.obs.x);
         // Target effective input for this sample: what is left of the error to v_d.
         let (dv, du_ff) = if self.cfg.feedforward {
             let e = v_hat - v_d;
-            (self.h_error_left(e) - e, io.u_ff - self.state.u_ff_prev)
+            (
+                self.h_error_left::<FUSED>(e) - e,
+                io.u_ff - self.state.u_ff_prev,
+            )
         } else {
-            let left = self.h_error_left(v_hat - self.state.v_d_prev);
+            let left = self.h_error_left::<FUSED>(v_hat - self.state.v_d_prev);
             (v_d - v_hat + left, T::ZERO)
         };
         let s = &mut self.state;
         s.v_d_prev = v_d;
         s.u_ff_prev = io.u_ff;
         // The model's slope at the hysteresis part of the estimate (inside the loop bound).
-        let den =
-            (d_p - self.hgo.model().slope(s.obs.h, dv.sgn())).clamp_to(self.den_lo, self.den_hi);
+        let slope = match cbw {
+            Some(m) => cbw_n1_slope(m, s.obs.h, dv.sgn()),
+            None => self.hgo.model().slope(s.obs.h, dv.sgn()),
+        };
+        let den = (d_p - slope).clamp_to(self.den_lo, self.den_hi);
         let u = u0 + du_ff + dv / den;
         if u.is_finite() {
             u
@@ -220,7 +268,7 @@ impl<T: Real> Robust<T> {
         let obs = self.hgo.init(io.y_um, io.u_applied);
         self.state = RobustState {
             obs,
-            v_d_prev: self.v_d(io, obs.x),
+            v_d_prev: self.v_d::<false>(io, obs.x),
             u_ff_prev: io.u_ff,
             fresh: false,
         };

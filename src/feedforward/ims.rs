@@ -24,14 +24,16 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     fn max_h_slope(&self) -> T;
     /// Direct inversion of one step, for models whose step has a closed form: the input
     /// `u` whose step from `state` gives `y_model(u) = y_ref` to within `tol`, the model
-    /// output there and the state after the step. `None` (the default): the IMS runs its
-    /// bracketed solve on [`Hysteresis::step`] instead.
+    /// output there and the state after the step. `hint`: the [`Inverted::hint`] of the
+    /// previous solved step (`T::ONE` when there is none), a start for the solve. `None`
+    /// (the default): the IMS runs its bracketed solve on [`Hysteresis::step`] instead.
     #[inline]
     fn invert_step(
         &self,
         _state: &Self::State,
         _y_ref: T,
         _tol: T,
+        _hint: T,
     ) -> Option<Inverted<T, Self::State>> {
         None
     }
@@ -46,6 +48,8 @@ pub struct Inverted<T, S> {
     pub state: S,
     /// Newton iterations used.
     pub iterations: usize,
+    /// What the next step's solve can start from (CBW: `phi(k du)` of this step).
+    pub hint: T,
 }
 
 /// Newton iterations of one piece of [`ImsModel::invert_step`] for CBW at most.
@@ -54,34 +58,38 @@ const CBW_NEWTON_MAX: usize = 8;
 /// Solves `g(du) = d du - c du phi(k du) = r` for `du` on one affine piece of the CBW step
 /// (`dh/du = alpha - k h`, `c = alpha - k h0`, `h1 - h0 = c du phi(k du)`,
 /// `phi(x) = (1 - e^-x)/x`). `g` is strictly increasing (`g' = d - c e^-(k du) >= d - max
-/// dh/du > 0`) with `g(0) = 0`, so Newton from 0 converges. Each iteration evaluates the
-/// exact step at its new point (the state must be exact: the model's contraction per sample
-/// is only `k du`, so per-sample state errors would add up over thousands of samples) and
-/// stops once the residual that point leaves, `|g''| step^2 / 2` to second order, is below
-/// `tol`. At 100 kHz in f32 one iteration (one `exp_m1`) is all it takes. Returns
-/// `(du, h1 - h0, iterations)`, `None` if it did not converge.
-#[inline]
-fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T) -> Option<(T, T, usize)> {
-    let mut du = T::ZERO;
-    let mut dh = T::ZERO;
-    let mut e = T::ONE; // e^-(k du)
-    for i in 1..=CBW_NEWTON_MAX {
-        let step = (d * du - dh - r) / (d - c * e);
-        du -= step;
+/// dh/du > 0`) and convex or concave on the piece (`g''` has the sign of `c k`), so Newton
+/// converges from any start. The first step is `du = r / (d - c phi_hint)`: the secant
+/// slope of `g` over the step if `phi_hint = phi(k du)` (the previous sample's, which
+/// differs from this one's by the change of `du` between samples), the Newton step from 0
+/// if `phi_hint = 1`. Each iteration evaluates the exact step at its point (the state must
+/// be exact: the model's contraction per sample is only `k du`, so per-sample state errors
+/// would add up over thousands of samples) and stops once the residual there,
+/// `|g(du) - r|`, is at most `tol`; otherwise a Newton step. At 100 kHz in f32 the first
+/// point is all it takes (one `exp_m1`). Returns `(du, h1 - h0, iterations, phi(k du))`,
+/// `None` if it did not converge.
+#[inline(always)]
+fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T, T, usize, T)> {
+    let slope = d - c * phi_hint;
+    // d - c > 0 always (the IMS checks d against the largest slope); a wild hint could
+    // leave the secant without that.
+    let slope = if slope > T::ZERO { slope } else { d - c };
+    let mut du = r / slope;
+    // An exclusive range: `1..=MAX` costs a flag test per iteration on thumbv7.
+    for i in 1..CBW_NEWTON_MAX + 1 {
         let x = k * du;
         let em = (-x).exp_m1(); // e^-x - 1
         let phi = if x == T::ZERO { T::ONE } else { -em / x };
-        dh = c * du * phi;
-        // g'' = c k e^-(k du): what the step leaves of the residual, to second order.
-        let left = (c * k * e).abs() * step * step * T::HALF;
-        e = T::ONE + em;
-        if !(left > tol) {
+        let dh = c * du * phi;
+        let res = d * du - dh - r;
+        if !(res.abs() > tol) {
             return if du.is_finite() && dh.is_finite() {
-                Some((du, dh, i))
+                Some((du, dh, i, phi))
             } else {
                 None
             };
         }
+        du -= res / (d - c * (T::ONE + em));
     }
     None
 }
@@ -101,59 +109,107 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
     /// `h` crosses zero inside the step, the first piece ends exactly where `h = 0` and a
     /// second piece finishes the step, as in the model's own closed-form step.
     #[inline]
-    fn invert_step(&self, state: &BwState<T>, y_ref: T, tol: T) -> Option<Inverted<T, BwState<T>>> {
+    fn invert_step(
+        &self,
+        state: &BwState<T>,
+        y_ref: T,
+        tol: T,
+        hint: T,
+    ) -> Option<Inverted<T, BwState<T>>> {
         if self.n() != T::ONE {
             return None;
         }
-        let (d, alpha, beta, gamma) = (self.d(), self.alpha(), self.beta(), self.gamma());
-        let h0 = state.h;
-        let r = y_ref - (d * state.u - h0);
-        // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) as selects, not `sgn`
-        // products: this runs every sample.
-        let up = r > T::ZERO;
-        if !(up || r < T::ZERO) {
-            // Already there (or NaN: the caller holds the output).
-            return if r == T::ZERO {
-                Some(Inverted {
-                    u: state.u,
-                    y: y_ref,
-                    state: *state,
-                    iterations: 0,
-                })
-            } else {
-                None
-            };
+        invert_cbw_n1(self, state, y_ref, tol, hint)
+    }
+}
+
+/// [`ImsModel::invert_step`] of CBW for `n = 1` (the caller checks `n`).
+#[inline(always)]
+fn invert_cbw_n1<T: Real>(
+    m: &Cbw<T>,
+    state: &BwState<T>,
+    y_ref: T,
+    tol: T,
+    hint: T,
+) -> Option<Inverted<T, BwState<T>>> {
+    let (d, alpha, beta, gamma) = (m.d(), m.alpha(), m.beta(), m.gamma());
+    let h0 = state.h;
+    let r = y_ref - (d * state.u - h0);
+    // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) as selects, not `sgn`
+    // products: this runs every sample.
+    let up = r > T::ZERO;
+    if !(up || r < T::ZERO) {
+        // Already there (or NaN: the caller holds the output).
+        return if r == T::ZERO {
+            Some(Inverted {
+                u: state.u,
+                y: y_ref,
+                state: *state,
+                iterations: 0,
+                hint,
+            })
+        } else {
+            None
+        };
+    }
+    let s = if up { T::ONE } else { -T::ONE };
+    let beta_s = if up { beta } else { -beta };
+    let h_up = if h0 == T::ZERO { up } else { h0 > T::ZERO };
+    let k = beta_s + if h_up { gamma } else { -gamma };
+    let (mut du, mut dh, mut it, mut phi) = cbw_piece(d, alpha - k * h0, k, r, tol, hint)?;
+    if h0 * (h0 + dh) < T::ZERO {
+        // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
+        // moving in direction s, where sgn(h) = s.
+        let du0 = if k == T::ZERO {
+            -h0 / alpha
+        } else {
+            (-k * h0 / alpha).ln_1p() / k
+        };
+        let r2 = r - (d * du0 + h0);
+        if !(du0.is_finite() && du0.sgn() != -s && r2.sgn() != -s) {
+            return None;
         }
-        let s = if up { T::ONE } else { -T::ONE };
-        let beta_s = if up { beta } else { -beta };
-        let h_up = if h0 == T::ZERO { up } else { h0 > T::ZERO };
-        let k = beta_s + if h_up { gamma } else { -gamma };
-        let (mut du, mut dh, mut it) = cbw_piece(d, alpha - k * h0, k, r, tol)?;
-        if h0 * (h0 + dh) < T::ZERO {
-            // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
-            // moving in direction s, where sgn(h) = s.
-            let du0 = if k == T::ZERO {
-                -h0 / alpha
-            } else {
-                (-k * h0 / alpha).ln_1p() / k
-            };
-            let r2 = r - (d * du0 + h0);
-            if !(du0.is_finite() && du0.sgn() != -s && r2.sgn() != -s) {
-                return None;
+        let (du2, dh2, it2, phi2) = cbw_piece(d, alpha, (beta + gamma) * s, r2, tol, T::ONE)?;
+        du = du0 + du2;
+        dh = dh2 - h0;
+        it += it2;
+        phi = phi2;
+    }
+    let u = state.u + du;
+    let h = h0 + dh;
+    Some(Inverted {
+        u,
+        y: d * u - h,
+        state: BwState { u, h },
+        iterations: it,
+        hint: phi,
+    })
+}
+
+impl<T: Real> Ims<T, Cbw<T>> {
+    /// The plain case the pipeline's fused step runs: solved loop, `n = 1`, no quadratic
+    /// term, no creep.
+    pub(crate) fn is_plain_cbw_n1(&self) -> bool {
+        self.closure == ImsLoop::Solved
+            && self.model.n() == T::ONE
+            && self.quad == T::ZERO
+            && self.creep.is_none()
+    }
+
+    /// [`Ims::compensate`] for [`Ims::is_plain_cbw_n1`] (same arithmetic, the checks of the
+    /// other cases left out).
+    #[inline(always)]
+    pub(crate) fn compensate_plain_cbw_n1(&mut self, y_ref_um: T) -> T {
+        if !y_ref_um.is_finite() {
+            return self.u;
+        }
+        let tol = self.tol(y_ref_um);
+        if let Some(inv) = invert_cbw_n1(&self.model, &self.state, y_ref_um, tol, self.step_hint) {
+            if let Some(u) = self.take_inverted(inv) {
+                return u;
             }
-            let (du2, dh2, it2) = cbw_piece(d, alpha, (beta + gamma) * s, r2, tol)?;
-            du = du0 + du2;
-            dh = dh2 - h0;
-            it += it2;
         }
-        let u = state.u + du;
-        let h = h0 + dh;
-        Some(Inverted {
-            u,
-            y: d * u - h,
-            state: BwState { u, h },
-            iterations: it,
-        })
+        self.solve_bracketed(y_ref_um, tol)
     }
 }
 
@@ -184,6 +240,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     max_step_volts: T,
     /// Secant slope of the last solved step (first trial of the next solve).
     slope_hint: T,
+    /// [`Inverted::hint`] of the last direct inversion (`T::ONE`: none).
+    step_hint: T,
     state: M::State,
     u: T,
     y: T,
@@ -238,6 +296,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             creep: None,
             max_step_volts: T::MAX,
             slope_hint,
+            step_hint: T::ONE,
             state,
             u: u0,
             y,
@@ -286,6 +345,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.u
     }
 
+    /// The voltage range (V) every output lies in.
+    pub fn volts_range(&self) -> (T, T) {
+        (self.volts_min, self.volts_max)
+    }
+
     pub fn model(&self) -> &M {
         &self.model
     }
@@ -311,53 +375,91 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             Some(c) => c.static_target(y_ref_um),
             None => y_ref_um,
         };
-        let u = match self.closure {
+        match self.closure {
             ImsLoop::Solved => {
-                let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
-                let tol = T::from_f64(8.0) * T::EPSILON * scale;
+                let tol = self.tol(y_ref_um);
                 if self.quad == T::ZERO {
-                    if let Some(inv) = self.model.invert_step(&self.state, y_ref_um, tol) {
-                        let (lo, hi) = (
-                            self.volts_min.max(self.u - self.max_step_volts),
-                            self.volts_max.min(self.u + self.max_step_volts),
-                        );
-                        if inv.u >= lo && inv.u <= hi {
-                            // Inside the limits: the solve's own step is the model's.
-                            self.evals = inv.iterations;
-                            self.state = inv.state;
-                            return self.commit(inv.u, inv.y);
+                    if let Some(inv) =
+                        self.model
+                            .invert_step(&self.state, y_ref_um, tol, self.step_hint)
+                    {
+                        if let Some(u) = self.take_inverted(inv) {
+                            return u;
                         }
                     }
                 }
-                let (model, state, dt, quad) = (&self.model, self.state, self.dt_s, self.quad);
-                let f = |u: T| {
-                    let mut s = state;
-                    model.step(&mut s, u, dt) + quad * u * u - y_ref_um
-                };
-                // f at the held voltage: not `self.y - y_ref` for models with rate terms.
-                let f0 = f(self.u);
-                let root =
-                    solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
-                self.evals = root.evals + 1;
-                let secant = (root.fx - f0) / (root.x - self.u);
-                if secant.is_finite() && secant > self.min_slope {
-                    self.slope_hint = secant;
-                }
-                root.x
+                self.solve_bracketed(y_ref_um, tol)
             }
             ImsLoop::Delayed => {
                 self.evals = 0;
                 let d = self.model.d();
                 let h_prev = d * self.u - self.y;
-                (y_ref_um + h_prev) / d
+                self.finish((y_ref_um + h_prev) / d)
             }
+        }
+    }
+
+    /// Tolerance of the solve on `y` (um) for the reference `y_ref_um`.
+    #[inline(always)]
+    fn tol(&self, y_ref_um: T) -> T {
+        let scale = y_ref_um.abs() + self.y.abs() + T::ONE;
+        T::from_f64(8.0) * T::EPSILON * scale
+    }
+
+    /// Takes a direct inversion if it lies inside the range and slew limits (the solve's own
+    /// step is then the model's); `None` leaves the state untouched.
+    #[inline(always)]
+    fn take_inverted(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
+        // Without a slew limit the range alone (`u -+ T::MAX` lies beyond it).
+        let (lo, hi) = if self.max_step_volts == T::MAX {
+            (self.volts_min, self.volts_max)
+        } else {
+            (
+                self.volts_min.max(self.u - self.max_step_volts),
+                self.volts_max.min(self.u + self.max_step_volts),
+            )
         };
+        if inv.u >= lo && inv.u <= hi {
+            self.evals = inv.iterations;
+            self.step_hint = inv.hint;
+            self.state = inv.state;
+            Some(self.commit(inv.u, inv.y))
+        } else {
+            None
+        }
+    }
+
+    /// The bracketed solve on the model's step (models without a direct inversion, or a
+    /// solution outside the limits), then the limits.
+    #[inline(never)]
+    fn solve_bracketed(&mut self, y_ref_um: T, tol: T) -> T {
+        let (model, state, dt, quad) = (&self.model, self.state, self.dt_s, self.quad);
+        let f = |u: T| {
+            let mut s = state;
+            model.step(&mut s, u, dt) + quad * u * u - y_ref_um
+        };
+        // f at the held voltage: not `self.y - y_ref` for models with rate terms.
+        let f0 = f(self.u);
+        let root = solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
+        self.evals = root.evals + 1;
+        let secant = (root.fx - f0) / (root.x - self.u);
+        if secant.is_finite() && secant > self.min_slope {
+            self.slope_hint = secant;
+        }
+        self.finish(root.x)
+    }
+
+    /// Limits `u` (range, slew; NaN holds the previous voltage), steps the model there and
+    /// takes it.
+    #[inline]
+    fn finish(&mut self, u: T) -> T {
         // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
         let u = if u.is_finite() { u } else { self.u };
         let u = u
             .clamp_to(self.volts_min, self.volts_max)
             .clamp_to(self.u - self.max_step_volts, self.u + self.max_step_volts);
         let y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
+        self.step_hint = T::ONE;
         self.commit(u, y)
     }
 
@@ -385,6 +487,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.u = u0;
         self.evals = 0;
+        self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
             c.settle(self.y);
         }
@@ -397,6 +500,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.state = self.model.init(u0);
         self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.u = u0;
+        self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
             c.settle(self.y);
         }
@@ -520,7 +624,7 @@ mod invert_step_tests {
             let t = k as f64 * 1e-4;
             let y_ref = 8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())
                 + 0.5 * (2.0 * core::f64::consts::PI * 130.0 * t).sin();
-            let inv = m.invert_step(&st, y_ref, 1e-12).expect("converges");
+            let inv = m.invert_step(&st, y_ref, 1e-12, 1.0).expect("converges");
             let mut s2 = st;
             let y = m.step(&mut s2, inv.u, 1e-4);
             worst = worst.max((y - y_ref).abs()).max((s2.h - inv.state.h).abs());
@@ -534,7 +638,7 @@ mod invert_step_tests {
             let t = k as f64 * 1e-4;
             let y_ref = (8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())) as f32;
             let inv = m
-                .invert_step(&st, y_ref, 8.0 * f32::EPSILON * 17.0)
+                .invert_step(&st, y_ref, 8.0 * f32::EPSILON * 17.0, 1.0)
                 .expect("converges");
             let mut s2 = st;
             let y = m.step(&mut s2, inv.u, 1e-4);

@@ -406,6 +406,24 @@ pub mod bench {
 
     pub const ROWS: usize = LAWS.len() * FFS.len();
 
+    /// Profiling build (`PIEZO_BENCH_ONLY="<law> <ff>"` at compile time): the bench runs that
+    /// row only, brackets its timed loop with calls to [`mark`] and exits QEMU after it, so
+    /// a `-singlestep -d exec,nochain` log holds one row (see the README's profile command).
+    const ONLY: Option<&str> = option_env!("PIEZO_BENCH_ONLY");
+
+    /// Marks the start (1) and end (2) of a timed loop in an execution log.
+    #[inline(never)]
+    pub fn mark(k: u32) {
+        black_box(k);
+    }
+
+    fn selected(law: &str, ff: &str) -> bool {
+        match ONLY {
+            None => true,
+            Some(o) => o.split_once(' ') == Some((law, ff)),
+        }
+    }
+
     #[derive(Clone, Copy, Debug, Default)]
     pub struct Row {
         pub law: &'static str,
@@ -502,6 +520,10 @@ pub mod bench {
                 let Some(row) = slot.next() else { break };
                 row.law = law;
                 row.ff = ff;
+                if !selected(law, ff) {
+                    row.unsupported = true;
+                    continue;
+                }
                 let Some(mut ctl) = configured(law, ff) else {
                     row.unsupported = true;
                     continue;
@@ -525,11 +547,13 @@ pub mod bench {
                 let Some(mut ctl) = configured(law, ff) else {
                     continue;
                 };
+                mark(1);
                 let t0 = SYST::get_current();
                 for c in codes.iter() {
                     black_box(ctl.lp.step(black_box([*c; AXES])));
                 }
                 let dt = ticks(t0, SYST::get_current()).saturating_sub(overhead_ticks);
+                mark(2);
                 row.instr_x100 =
                     ((dt as u64 * instr_per_tick_x1000 as u64) / (10 * BENCH_STEPS as u64)) as u32;
                 row.max_instr = ((worst as u64 * instr_per_tick_x1000 as u64) / 1000) as u32;
@@ -632,6 +656,9 @@ mod app {
         defmt::info!("qemu board: bench");
         let table = bench::run(&mut syst);
         bench::print(&table, true);
+        if option_env!("PIEZO_BENCH_ONLY").is_some() {
+            semihosting::process::exit(0);
+        }
 
         syst.set_clock_source(SystClkSource::Core);
         syst.set_reload(SYSTICK_HZ / SAMPLE_HZ - 1);

@@ -1,0 +1,147 @@
+//! The fused step of the firmware's main mode: closed loop with the HGO + robust law
+//! (exponential convergence, CBW observer with `n = 1`, no measurement filter) on the IMS-CBW
+//! feedforward (solved loop), one axis.
+//!
+//! It does what [`Pipeline::step_generic`] does in that configuration, with the same
+//! arithmetic in the same order (so the same results, bit for bit), in one straight
+//! function: no dispatch over modes, compensators and laws per sample, and no guard that
+//! cannot fire there. Which guards those are is decided once per configuration
+//! ([`Pipeline::fusable`]): a valid ADC code scales into the input guard's bound, the
+//! applied voltage (a code of the output range) and the IMS output (inside its voltage
+//! range) too, so the law's input guard only has to hold the setpoint. The guards that
+//! matter stay: an ADC code outside the sensor window, a fault, a law that has not primed
+//! its observer yet or a non-finite command leave the sample (or its end) to the generic
+//! path's safe-state handling, and the final range and slew limits are the same code.
+
+use super::{Fault, Pipeline};
+use crate::feedback::guard::INPUT_BOUND;
+use crate::feedback::Feedback;
+use crate::feedforward::{Feedforward, MultiFeedforward};
+use crate::real::Real;
+use crate::signals::LoopSignals;
+
+impl<T: Real, const N: usize> Pipeline<T, N> {
+    /// The configuration runs the fused step (see the module documentation).
+    pub(super) fn fusable(&self) -> bool {
+        let (
+            1,
+            super::Mode::ClosedLoop,
+            MultiFeedforward::PerAxis(ffs),
+            Some(Feedback::Robust(law)),
+            Some(axis),
+            Some(out),
+        ) = (
+            N,
+            self.state.mode,
+            &self.feedforward,
+            self.feedback.first(),
+            self.config.axes.first(),
+            self.output.first(),
+        )
+        else {
+            return false;
+        };
+        let Some(Feedforward::ImsCbw(ims)) = ffs.first() else {
+            return false;
+        };
+        // Strictly inside the guard's bound (as the number type rounds it), with a margin
+        // for the rounding of the scaling itself.
+        let bound = T::from_f64(INPUT_BOUND).to_f64() * 0.999;
+        let inside = |x: f64| x.abs() < bound;
+        let sensor = |code: i32| {
+            axis.sensor.offset_um.to_f64() + axis.sensor.um_per_code.to_f64() * code as f64
+        };
+        let (lo, hi) = out.code_range();
+        let volts = |code: i32| {
+            out.dac.volts_at_zero.to_f64() + out.dac.volts_per_code.to_f64() * code as f64
+        };
+        let (ff_lo, ff_hi) = ims.volts_range();
+        law.fusable()
+            && ims.is_plain_cbw_n1()
+            && inside(sensor(axis.sensor.code_min))
+            && inside(sensor(axis.sensor.code_max))
+            && inside(volts(lo))
+            && inside(volts(hi))
+            && inside(ff_lo.to_f64())
+            && inside(ff_hi.to_f64())
+    }
+
+    /// One sample on the fused path; `None` (nothing changed) when it does not apply to
+    /// this sample: the generic step runs it instead.
+    #[inline(always)]
+    pub(super) fn step_fused(&mut self, adc: [i32; N]) -> Option<[i32; N]> {
+        let Self {
+            config,
+            output,
+            reference,
+            feedforward,
+            feedback,
+            state: st,
+            ..
+        } = self;
+        let (
+            Some(&adc),
+            Some(axis),
+            Some(out),
+            Some(gen),
+            MultiFeedforward::PerAxis(ffs),
+            Some(Feedback::Robust(law)),
+        ) = (
+            adc.first(),
+            config.axes.first(),
+            output.first(),
+            reference.first_mut(),
+            feedforward,
+            feedback.first_mut(),
+        )
+        else {
+            return None;
+        };
+        let Some(Feedforward::ImsCbw(ims)) = ffs.first_mut() else {
+            return None;
+        };
+        // A code outside the window, or an observer still to prime: the generic path.
+        let y = axis.sensor.position_um(adc)?;
+        if law.is_fresh() {
+            return None;
+        }
+        let (Some(y_tr), Some(sp_tr), Some(u_ff_tr), Some(u_cmd_tr), Some(code), Some(u_applied)) = (
+            st.trace.y_um.first_mut(),
+            st.trace.setpoint.first_mut(),
+            st.trace.u_ff.first_mut(),
+            st.trace.u_cmd.first_mut(),
+            st.code.first_mut(),
+            st.u_applied.first_mut(),
+        ) else {
+            return None;
+        };
+        st.counters.samples = st.counters.samples.saturating_add(1);
+        *y_tr = y;
+        let sp = gen.next_setpoint();
+        *sp_tr = sp;
+        let u_ff = ims.compensate_plain_cbw_n1(sp.y_um);
+        *u_ff_tr = u_ff;
+        let mut u = law.update_fused(&LoopSignals {
+            setpoint: sp,
+            y_um: y,
+            u_ff,
+            u_applied: *u_applied,
+        });
+        // The law never returns a non-finite command; should it, the safe state as in
+        // the generic step.
+        let ok = u.is_finite();
+        if !ok {
+            st.fault = Some(Fault::NonFiniteCommand { axis: 0 });
+            st.counters.nonfinite_commands = st.counters.nonfinite_commands.saturating_add(1);
+            u = axis.safe_volts;
+        }
+        *u_cmd_tr = u;
+        let l = out.limit(u, *code);
+        *code = l.code;
+        *u_applied = out.dac.volts(l.code);
+        if l.saturated && ok {
+            st.counters.saturated_samples = st.counters.saturated_samples.saturating_add(1);
+        }
+        Some(st.code)
+    }
+}
