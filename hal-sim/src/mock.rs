@@ -24,13 +24,16 @@ use std::rc::Rc;
 pub struct MockClock(Rc<Cell<u64>>);
 
 impl MockClock {
+    #[inline]
     pub fn now_ns(&self) -> u64 {
         self.0.get()
     }
+    #[inline]
     pub fn advance_ns(&self, ns: u64) {
         self.0.set(self.0.get().saturating_add(ns));
     }
     /// Moves the clock to `ns` if that is later.
+    #[inline]
     pub fn set_ns(&self, ns: u64) {
         if ns > self.0.get() {
             self.0.set(ns);
@@ -43,6 +46,7 @@ impl MockClock {
 pub struct MockDelay(pub MockClock);
 
 impl DelayNs for MockDelay {
+    #[inline]
     fn delay_ns(&mut self, ns: u32) {
         self.0.advance_ns(ns as u64);
     }
@@ -103,12 +107,20 @@ struct AdcChip {
     codes_per_volt: f64,
     clock: MockClock,
     rng: Rng,
+    /// Code range, for [`Self::quantise`].
+    code_lo: i32,
+    code_lo_f: f64,
+    /// `hi - lo + 0.5`
+    code_top_f: f64,
     input_volts: f64,
     reg: u8,
     cnv_high: bool,
     converting: i32,
     ready_at_ns: u64,
     result: i32,
+    /// The frames of `converting` and `result` (encoded once per conversion, not per read).
+    converting_frame: [u8; 3],
+    result_frame: [u8; 3],
     stuck: Option<i32>,
     fail_next: u32,
     stats: AdcStats,
@@ -132,15 +144,29 @@ impl AdcChip {
         let now = self.clock.now_ns();
         if !self.cnv_high && self.ready_at_ns <= now {
             self.result = self.converting;
+            self.result_frame = self.converting_frame;
         } else {
             self.stats.early_reads += 1;
         }
-        ad4000::encode(&self.spec.config, self.result)
+        self.result_frame
+    }
+
+    /// CNV rising edge: samples the input and starts a conversion.
+    #[inline]
+    fn start_conversion(&mut self) {
+        let code = match self.stuck {
+            Some(c) => c,
+            None => self.quantise(self.input_volts),
+        };
+        self.converting = code;
+        self.converting_frame = ad4000::encode(&self.spec.config, code);
+        self.ready_at_ns = self.clock.now_ns() + self.spec.t_conv_ns;
+        self.stats.conversions += 1;
     }
 
     #[inline]
     fn quantise(&mut self, volts: f64) -> i32 {
-        let (lo, hi) = self.spec.config.code_range();
+        let lo = self.code_lo_f;
         let noise = if self.spec.noise_lsb > 0.0 {
             self.spec.noise_lsb * self.rng.gauss()
         } else {
@@ -148,11 +174,13 @@ impl AdcChip {
         };
         let x = volts * self.codes_per_volt + self.spec.offset_lsb + noise;
         if x.is_nan() {
-            return lo;
+            return self.code_lo;
         }
-        // Round half up without a libm call: shift to positive, truncate.
-        let x = x.clamp(lo as f64 - 1.0, hi as f64 + 1.0) - lo as f64 + 0.5;
-        ((x as i64) + lo as i64).clamp(lo as i64, hi as i64) as i32
+        // Round half up without a libm call: shift to positive, truncate (the shifted value
+        // is kept in `0 ..= hi - lo + 0.5`, so truncation is the floor and the code is in
+        // range).
+        let x = (x - lo + 0.5).max(0.0).min(self.code_top_f);
+        x as i32 + self.code_lo
     }
 }
 
@@ -163,8 +191,15 @@ pub struct MockAdc(Rc<RefCell<AdcChip>>);
 impl MockAdc {
     pub fn new(spec: AdcSpec, clock: MockClock) -> Self {
         let rng = Rng::new(spec.seed);
+        let (lo, hi) = spec.config.code_range();
+        let zero = ad4000::encode(&spec.config, 0);
         Self(Rc::new(RefCell::new(AdcChip {
             codes_per_volt: AdcChip::codes_per_volt(&spec),
+            code_lo: lo,
+            code_lo_f: lo as f64,
+            code_top_f: (hi - lo) as f64 + 0.5,
+            converting_frame: zero,
+            result_frame: zero,
             spec,
             clock,
             rng,
@@ -225,20 +260,30 @@ impl ErrorType for MockAdcSpi {
 }
 
 impl SpiDevice for MockAdcSpi {
+    #[inline]
     fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), MockSpiError> {
         let mut chip = self.0.borrow_mut();
+        // The loop's one read frame (SDI idle high): the conversion result. Inlined into
+        // the driver's read; everything else takes the general path.
+        if let ([Operation::Read(r)], 0) = (&mut *ops, chip.fail_next) {
+            if let Ok(r) = <&mut [u8; 3]>::try_from(&mut **r) {
+                *r = chip.conversion_frame();
+                return Ok(());
+            }
+        }
+        chip.transaction(ops)
+    }
+}
+
+impl AdcChip {
+    /// Any SPI transaction: register access or conversion read, injected failures.
+    #[inline(never)]
+    fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), MockSpiError> {
+        let chip = self;
         if chip.fail_next > 0 {
             chip.fail_next -= 1;
             chip.stats.failed_transactions += 1;
             return Err(MockSpiError);
-        }
-        // The loop's one read frame (SDI idle high): the conversion result.
-        if let [Operation::Read(r)] = ops {
-            let out = chip.conversion_frame();
-            r.iter_mut()
-                .enumerate()
-                .for_each(|(k, b)| *b = out.get(k).copied().unwrap_or(0));
-            return Ok(());
         }
         // The first MOSI byte selects a register access; otherwise the frame shifts out
         // the conversion result (SDI idles high).
@@ -294,21 +339,16 @@ impl PinErrorType for MockCnv {
 }
 
 impl OutputPin for MockCnv {
+    #[inline]
     fn set_high(&mut self) -> Result<(), Infallible> {
         let mut chip = self.0.borrow_mut();
         if !chip.cnv_high {
-            let v = chip.input_volts;
-            let code = match chip.stuck {
-                Some(c) => c,
-                None => chip.quantise(v),
-            };
-            chip.converting = code;
-            chip.ready_at_ns = chip.clock.now_ns() + chip.spec.t_conv_ns;
-            chip.stats.conversions += 1;
+            chip.start_conversion();
         }
         chip.cnv_high = true;
         Ok(())
     }
+    #[inline]
     fn set_low(&mut self) -> Result<(), Infallible> {
         self.0.borrow_mut().cnv_high = false;
         Ok(())
@@ -364,6 +404,7 @@ struct DacChip {
 }
 
 impl DacChip {
+    #[inline]
     fn update_output(&mut self) {
         self.stats.updates += 1;
         self.volts = if self.ctrl & (CTRL_OPGND | CTRL_DACTRI) != 0 {
@@ -388,6 +429,7 @@ impl DacChip {
         self.update_output();
     }
 
+    #[inline]
     fn frame(&mut self, word: u32) {
         let reg = (word >> 20) & 0b111;
         let data = word & DATA_MASK;
@@ -489,8 +531,25 @@ impl ErrorType for MockDacSpi {
 }
 
 impl SpiDevice for MockDacSpi {
+    #[inline]
     fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
         let mut chip = self.0.borrow_mut();
+        // The loop's one write frame, inlined into the driver; the rest: general path.
+        if let [Operation::Write([b0, b1, b2])] = ops {
+            chip.stats.frames += 1;
+            chip.readback = None; // shifted out on MISO, unread
+            chip.frame(u32::from_be_bytes([0, *b0, *b1, *b2]));
+            return Ok(());
+        }
+        chip.transaction(ops)
+    }
+}
+
+impl DacChip {
+    /// Any SPI frame (one transaction is one SYNC-low frame).
+    #[inline(never)]
+    fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
+        let chip = self;
         chip.stats.frames += 1;
         let rb = chip.readback.take().unwrap_or(0).to_be_bytes();
         let out = [rb[1], rb[2], rb[3]];
@@ -542,10 +601,12 @@ impl PinErrorType for MockLdac {
 }
 
 impl OutputPin for MockLdac {
+    #[inline]
     fn set_high(&mut self) -> Result<(), Infallible> {
         self.0.borrow_mut().ldac_low = false;
         Ok(())
     }
+    #[inline]
     fn set_low(&mut self) -> Result<(), Infallible> {
         let mut chip = self.0.borrow_mut();
         if !chip.ldac_low {

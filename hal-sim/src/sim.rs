@@ -261,10 +261,12 @@ pub struct Bench<const N: usize> {
     sensor_volts_per_um: f64,
     sensor_center_um: f64,
     period_ns: f64,
+    /// The loop period in whole ns, if it is one (the clock update without floats).
+    period_ns_int: Option<u64>,
     k: u64,
-    dac_volts: Vec<f64>,
+    dac_volts: [f64; N],
     /// The code each DAC holds (the last successful write).
-    dac_codes: Vec<i32>,
+    dac_codes: [i32; N],
     /// Failed converter transactions (the pipeline sees an invalid code).
     pub bus_errors: u64,
 }
@@ -312,9 +314,11 @@ impl<const N: usize> Bench<N> {
             sensor_volts_per_um: sc.converters.sensor_volts_per_um,
             sensor_center_um: sc.converters.sensor_center_um,
             period_ns: 1e9 / sc.run.loop_hz,
+            period_ns_int: Some((1e9 / sc.run.loop_hz) as u64)
+                .filter(|&p| p as f64 == 1e9 / sc.run.loop_hz),
             k: 0,
-            dac_volts: vec![0.0; N],
-            dac_codes: pipeline_codes.to_vec(),
+            dac_volts: [0.0; N],
+            dac_codes: pipeline_codes,
             bus_errors: 0,
         })
     }
@@ -331,8 +335,9 @@ impl<const N: usize> Bench<N> {
     }
 
     /// One loop sample with faults injected by `inject` between the converters, the
-    /// pipeline and the stage (the fault campaign's hook).
-    #[inline]
+    /// pipeline and the stage (the fault campaign's hook). Inlined into the caller's loop,
+    /// which reads the [`Sample`] from registers.
+    #[inline(always)]
     pub fn step_with(&mut self, inject: &mut impl Inject<N>) -> Sample<N> {
         let t_s = self.stage.time_s();
         let k = self.k;
@@ -352,8 +357,13 @@ impl<const N: usize> Bench<N> {
         // A skipped control step (overrun, dropped sample): the DACs hold their codes.
         if !inject.skip_step(k) {
             let out = self.pipeline.step(codes);
-            for (i, (dac, code)) in self.dacs.iter_mut().zip(out).enumerate() {
-                let held = &mut self.dac_codes[i];
+            for (i, ((dac, code), held)) in self
+                .dacs
+                .iter_mut()
+                .zip(out)
+                .zip(self.dac_codes.iter_mut())
+                .enumerate()
+            {
                 if inject.dac_write_fails(k, i) {
                     self.pipeline.dac_write_failed(i, *held);
                 } else {
@@ -368,7 +378,10 @@ impl<const N: usize> Bench<N> {
         }
         self.stage.advance(&self.dac_volts);
         self.k += 1;
-        self.clock.set_ns((self.k as f64 * self.period_ns) as u64);
+        self.clock.set_ns(match self.period_ns_int {
+            Some(p) => self.k.saturating_mul(p),
+            None => (self.k as f64 * self.period_ns) as u64,
+        });
         let st = self.pipeline.state();
         Sample {
             t_s,

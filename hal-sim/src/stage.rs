@@ -58,7 +58,12 @@ impl Rng {
 /// The static (rate-independent) part of one axis.
 #[derive(Debug, Clone)]
 enum Static {
-    Linear { d: f64, u: f64 },
+    Linear {
+        d: f64,
+        u: f64,
+    },
+    /// CBW with `n = 1` (the default): its exact step, inlined.
+    Cbw1(Cbw<f64>, BwState<f64>),
     Cbw(Cbw<f64>, BwState<f64>),
     Gbw(Gbw<f64>, BwState<f64>),
     Dahl(Dahl<f64>, BwState<f64>),
@@ -72,6 +77,7 @@ impl Static {
                 *last = u;
                 *d * u
             }
+            Static::Cbw1(m, s) => m.step_n1(s, u),
             Static::Cbw(m, s) => m.step(s, u, dt),
             Static::Gbw(m, s) => m.step(s, u, dt),
             Static::Dahl(m, s) => m.step(s, u, dt),
@@ -123,25 +129,70 @@ impl Amp {
 }
 
 /// One creep element's exact update over an internal step `h` for a linear input
-/// (ramp-invariant discretisation of `c' = (g*y - c)/tau`).
-#[derive(Debug, Clone, Copy)]
-struct CreepFh {
-    e: f64,
-    b0: f64,
-    b1: f64,
+/// (ramp-invariant discretisation of `c' = (g*y - c)/tau`): `[e, b0, b1]` of
+/// `c' = e*c + b0*y0 + b1*y1`.
+fn creep_fh(gain: f64, tau: f64, h: f64) -> [f64; 3] {
+    // c(h) = e*c0 + g*[(1 - r)*y1 + (r - e)*y0], e = exp(-h/tau), r = tau/h*(1 - e)
+    let one_minus_e = -(-h / tau).exp_m1();
+    let e = 1.0 - one_minus_e;
+    let r = tau / h * one_minus_e;
+    [e, gain * (r - e), gain * (1.0 - r)]
 }
 
-impl CreepFh {
-    fn new(gain: f64, tau: f64, h: f64) -> Self {
-        // c(h) = e*c0 + g*[(1 - r)*y1 + (r - e)*y0], e = exp(-h/tau), r = tau/h*(1 - e)
-        let one_minus_e = -(-h / tau).exp_m1();
-        let e = 1.0 - one_minus_e;
-        let r = tau / h * one_minus_e;
-        Self {
-            e,
-            b0: gain * (r - e),
-            b1: gain * (1.0 - r),
+/// Creep elements per block: the update runs on fixed-size blocks (vectorised); unused
+/// places are zero elements (`e = b0 = b1 = 0`, so their state stays 0 and adds 0).
+const CREEP_LANES: usize = 4;
+
+/// The creep elements of one axis, in blocks of [`CREEP_LANES`].
+#[derive(Debug, Clone)]
+struct Creep {
+    /// Per block: `e`, `b0`, `b1` of each element.
+    fh: Vec<[[f64; CREEP_LANES]; 3]>,
+    /// Per block: the element states.
+    c: Vec<[f64; CREEP_LANES]>,
+}
+
+impl Creep {
+    fn new(gains: &[f64], taus: &[f64], h: f64) -> Self {
+        let n = gains.len().min(taus.len());
+        let blocks = n.div_ceil(CREEP_LANES);
+        let mut fh = vec![[[0.0; CREEP_LANES]; 3]; blocks];
+        for (i, (&g, &t)) in gains.iter().zip(taus).enumerate() {
+            let k = creep_fh(g, t, h);
+            for (row, kk) in fh[i / CREEP_LANES].iter_mut().zip(k) {
+                row[i % CREEP_LANES] = kk;
+            }
         }
+        Self {
+            fh,
+            c: vec![[0.0; CREEP_LANES]; blocks],
+        }
+    }
+
+    /// One step for an input moving linearly from `y0` to `y`; returns `y + sum c`
+    /// (summed in element order).
+    #[inline(always)]
+    fn step(&mut self, y0: f64, y: f64) -> f64 {
+        let mut yc = y;
+        for (c, [e, b0, b1]) in self.c.iter_mut().zip(&self.fh) {
+            for j in 0..CREEP_LANES {
+                c[j] = e[j] * c[j] + b0[j] * y0 + b1[j] * y;
+            }
+            for cj in c.iter() {
+                yc += *cj;
+            }
+        }
+        yc
+    }
+
+    /// At rest for the constant input `y`; returns `y + sum c`.
+    fn settle(&mut self, gains: &[f64], y: f64) -> f64 {
+        for (i, g) in gains.iter().enumerate() {
+            if let Some(c) = self.c.get_mut(i / CREEP_LANES) {
+                c[i % CREEP_LANES] = g * y;
+            }
+        }
+        y + gains.iter().map(|g| g * y).sum::<f64>()
     }
 }
 
@@ -154,8 +205,7 @@ struct Axis {
     creep_gain: Vec<f64>,
     /// Exact first-order-hold update of each creep element over one internal step:
     /// `c' = e*c + b0*y0 + b1*y1` for an input moving linearly from `y0` to `y1`.
-    creep_fh: Vec<CreepFh>,
-    creep: Vec<f64>,
+    creep: Creep,
     /// Input of the creep elements at the end of the last step.
     y_in: f64,
     /// Output of the static part + creep (before coupling).
@@ -182,12 +232,7 @@ impl Axis {
         let y = ys + self.asym * v * v;
         let y0 = self.y_in;
         self.y_in = y;
-        let mut yc = y;
-        for (c, k) in self.creep.iter_mut().zip(&self.creep_fh) {
-            *c = k.e * *c + k.b0 * y0 + k.b1 * y;
-            yc += *c;
-        }
-        self.y_hc = yc;
+        self.y_hc = self.creep.step(y0, y);
     }
 
     /// One internal step of the structure to the new input. Exact for an input moving
@@ -228,6 +273,8 @@ pub struct Stage {
     drift: Option<(f64, f64, f64)>,      // (um, tau_s, rate)
     /// Exponential part of the drift now, and its decay per internal step.
     drift_exp_um: f64,
+    /// [`Self::drift_um`] now.
+    drift_now_um: f64,
     drift_decay: f64,
     noise_sigma_um: f64,
     /// Delay line of positions at the internal rate, per axis (length a power of two).
@@ -269,7 +316,11 @@ impl Stage {
                 HysteresisModel::Cbw => {
                     let m = Cbw::new(hy.d, hy.alpha, hy.beta, hy.gamma, hy.n)
                         .context("stage.hysteresis (cbw)")?;
-                    Static::Cbw(m, m.init(0.0))
+                    if m.n() == 1.0 {
+                        Static::Cbw1(m, m.init(0.0))
+                    } else {
+                        Static::Cbw(m, m.init(0.0))
+                    }
                 }
                 HysteresisModel::Gbw => {
                     let m = Gbw::new(hy.d, hy.alpha, hy.a, hy.beta, hy.gamma, hy.n)
@@ -302,12 +353,7 @@ impl Stage {
                 },
                 stat,
                 asym: hy.asym_um_per_v2,
-                creep_fh: gains
-                    .iter()
-                    .zip(&taus)
-                    .map(|(&g, &t)| CreepFh::new(g, t, h))
-                    .collect(),
-                creep: vec![0.0; gains.len()],
+                creep: Creep::new(&gains, &taus, h),
                 y_in: 0.0,
                 creep_gain: gains,
                 y_hc: 0.0,
@@ -367,6 +413,7 @@ impl Stage {
                 f.stiffness_n_per_um,
             )),
             drift_exp_um: 0.0,
+            drift_now_um: 0.0,
             drift_decay: (-h / cfg.drift.tau_s).exp(),
             drift: cfg.drift.enabled.then_some((
                 cfg.drift.um,
@@ -384,6 +431,7 @@ impl Stage {
             exact_hysteresis: false,
             zero_um: cfg.zero_um,
         };
+        st.drift_now_um = st.drift_calc_um();
         // Rest at the amplifier's output for 0 V in.
         let zero = vec![0.0; st.axes.len()];
         st.settle(&zero);
@@ -397,12 +445,8 @@ impl Stage {
             ax.y_stat = ax.stat.step(ax.amp.v, self.h);
             ax.v_stat = ax.amp.v;
             let y = ax.y_stat + ax.asym * ax.amp.v * ax.amp.v;
-            ax.creep
-                .iter_mut()
-                .zip(&ax.creep_gain)
-                .for_each(|(c, g)| *c = g * y);
             ax.y_in = y;
-            ax.y_hc = y + ax.creep.iter().sum::<f64>();
+            ax.y_hc = ax.creep.settle(&ax.creep_gain, y);
             ax.x = ax.y_hc;
             ax.u_struct = ax.y_hc;
             ax.v = 0.0;
@@ -437,8 +481,13 @@ impl Stage {
         self.axes.get(axis).map_or(f64::NAN, |a| a.x) + self.drift_um()
     }
 
-    /// Sensor zero plus thermal drift (um).
+    /// Sensor zero plus thermal drift (um) now (kept by [`Self::advance_time`]).
+    #[inline(always)]
     fn drift_um(&self) -> f64 {
+        self.drift_now_um
+    }
+
+    fn drift_calc_um(&self) -> f64 {
         self.zero_um
             + match self.drift {
                 Some((_, _, rate)) => self.drift_exp_um + rate * self.t,
@@ -473,6 +522,17 @@ impl Stage {
     /// Advances one loop period with the DAC output voltages held.
     #[inline]
     pub fn advance(&mut self, dac_volts: &[f64]) {
+        if self.substeps == 1 && self.coupling.is_none() && !self.exact_hysteresis {
+            self.advance_one(dac_volts);
+        } else {
+            self.advance_slow(dac_volts);
+        }
+    }
+
+    /// [`Self::advance`] with several internal steps, coupling or the exact hysteresis (a
+    /// function of its own: its setup would otherwise run on the fast path too).
+    #[inline(never)]
+    fn advance_slow(&mut self, dac_volts: &[f64]) {
         if self.exact_hysteresis {
             for _ in 0..self.substeps {
                 self.step_internal(dac_volts, None);
@@ -483,10 +543,6 @@ impl Stage {
         // the hysteresis models are rate-independent: one exact model step to the end
         // voltage, and linear interpolation in voltage inside the period (error ~
         // curvature * dv^2 / 8, about 1e-6 um at full speed).
-        if self.substeps == 1 && self.coupling.is_none() {
-            self.advance_one(dac_volts);
-            return;
-        }
         self.advance_general(dac_volts);
     }
 
@@ -501,7 +557,11 @@ impl Stage {
         let ad = &self.ad;
         for ((ax, &u), line) in self.axes.iter_mut().zip(dac_volts).zip(&mut self.delay) {
             let v = ax.amp.step(u);
-            let ys = ax.stat.step(v, h);
+            // The default model first, where the compiler can inline it.
+            let ys = match &mut ax.stat {
+                Static::Cbw1(m, s) => m.step_n1(s, v),
+                other => other.step(v, h),
+            };
             (ax.v_end, ax.y_end, ax.v_stat, ax.y_stat) = (v, ys, v, ys);
             ax.hammerstein(v, ys);
             ax.structure(ax.y_hc + f_um, ad, inv_h);
@@ -516,11 +576,13 @@ impl Stage {
     #[inline(always)]
     fn advance_time(&mut self) {
         self.steps += 1;
-        self.t = self.steps as f64 * self.h;
+        // Through i64: one instruction on x86-64 (u64 -> f64 takes several); exact below 2^53.
+        self.t = self.steps as i64 as f64 * self.h;
         if let Some((um, _, _)) = self.drift {
             // um * (1 - exp(-t/tau)), advanced without an exp per step.
             self.drift_exp_um = um - (um - self.drift_exp_um) * self.drift_decay;
         }
+        self.drift_now_um = self.drift_calc_um();
         self.delay_pos = self.delay_pos.wrapping_add(1);
     }
 

@@ -96,13 +96,32 @@ impl<T: Real> Cbw<T> {
     pub fn advance_h(&self, h: T, u0: T, du: T) -> T {
         let s = du.sgn();
         if self.n == T::ONE {
-            step_piecewise_affine(h, du, self.alpha, |sigma| {
-                self.beta * s + self.gamma * sigma
-            })
+            self.advance_h_n1(h, du)
         } else {
             rk4_input(h, u0, du, self.max_du, |h, _| self.slope(h, s))
                 .clamp_to(-self.h_max, self.h_max)
         }
+    }
+}
+
+impl<T: Real> Cbw<T> {
+    /// The exact `n = 1` update of `h` over `du` (piecewise affine in `h`).
+    #[inline(always)]
+    fn advance_h_n1(&self, h: T, du: T) -> T {
+        let s = du.sgn();
+        step_piecewise_affine(h, du, self.alpha, |sigma| {
+            self.beta * s + self.gamma * sigma
+        })
+    }
+
+    /// [`Hysteresis::step`] for a model with `n = 1` (the caller checks [`Self::n`]): the
+    /// same result without the RK4 branch, small enough to inline (the simulated stage).
+    #[inline]
+    pub fn step_n1(&self, s: &mut BwState<T>, u: T) -> T {
+        let u = sane_input(u, s.u);
+        s.h = self.advance_h_n1(s.h, u - s.u);
+        s.u = u;
+        self.d * u - s.h
     }
 }
 
@@ -162,6 +181,20 @@ mod tests {
             u = un;
         }
         assert!((h_exact - h_rk4).abs() < 1e-8, "{h_exact} vs {h_rk4}");
+    }
+
+    #[test]
+    fn step_n1_equals_step() {
+        let m = set1();
+        let (mut a, mut b) = (m.init(0.0), m.init(0.0));
+        for k in 0..3000 {
+            let u = 80.0 * (k as f64 * 0.013).sin() + if k % 500 == 7 { f64::NAN } else { 0.0 };
+            assert_eq!(
+                m.step(&mut a, u, 1e-5).to_bits(),
+                m.step_n1(&mut b, u).to_bits()
+            );
+            assert_eq!(a, b);
+        }
     }
 
     #[test]
