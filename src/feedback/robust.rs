@@ -202,10 +202,11 @@ impl<T: Real> Robust<T> {
         self.state.fresh
     }
 
-    /// [`Robust::update`] for a law with [`Robust::fusable`] and inputs whose measurement,
-    /// feedforward and applied voltage are finite and inside the input guard's bound (the
-    /// pipeline checks both once per configuration): the same arithmetic without the
-    /// checks that cannot fire then.
+    /// [`Robust::update`] for a primed law (not [`Robust::is_fresh`]) with
+    /// [`Robust::fusable`] and inputs whose measurement, feedforward and applied voltage are
+    /// finite and inside the input guard's bound (the pipeline checks the configuration
+    /// once, the rest every sample): the same arithmetic without the checks that cannot
+    /// fire then.
     #[inline(always)]
     pub(crate) fn update_fused(&mut self, io: &LoopSignals<T>) -> T {
         self.update_impl::<true>(io)
@@ -218,7 +219,8 @@ impl<T: Real> Robust<T> {
         } else {
             self.guard.clean(io)
         };
-        if self.state.fresh {
+        // The fused caller runs only a primed law (`is_fresh` is its condition).
+        if !FUSED && self.state.fresh {
             self.prime(&io);
             return io.u_applied;
         }

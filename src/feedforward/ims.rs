@@ -74,10 +74,40 @@ fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T,
     // d - c > 0 always (the IMS checks d against the largest slope); a wild hint could
     // leave the secant without that.
     let slope = if slope > T::ZERO { slope } else { d - c };
-    let mut du = r / slope;
+    let du = r / slope;
+    // The first point inline (the per-sample case), the Newton steps out of line.
+    let (phi, em) = (k * du).phi_expm1_neg(); // em = e^-(k du) - 1
+    let dh = c * du * phi;
+    let res = d * du - dh - r;
+    if !(res.abs() > tol) {
+        return if du.is_finite() && dh.is_finite() {
+            Some((du, dh, 1, phi))
+        } else {
+            None
+        };
+    }
+    cbw_piece_newton(d, c, k, r, tol, du, res, em)
+}
+
+/// The Newton steps of [`cbw_piece`] after its first point `du` (residual `res`,
+/// `em = e^-(k du) - 1`).
+#[inline(never)]
+#[cold]
+#[allow(clippy::too_many_arguments)]
+fn cbw_piece_newton<T: Real>(
+    d: T,
+    c: T,
+    k: T,
+    r: T,
+    tol: T,
+    du: T,
+    res: T,
+    em: T,
+) -> Option<(T, T, usize, T)> {
+    let mut du = du - res / (d - c * (T::ONE + em));
     // An exclusive range: `1..=MAX` costs a flag test per iteration on thumbv7.
-    for i in 1..CBW_NEWTON_MAX + 1 {
-        let (phi, em) = (k * du).phi_expm1_neg(); // em = e^-(k du) - 1
+    for i in 2..CBW_NEWTON_MAX + 1 {
+        let (phi, em) = (k * du).phi_expm1_neg();
         let dh = c * du * phi;
         let res = d * du - dh - r;
         if !(res.abs() > tol) {
