@@ -15,18 +15,22 @@
 //! | `set <param> <value>` | write a parameter (range-checked) | `ok <param> <value>` |
 //! | `mode <law>` | select the feedback law (bumpless) | `ok mode <law>` |
 //! | `ff <compensator>` | select the feedforward compensator | `ok ff <name>` |
-//! | `wave off` / `wave hold <um>` | stop the waveform / hold a position | `ok wave ...` |
+//! | `wave off` / `wave hold <um>` | stop the waveform (every axis) / hold a position | `ok wave ...` |
 //! | `wave sine\|triangle\|square <amp_um> <freq_hz> [<offset_um>]` | start a waveform | `ok wave ...` |
 //! | `wave steps <low_um> <high_um> <levels> <freq_hz>` | staircase low..high..low, `levels` in 2..=[`MAX_LEVELS`] (2: square) | `ok wave steps ...` |
 //! | `table clear` | empty the point table | `ok table 0` |
 //! | `table add <um> [<um>...]` | append up to [`TABLE_ADD_MAX`] points (all or none; at most [`TABLE_LEN`] in all, else `err 8`) | `ok table <n>` |
 //! | `table len` | points in the table | `ok table <n>` |
+//! | `wave raster <x_span_um> <y_span_um> <lines> <line_hz> [<xc_um> <yc_um>]` | 2-axis raster: x triangle at `line_hz` over `x_span_um`, y triangle over `y_span_um` at `line_hz / (2 lines)` (one sweep of y per `lines` x periods), centred on (`xc_um`, `yc_um`) (default: half the spans, so the scan starts at 0); `lines` in 1..=[`MAX_LINES`]; 1-axis board: `err 13` | `ok wave raster <x_span> <y_span> <lines> <line_hz> <xc> <yc>` |
+//! | `wave lissajous <x_amp_um> <y_amp_um> <fx_hz> <fy_hz> [<phase_deg>] [<xc_um> <yc_um>]` | 2-axis Lissajous: sines, y `phase_deg` ahead of x (default 90, in -360..=360), centred on (`xc_um`, `yc_um`) (default: the amplitudes, so the scan starts at 0); 1-axis board: `err 13` | `ok wave lissajous <x_amp> <y_amp> <fx> <fy> <phase> <xc> <yc>` |
+//! | `axis [<n>]` | axis the 1-axis waves (`hold`, `sine`, `triangle`, `square`, `steps`, `table`) apply to (default 0; `err 8` beyond the board's axes); without `n`: report it | `ok axis <n> of <axes>` |
 //! | `wave table <freq_hz>` | periodic spline through the table's points, one period per `1/freq_hz` (fewer than 2 points: `err 12`) | `ok wave table <freq_hz> <n>` |
 //! | `stats` / `stats reset` | timing (cycles min/max/last, overruns) / reset it | `ok ...` |
 //! | `rec sel <signal>...` | recorder channels (up to its channel count) | `ok rec sel ...` |
 //! | `rec trig now` | trigger at once when armed | `ok` |
 //! | `rec trig rise\|fall\|level <channel> <level> [<pre>]` | trigger on a channel | `ok` |
 //! | `rec arm` / `rec stop` | start / abort a capture | `ok` |
+//! | `rec div [<n>]` | record every `n`-th period, 1..=1000 (the buffer spans `n` times longer, e.g. a whole XY scan); without `n`: report it | `ok rec div <n>` |
 //! | `rec status` | `idle`, `armed`, `triggered` or `done` and frame count | `ok rec <state> <n>` |
 //! | `rec read <start> <count>` | frames as `<i> <v0> <v1> ...` lines | `ok rec read <n>` |
 //! | `fault` | latched fault (`none`, `sensor-range`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
@@ -48,6 +52,8 @@ pub const MAX_LINE: usize = 96;
 pub const MAX_WORDS: usize = 10;
 /// Most levels of `wave steps`.
 pub const MAX_LEVELS: u16 = 64;
+/// Most x lines per y sweep of `wave raster`.
+pub const MAX_LINES: u16 = 4096;
 /// Most points of one `table add` line.
 pub const TABLE_ADD_MAX: usize = MAX_WORDS - 2;
 /// Capacity of the point table of `wave table` (the reference generator's).
@@ -190,6 +196,8 @@ pub enum RecCmd<'a> {
         start: usize,
         count: usize,
     },
+    /// Record every n-th period (`Some`), or report the divider (`None`).
+    Divider(Option<usize>),
 }
 
 /// The points of one `table add` line (1..=[`TABLE_ADD_MAX`]), without allocation.
@@ -254,6 +262,23 @@ pub enum Command<'a> {
     },
     /// Periodic spline through the point table, at this frequency (Hz).
     WaveTable(f32),
+    /// 2-axis raster: x triangle over `span_um[0]` at `line_hz`, y triangle over
+    /// `span_um[1]` at `line_hz / (2 lines)`, around `center_um`.
+    WaveRaster {
+        span_um: [f32; 2],
+        lines: u16,
+        line_hz: f32,
+        center_um: [f32; 2],
+    },
+    /// 2-axis Lissajous scan: sines at `freq_hz`, y `phase_deg` ahead of x.
+    WaveLissajous {
+        amp_um: [f32; 2],
+        freq_hz: [f32; 2],
+        phase_deg: f32,
+        center_um: [f32; 2],
+    },
+    /// Select the axis of the 1-axis waves (`Some`), or report it (`None`).
+    Axis(Option<usize>),
     /// Empty the point table.
     TableClear,
     /// Append points (um) to the table.
@@ -696,6 +721,13 @@ fn parse_words<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
             Command::Feedforward(w.arg(1)?)
         }
         "wave" => parse_wave(w)?,
+        "axis" => {
+            w.at_most(2)?;
+            Command::Axis(match w.get(1) {
+                Some(_) => Some(w.index(1)?),
+                None => None,
+            })
+        }
         "table" => match w.arg(1)? {
             "clear" => {
                 w.at_most(2)?;
@@ -775,6 +807,56 @@ fn parse_wave<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
             }
             return Ok(Command::WaveTable(freq_hz));
         }
+        "raster" => {
+            // 4 arguments, or 6 with the centre.
+            w.at_most(8)?;
+            let span_um = [w.num(2)?, w.num(3)?];
+            let lines = w.index(4)?;
+            let line_hz = w.num(5)?;
+            let center_um = match w.len() {
+                6 => [span_um[0] * 0.5, span_um[1] * 0.5],
+                _ => [w.num(6)?, w.num(7)?],
+            };
+            let ok = span_um[0] >= 0.0
+                && span_um[1] >= 0.0
+                && (1..=MAX_LINES as usize).contains(&lines)
+                && line_hz >= 0.0;
+            if !ok {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveRaster {
+                span_um,
+                lines: lines as u16,
+                line_hz,
+                center_um,
+            });
+        }
+        "lissajous" => {
+            // 4 arguments; 5: + phase; 6: + centre; 7: + phase and centre.
+            w.at_most(9)?;
+            let amp_um = [w.num(2)?, w.num(3)?];
+            let freq_hz = [w.num(4)?, w.num(5)?];
+            let (phase_deg, center_um) = match w.len() {
+                6 => (90.0, amp_um),
+                7 => (w.num(6)?, amp_um),
+                8 => (90.0, [w.num(6)?, w.num(7)?]),
+                _ => (w.num(6)?, [w.num(7)?, w.num(8)?]),
+            };
+            let ok = amp_um[0] >= 0.0
+                && amp_um[1] >= 0.0
+                && freq_hz[0] >= 0.0
+                && freq_hz[1] >= 0.0
+                && (-360.0..=360.0).contains(&phase_deg);
+            if !ok {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveLissajous {
+                amp_um,
+                freq_hz,
+                phase_deg,
+                center_um,
+            });
+        }
         "sine" => Shape::Sine,
         "triangle" => Shape::Triangle,
         "square" => Shape::Square,
@@ -844,6 +926,13 @@ fn parse_rec<'a>(w: &Words<'a>) -> Result<RecCmd<'a>, Error> {
         "status" => {
             w.at_most(2)?;
             RecCmd::Status
+        }
+        "div" => {
+            w.at_most(3)?;
+            RecCmd::Divider(match w.get(2) {
+                Some(_) => Some(w.index(2)?),
+                None => None,
+            })
         }
         "read" => {
             w.at_most(4)?;
@@ -1207,6 +1296,71 @@ mod tests {
     }
 
     #[test]
+    fn parses_scans_and_axis() {
+        assert_eq!(
+            p("wave raster 20 10 16 50"),
+            Ok(Command::WaveRaster {
+                span_um: [20.0, 10.0],
+                lines: 16,
+                line_hz: 50.0,
+                center_um: [10.0, 5.0],
+            })
+        );
+        assert_eq!(
+            p("wave raster 20 10 16 50 30 40"),
+            Ok(Command::WaveRaster {
+                span_um: [20.0, 10.0],
+                lines: 16,
+                line_hz: 50.0,
+                center_um: [30.0, 40.0],
+            })
+        );
+        let liss = |phase_deg, center_um| {
+            Ok(Command::WaveLissajous {
+                amp_um: [5.0, 4.0],
+                freq_hz: [30.0, 40.0],
+                phase_deg,
+                center_um,
+            })
+        };
+        assert_eq!(p("wave lissajous 5 4 30 40"), liss(90.0, [5.0, 4.0]));
+        assert_eq!(p("wave lissajous 5 4 30 40 45"), liss(45.0, [5.0, 4.0]));
+        assert_eq!(
+            p("wave lissajous 5 4 30 40 10 20"),
+            liss(90.0, [10.0, 20.0])
+        );
+        assert_eq!(
+            p("wave lissajous 5 4 30 40 -45 10 20"),
+            liss(-45.0, [10.0, 20.0])
+        );
+        for (line, e) in [
+            ("wave raster 20 10 16", Error::MissingArgument),
+            ("wave raster 20 10 16 50 30", Error::MissingArgument),
+            ("wave raster 20 10 16 50 30 40 1", Error::TooManyArguments),
+            ("wave raster 20 10 0 50", Error::OutOfRange),
+            ("wave raster 20 10 4097 50", Error::OutOfRange),
+            ("wave raster -20 10 16 50", Error::OutOfRange),
+            ("wave raster 20 10 16 -50", Error::OutOfRange),
+            ("wave raster 20 10 1.5 50", Error::BadNumber),
+            ("wave lissajous 5 4 30", Error::MissingArgument),
+            ("wave lissajous 5 4 30 -40", Error::OutOfRange),
+            ("wave lissajous 5 -4 30 40", Error::OutOfRange),
+            ("wave lissajous 5 4 30 40 400", Error::OutOfRange),
+            ("wave lissajous 5 4 30 40 nan", Error::BadNumber),
+            ("wave lissajous 5 4 30 40 90 1 2 3", Error::TooManyArguments),
+            ("axis -1", Error::BadNumber),
+            ("axis 1 2", Error::TooManyArguments),
+        ] {
+            assert_eq!(p(line), Err(e), "{line}");
+        }
+        assert_eq!(p("axis"), Ok(Command::Axis(None)));
+        assert_eq!(p("rec div"), Ok(Command::Rec(RecCmd::Divider(None))));
+        assert_eq!(p("rec div 10"), Ok(Command::Rec(RecCmd::Divider(Some(10)))));
+        assert_eq!(p("rec div 1 2"), Err(Error::TooManyArguments));
+        assert_eq!(p("axis 1"), Ok(Command::Axis(Some(1))));
+    }
+
+    #[test]
     fn every_error_has_its_code() {
         assert_eq!(p("jump").unwrap_err().code(), 3);
         assert_eq!(p("set kp").unwrap_err(), Error::MissingArgument);
@@ -1539,7 +1693,7 @@ mod tests {
                 proptest::sample::select(&[
                     "rec", "trig", "sel", "wave", "sine", "set", "1e3", "-1", "read", "3",
                     "rise", "stats", "reset", "hold", "now", "arm", "steps", "table",
-                    "add", "clear", "len",
+                    "add", "clear", "len", "raster", "lissajous", "axis",
                 ][..]).prop_map(|s| s.to_string()),
                 "[a-z0-9.]{0,6}",
             ],

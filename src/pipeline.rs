@@ -296,6 +296,21 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         self.restart();
     }
 
+    /// Replaces the output limits of `axis` in place (validated like [`Pipeline::new`]):
+    /// mode, wave, compensator and law keep running. `safe_volts` is clamped into the new
+    /// range. A range that excludes the present code moves the output into the range at the
+    /// next sample (the range wins over the slew limit); within it the new slew limit holds.
+    pub fn set_limits(&mut self, axis: usize, limits: OutputLimits<T>) -> Result<(), ConfigError> {
+        let fs = self.config.sample_hz;
+        let (Some(a), Some(o)) = (self.config.axes.get_mut(axis), self.output.get_mut(axis)) else {
+            return Err(ConfigError::new("axis index out of range"));
+        };
+        *o = Output::new(&limits, &a.dac, fs).map_err(|e| e.on_axis(axis))?;
+        a.limits = limits;
+        a.safe_volts = a.safe_volts.clamp_to(limits.volts_min, limits.volts_max);
+        Ok(())
+    }
+
     /// The driver reports that the last DAC write of `axis` failed and the converter still
     /// holds `held_code`. The pipeline takes the held code as applied (so the slew limit of
     /// the next sample is measured from what the stage really sees) and latches the safe
@@ -569,6 +584,48 @@ mod tests {
             assert!((c - prev).abs() <= step);
             prev = c;
         }
+    }
+
+    #[test]
+    fn set_limits_in_place_keeps_running_and_holds_the_new_limits() {
+        let mut p = pipeline(100.0 / 150.0, Wave::Hold { y_um: 60.0 });
+        p.set_mode(Mode::Feedforward);
+        for _ in 0..1000 {
+            p.step([600_000]);
+        }
+        let bad = OutputLimits {
+            volts_min: 10.0,
+            volts_max: 5.0,
+            slew_volts_per_s: 1e4,
+        };
+        let e = p.set_limits(0, bad).unwrap_err();
+        assert!(e.what.contains("volts_min"), "{e}");
+        assert!(p.set_limits(1, axis().limits).is_err());
+        let new = OutputLimits {
+            volts_min: 20.0,
+            volts_max: 60.0,
+            slew_volts_per_s: 5_000.0,
+        };
+        p.set_limits(0, new).unwrap();
+        assert_eq!(p.state().mode, Mode::Feedforward);
+        assert_eq!(p.config().axes[0].limits, new);
+        assert_eq!(p.config().axes[0].safe_volts, 20.0);
+        let o = *p.output(0).unwrap();
+        let (lo, hi) = o.code_range();
+        // 90 V wanted: the range clamps at once to 60 V, then holds it.
+        let mut prev = p.step([600_000])[0];
+        assert!(prev >= lo && prev <= hi);
+        for _ in 0..500 {
+            let c = p.step([600_000])[0];
+            assert!(c >= lo && c <= hi && (c - prev).abs() <= o.max_step());
+            prev = c;
+        }
+        assert!((p.state().u_applied[0] - 60.0).abs() < 1e-3);
+        // Down towards 30 V (hold at 20 um) at the new slew limit: 0.05 V per sample.
+        p.set_wave(0, Wave::Hold { y_um: 20.0 }).unwrap();
+        let u0 = p.state().u_applied[0];
+        p.step([600_000]);
+        assert!((u0 - p.state().u_applied[0] - 0.05).abs() < 1e-3);
     }
 
     #[test]

@@ -55,6 +55,19 @@ pub trait Real:
     fn floor(self) -> Self;
     fn is_finite(self) -> bool;
 
+    /// `(phi(x), exp(-x) - 1)` with `phi(x) = (1 - exp(-x)) / x` (`phi(0) = 1`): the two
+    /// factors of the exact input-domain step of the Bouc-Wen models for `n = 1`.
+    #[inline(always)]
+    fn phi_expm1_neg(self) -> (Self, Self) {
+        let em = (-self).exp_m1();
+        let phi = if self == Self::ZERO {
+            Self::ONE
+        } else {
+            -em / self
+        };
+        (phi, em)
+    }
+
     #[inline(always)]
     fn from_usize(n: usize) -> Self {
         Self::from_f64(n as f64)
@@ -131,7 +144,7 @@ pub trait Real:
 }
 
 macro_rules! real_impl {
-    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:path, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:path, $fabs:path) => {
+    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:path, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:path, $fabs:path, $phi:path) => {
         impl Real for $t {
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
@@ -217,13 +230,29 @@ macro_rules! real_impl {
             fn is_finite(self) -> bool {
                 <$t>::is_finite(self)
             }
+            #[inline(always)]
+            fn phi_expm1_neg(self) -> (Self, Self) {
+                $phi(self)
+            }
         }
     };
 }
 
 real_impl!(
-    f32, 8, expf, expm1_f32, logf, log1pf, powf, sin_f32, cos_f32, tanhf, atan2f, floor_f32,
-    abs_f32
+    f32,
+    8,
+    expf,
+    expm1_f32,
+    logf,
+    log1pf,
+    powf,
+    sin_f32,
+    cos_f32,
+    tanhf,
+    atan2f,
+    floor_f32,
+    abs_f32,
+    phi_expm1_neg_f32
 );
 real_impl!(
     f64,
@@ -238,8 +267,34 @@ real_impl!(
     tanh,
     atan2,
     libm::floor,
-    libm::fabs
+    libm::fabs,
+    phi_expm1_neg_f64
 );
+
+/// The trait's default, for `f64`.
+#[inline(always)]
+fn phi_expm1_neg_f64(x: f64) -> (f64, f64) {
+    let em = libm::expm1(-x);
+    let phi = if x == 0.0 { 1.0 } else { -em / x };
+    (phi, em)
+}
+
+/// [`Real::phi_expm1_neg`] in single precision: for the per-sample `|x| <= 1/32`, `phi` by
+/// its Taylor polynomial (degree 4, remainder `x^5/720 < 5e-11` relative) and `exp(-x) - 1
+/// = -x phi`: no division and no test for `x = 0`; elsewhere from `exp_m1`.
+#[inline(always)]
+fn phi_expm1_neg_f32(x: f32) -> (f32, f32) {
+    if x.abs() <= 1.0 / 32.0 {
+        let p = 1.0 / 24.0 - x * (1.0 / 120.0);
+        let p = 1.0 / 6.0 - x * p;
+        let p = 0.5 - x * p;
+        let phi = 1.0 - x * p;
+        (phi, -x * phi)
+    } else {
+        let em = expm1_f32(-x);
+        (-em / x, em)
+    }
+}
 
 /// `exp(x) - 1` in single precision. The models' exact input-domain steps need it with
 /// `|x| = k*du` tiny at high sample rates (1e-3 at 100 kHz), where libm's `expm1f` (~100
@@ -422,6 +477,29 @@ mod tests {
         assert!(worst < 2.5e-7, "f32 sin/cos error {worst}");
         assert!(f32::NAN.sin().is_nan());
         assert!((1e6f32.sin() as f64 - (1e6f64).sin()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn f32_phi_expm1_neg_matches_f64() {
+        let mut worst = (0.0f64, 0.0f64);
+        for i in -100_000..=100_000 {
+            let x = i as f32 * 1e-6; // [-0.1, 0.1], across the polynomial's edge at 1/32
+            let (phi, em) = x.phi_expm1_neg();
+            let (want_phi, want_em) = (x as f64).phi_expm1_neg();
+            worst.0 = worst.0.max((phi as f64 - want_phi).abs() / want_phi);
+            worst.1 = worst
+                .1
+                .max((em as f64 - want_em).abs() / want_em.abs().max(1e-30));
+        }
+        assert!(
+            worst.0 < 2.5e-7 && worst.1 < 2.5e-7,
+            "f32 relative errors {worst:?}"
+        );
+        assert_eq!(0.0f32.phi_expm1_neg(), (1.0, 0.0));
+        assert_eq!(0.0f64.phi_expm1_neg(), (1.0, 0.0));
+        let (phi, em) = 1e3f32.phi_expm1_neg();
+        assert_eq!((phi, em), (1e-3, -1.0));
+        assert!(f32::NAN.phi_expm1_neg().0.is_nan());
     }
 
     #[test]

@@ -4,6 +4,11 @@
 //! one [`Signal`] of the control loop. A capture is armed, waits for its [`Trigger`] while
 //! keeping the last `pre` frames (pre-trigger history), then records until the buffer holds
 //! `pre` frames before the trigger, the trigger frame and `N - pre - 1` frames after it.
+//! With a divider `d` ([`Recorder::set_divider`]) every `d`-th period is a frame, so the
+//! buffer spans `d` times longer (a whole XY scan); the trigger sees those frames only.
+
+/// Largest recorder divider (1000: 10.24 s of frames at 100 kHz).
+pub const MAX_DIVIDER: u32 = 1000;
 
 /// The signals of one control period the recorder can select.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -22,11 +27,22 @@ pub enum Signal {
     AdcCode,
     /// DAC code written.
     DacCode,
+    /// The same seven signals of the second axis (X/Y scanners; the names above are axis 0).
+    RefUm1,
+    YUm1,
+    ErrorUm1,
+    FfVolts1,
+    UVolts1,
+    AdcCode1,
+    DacCode1,
 }
 
 impl Signal {
     /// Number of signals; the firmware fills a `[T; Signal::COUNT]` per period.
-    pub const COUNT: usize = 7;
+    pub const COUNT: usize = 2 * Self::PER_AXIS;
+    /// Signals per axis: axis `a`'s signals are indices `a * PER_AXIS ..`, in the order
+    /// of axis 0's.
+    pub const PER_AXIS: usize = 7;
     pub const ALL: [Signal; Signal::COUNT] = [
         Signal::RefUm,
         Signal::YUm,
@@ -35,7 +51,19 @@ impl Signal {
         Signal::UVolts,
         Signal::AdcCode,
         Signal::DacCode,
+        Signal::RefUm1,
+        Signal::YUm1,
+        Signal::ErrorUm1,
+        Signal::FfVolts1,
+        Signal::UVolts1,
+        Signal::AdcCode1,
+        Signal::DacCode1,
     ];
+
+    /// The axis the signal belongs to (0 or 1).
+    pub fn axis(self) -> usize {
+        self.index() / Self::PER_AXIS
+    }
 
     /// Index into the per-period signal array.
     pub fn index(self) -> usize {
@@ -51,6 +79,13 @@ impl Signal {
             Signal::UVolts => "u_volts",
             Signal::AdcCode => "adc_code",
             Signal::DacCode => "dac_code",
+            Signal::RefUm1 => "ref1_um",
+            Signal::YUm1 => "y1_um",
+            Signal::ErrorUm1 => "error1_um",
+            Signal::FfVolts1 => "ff1_volts",
+            Signal::UVolts1 => "u1_volts",
+            Signal::AdcCode1 => "adc1_code",
+            Signal::DacCode1 => "dac1_code",
         }
     }
 
@@ -105,6 +140,8 @@ pub enum ConfigError {
     PreTooLong,
     /// The capture cannot be reconfigured while armed or triggered.
     Busy,
+    /// The divider must be in 1..=[`MAX_DIVIDER`].
+    BadDivider,
 }
 
 impl ConfigError {
@@ -113,6 +150,7 @@ impl ConfigError {
             ConfigError::NoSuchChannel => "trigger channel out of range",
             ConfigError::PreTooLong => "pre-trigger length must be below the buffer length",
             ConfigError::Busy => "recorder is capturing; stop it first",
+            ConfigError::BadDivider => "divider must be in 1..=1000",
         }
     }
 }
@@ -134,6 +172,10 @@ pub struct Recorder<T, const CH: usize, const N: usize> {
     post_left: usize,
     /// Trigger channel value of the previous frame (edge detection).
     prev: Option<T>,
+    /// Every `div`-th period is a frame (>= 1).
+    div: u32,
+    /// Periods to skip before the next frame.
+    skip: u32,
 }
 
 impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Default
@@ -165,7 +207,24 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
             filled: 0,
             post_left: 0,
             prev: None,
+            div: 1,
+            skip: 0,
         }
+    }
+
+    /// Records every `div`-th period (1..=[`MAX_DIVIDER`]; 1: every period).
+    pub fn set_divider(&mut self, div: u32) -> Result<(), ConfigError> {
+        self.idle_or_done()?;
+        if !(1..=MAX_DIVIDER).contains(&div) {
+            return Err(ConfigError::BadDivider);
+        }
+        self.div = div;
+        Ok(())
+    }
+
+    /// Periods per frame.
+    pub fn divider(&self) -> u32 {
+        self.div
     }
 
     pub fn state(&self) -> State {
@@ -232,6 +291,7 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
         self.head = 0;
         self.filled = 0;
         self.prev = None;
+        self.skip = 0;
     }
 
     /// Aborts a capture.
@@ -248,6 +308,11 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
         if !matches!(self.state, State::Armed | State::Triggered) {
             return;
         }
+        if self.skip > 0 {
+            self.skip -= 1;
+            return;
+        }
+        self.skip = self.div.saturating_sub(1);
         let mut frame = [T::default(); CH];
         for (v, s) in frame.iter_mut().zip(self.channels.iter()) {
             *v = signals.get(s.index()).copied().unwrap_or_default();
@@ -437,9 +502,32 @@ mod tests {
     }
 
     #[test]
+    fn divider_keeps_every_nth_period() {
+        let mut r = Recorder::<f32, 1, 8>::new();
+        assert_eq!(r.set_divider(0), Err(ConfigError::BadDivider));
+        assert_eq!(r.set_divider(MAX_DIVIDER + 1), Err(ConfigError::BadDivider));
+        r.set_divider(3).unwrap();
+        r.arm();
+        assert_eq!(r.set_divider(2), Err(ConfigError::Busy));
+        for k in 0..100 {
+            r.push(&[k as f32]);
+        }
+        assert_eq!(r.state(), State::Done);
+        let got: Vec<f32> = (0..8).map(|i| r.frame(i).unwrap()[0]).collect();
+        assert_eq!(got, [0.0, 3.0, 6.0, 9.0, 12.0, 15.0, 18.0, 21.0]);
+        assert_eq!(r.divider(), 3);
+    }
+
+    #[test]
     fn signal_names_round_trip() {
-        for s in Signal::ALL {
+        for (i, s) in Signal::ALL.into_iter().enumerate() {
             assert_eq!(Signal::from_name(s.name()), Some(s));
+            assert_eq!(s.index(), i);
+            assert_eq!(s.axis(), i / Signal::PER_AXIS);
+        }
+        // Axis 1 mirrors axis 0 signal by signal.
+        for (a, b) in Signal::ALL.iter().zip(&Signal::ALL[Signal::PER_AXIS..]) {
+            assert_eq!(a.name().replacen('_', "1_", 1), b.name());
         }
         assert_eq!(Signal::from_name("bogus"), None);
     }

@@ -21,28 +21,63 @@ fn type_of<T: Any>(_: &T) -> TypeId {
     TypeId::of::<T>()
 }
 
-fn bench() -> (Scenario, Bench<1>) {
-    let sc = Scenario::default();
+fn bench_of<const N: usize>(sc: Scenario) -> (Scenario, Bench<N>) {
     let linear = calibrate(&sc).unwrap();
     let info = StageInfo {
         scenario: &sc,
         linear,
     };
-    let controller = open_loop::<1>(&info).unwrap();
+    let controller = open_loop::<N>(&info).unwrap();
     let bench = Bench::new(&sc, controller, &linear).unwrap();
     (sc, bench)
 }
 
+fn bench() -> (Scenario, Bench<1>) {
+    bench_of(Scenario::default())
+}
+
+/// hal-sim's XY scanner: two axes on a raster.
+fn bench_xy() -> (Scenario, Bench<2>) {
+    let sc = Scenario::from_toml("[stage]\naxes = 2\n[reference]\nwave = \"raster\"").unwrap();
+    bench_of(sc)
+}
+
 #[test]
 fn firmware_and_hal_sim_run_the_same_pipeline_type() {
-    let (_, bench) = bench();
     let ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
     let firmware = type_of(&ctl.lp.p);
-    assert_eq!(firmware, type_of(&bench.pipeline), "pipeline types differ");
+    // The firmware's axis count (1, or 2 with `--features xy`) picks hal-sim's bench.
+    let sim = if control::AXES == 2 {
+        type_of(&bench_xy().1.pipeline)
+    } else {
+        type_of(&bench().1.pipeline)
+    };
+    assert_eq!(firmware, sim, "pipeline types differ");
     assert_eq!(firmware, TypeId::of::<control::LoopPipeline>());
     // The comparison tells types apart: another number type or axis count fails it.
     assert_ne!(firmware, TypeId::of::<Pipeline<f64, 1>>());
-    assert_ne!(firmware, TypeId::of::<Pipeline<f32, 2>>());
+    assert_ne!(firmware, TypeId::of::<Pipeline<f64, 2>>());
+    let other_axes = if control::AXES == 2 {
+        TypeId::of::<Pipeline<f32, 1>>()
+    } else {
+        TypeId::of::<Pipeline<f32, 2>>()
+    };
+    assert_ne!(firmware, other_axes);
+}
+
+/// The xy build's pipeline type (`FirmwarePipeline2`) is the one hal-sim's 2-axis
+/// scenarios (raster, Lissajous) run, whichever build this test is.
+#[test]
+fn the_xy_pipeline_is_hal_sims_two_axis_pipeline() {
+    let (_, bench) = bench_xy();
+    assert_eq!(
+        type_of(&bench.pipeline),
+        TypeId::of::<piezo_core::pipeline::FirmwarePipeline2>()
+    );
+    assert_ne!(
+        type_of(&bench.pipeline),
+        TypeId::of::<piezo_core::pipeline::FirmwarePipeline>()
+    );
 }
 
 #[test]

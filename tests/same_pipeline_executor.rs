@@ -26,20 +26,20 @@ fn a_sensor_fault_latches_until_cleared() {
     );
     // Mid-range code: no fault. Then a code beyond the sensor window.
     let mid = 1 << (control::ADC_BITS - 1);
-    ctl.lp.step(mid);
-    ctl.lp.step(i32::MAX);
+    ctl.lp.step([mid; control::AXES]);
+    ctl.lp.step([i32::MAX; control::AXES]);
     assert_eq!(
         ask(&mut ctl, "fault"),
         "ok fault sensor-range sensor 1 nonfinite 0 dac 0"
     );
     // The fault stays latched with good codes again, until cleared.
-    ctl.lp.step(mid);
+    ctl.lp.step([mid; control::AXES]);
     assert!(ask(&mut ctl, "fault").starts_with("ok fault sensor-range"));
     assert_eq!(
         ask(&mut ctl, "fault clear"),
         "ok fault none sensor 1 nonfinite 0 dac 0"
     );
-    ctl.lp.step(mid);
+    ctl.lp.step([mid; control::AXES]);
     assert!(ask(&mut ctl, "fault").starts_with("ok fault none"));
     assert_eq!(ask(&mut ctl, "fault reset"), "err 11 unknown sub-command");
 }
@@ -49,7 +49,7 @@ fn reference(ctl: &mut control::Ctl, n: usize) -> Vec<f64> {
     let mid = 1 << (control::ADC_BITS - 1);
     (0..n)
         .map(|_| {
-            ctl.lp.step(mid);
+            ctl.lp.step([mid; control::AXES]);
             ctl.lp.p.state().trace.setpoint[0].y_um as f64
         })
         .collect()
@@ -136,4 +136,135 @@ fn a_steps_wave_visits_every_level() {
     // Up 10, 20, 30, 40 and down 30, 20 in one period (the first level may repeat).
     let want = [10_000, 20_000, 30_000, 40_000, 30_000, 20_000];
     assert!(levels.starts_with(&want), "{levels:?}");
+}
+
+/// References of both axes (`ref_um` of axis 0 and, with `xy`, axis 1) over `n` periods.
+#[cfg(feature = "xy")]
+fn references(ctl: &mut control::Ctl, n: usize) -> Vec<[f64; 2]> {
+    let mid = 1 << (control::ADC_BITS - 1);
+    (0..n)
+        .map(|_| {
+            ctl.lp.step([mid; control::AXES]);
+            let sp = &ctl.lp.p.state().trace.setpoint;
+            [sp[0].y_um as f64, sp[sp.len() - 1].y_um as f64]
+        })
+        .collect()
+}
+
+#[cfg(feature = "xy")]
+fn span(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    v.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), y| {
+        (l.min(y), h.max(y))
+    })
+}
+
+/// A 1-axis build refuses the 2-axis scans and axis 1 with its numbered errors.
+#[cfg(not(feature = "xy"))]
+#[test]
+fn one_axis_build_refuses_scans_and_axis_1() {
+    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let unsupported = "err 13 not supported on this board";
+    assert_eq!(ask(&mut ctl, "wave raster 10 10 8 50"), unsupported);
+    assert_eq!(ask(&mut ctl, "wave lissajous 5 5 40 30"), unsupported);
+    assert_eq!(ask(&mut ctl, "rec sel ref_um y1_um"), unsupported);
+    assert_eq!(ask(&mut ctl, "axis"), "ok axis 0 of 1");
+    assert_eq!(ask(&mut ctl, "axis 1"), "err 8 value out of range");
+    assert_eq!(ask(&mut ctl, "axis 0"), "ok axis 0 of 1");
+}
+
+/// The xy build (`cargo test -p piezo-core --features xy --test same_pipeline_executor`):
+/// raster and Lissajous references on both axes, the axis selection of the 1-axis waves,
+/// and modes and limits on both axes.
+#[cfg(feature = "xy")]
+#[test]
+fn xy_build_scans_both_axes() {
+    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    // 4 lines at 1 kHz: x period 100 samples, y triangle at 125 Hz (800 samples), centred
+    // on half the spans by default: x 0..10, y 0..6 um.
+    assert_eq!(
+        ask(&mut ctl, "wave raster 10 6 4 1000"),
+        "ok wave raster 10 6 4 1000 5 3"
+    );
+    let r = references(&mut ctl, 1600);
+    let (x0, x1) = span(r.iter().map(|v| v[0]));
+    let (y0, y1) = span(r.iter().map(|v| v[1]));
+    assert!(x0.abs() < 1e-3 && (x1 - 10.0).abs() < 1e-3, "x {x0}..{x1}");
+    assert!(y0.abs() < 1e-3 && (y1 - 6.0).abs() < 1e-3, "y {y0}..{y1}");
+    for k in 0..800 {
+        let (a, b) = (r[k], r[k + 800]);
+        assert!(
+            (a[1] - b[1]).abs() < 1e-3,
+            "y period is not 800 samples at {k}"
+        );
+        assert!(
+            (a[0] - b[0]).abs() < 1e-3,
+            "x period does not divide 800 at {k}"
+        );
+    }
+    // One y sweep (400 samples) holds 4 x periods: 4 maxima of x.
+    let peaks = r[..400]
+        .windows(3)
+        .filter(|w| w[1][0] >= w[0][0] && w[1][0] > w[2][0])
+        .count();
+    assert_eq!(peaks, 4);
+
+    // Lissajous, y 45 deg ahead, around (20, 30).
+    assert_eq!(
+        ask(&mut ctl, "wave lissajous 5 4 1000 500 45 20 30"),
+        "ok wave lissajous 5 4 1000 500 45 20 30"
+    );
+    let r = references(&mut ctl, 400);
+    let fs = control::SAMPLE_HZ as f64;
+    let tau = std::f64::consts::TAU;
+    let want = |k: f64| {
+        [
+            20.0 + 5.0 * (tau * 1000.0 * k / fs).sin(),
+            30.0 + 4.0 * (tau * (500.0 * k / fs + 0.125)).sin(),
+        ]
+    };
+    // The first returned setpoint is phase 0 or one sample on: find which, then both axes
+    // must follow the formula with that one index.
+    let k0 = (-1..=1)
+        .min_by(|a, b| {
+            let e = |s: i32| (r[5][0] - want((5 + s) as f64)[0]).abs();
+            e(*a).total_cmp(&e(*b))
+        })
+        .unwrap();
+    for (k, v) in r.iter().enumerate() {
+        let w = want((k as i32 + k0) as f64);
+        assert!(
+            (v[0] - w[0]).abs() < 1e-3 && (v[1] - w[1]).abs() < 1e-3,
+            "sample {k}: {v:?} vs {w:?}"
+        );
+    }
+    assert_eq!(
+        ask(&mut ctl, "wave lissajous 5 4 1000 60000"),
+        "err 8 value out of range"
+    );
+
+    // `axis 1`: the 1-axis waves go to y; `wave off` holds both.
+    assert_eq!(ask(&mut ctl, "axis 2"), "err 8 value out of range");
+    assert_eq!(ask(&mut ctl, "axis 1"), "ok axis 1 of 2");
+    assert_eq!(ask(&mut ctl, "wave off"), "ok wave off");
+    assert_eq!(ask(&mut ctl, "wave hold 12"), "ok wave hold 12");
+    let r = references(&mut ctl, 10);
+    assert_eq!(r[9][1], 12.0);
+    assert!((r[9][0] - r[0][0]).abs() < 1e-9, "x must hold");
+    assert_eq!(ask(&mut ctl, "axis 0"), "ok axis 0 of 2");
+
+    // Modes and limits on both axes.
+    assert_eq!(ask(&mut ctl, "mode ff+pid"), "ok mode ff+pid");
+    for fb in ctl.lp.p.feedback() {
+        assert_eq!(fb.name(), "ff+pid");
+    }
+    assert_eq!(ask(&mut ctl, "set u_max 120"), "ok u_max 120");
+    assert_eq!(ask(&mut ctl, "set slew 1"), "err 8 value out of range");
+    for a in &ctl.lp.p.config().axes {
+        assert_eq!(a.limits.volts_max, 120.0);
+        assert_eq!(a.limits.slew_volts_per_s, 20_000.0);
+    }
+    assert_eq!(
+        ask(&mut ctl, "rec sel ref_um y_um ref1_um y1_um"),
+        "ok rec sel ref_um y_um ref1_um y1_um"
+    );
 }

@@ -2,8 +2,10 @@
 # Target: the firmware builds for the Nucleo-H743ZI2 (Cortex-M7, thumbv7em-none-eabihf),
 # linked through flip-link (stack overflow protection), in both converter variants: the
 # on-chip ADC/DAC (default) and the external SPI pair through the core's Ad4000/Ad5791
-# drivers (feature spi-converters). Prints flash/RAM use of each and checks in the ELF that
-# the control interrupt runs the core's pipeline step (and, with SPI, both drivers).
+# drivers (feature spi-converters), and the two-axis XY scanner on the on-chip converters
+# (feature xy: ADC1 + ADC2, DAC1 channels 1 + 2). Prints flash/RAM use of each and checks in
+# the ELF that the control interrupt runs the core's pipeline step (and, with SPI, both
+# drivers). xy with spi-converters must not compile (the SPI pair drives one axis).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
@@ -24,7 +26,19 @@ build() {
 
 build on-chip
 build spi-converters --features spi-converters
+build xy --features xy
+if cargo build --release --target thumbv7em-none-eabihf --bin firmware --features xy,spi-converters \
+  >"$work/xy-spi.log" 2>&1; then
+  echo "firmware: xy with spi-converters built, expected a compile_error"
+  exit 1
+fi
+grep -q 'feature `xy` (two axes) needs the on-chip converters' "$work/xy-spi.log" ||
+  { cat "$work/xy-spi.log"; echo "firmware: xy + spi-converters failed for another reason"; exit 1; }
+echo "firmware (H743, xy + spi-converters): refused at compile time, as intended"
 python3 .ci/firmware-code.py "$work/on-chip.elf" ADC1_2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}"
+# The xy ELF's inline annotations do not name Pipeline::step itself (objdump lists its
+# blocks): the step's feedforward stage, MultiFeedforward::compensate, stands for it there.
+python3 .ci/firmware-code.py "$work/xy.elf" ADC1_2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}|piezo_core::feedforward::MultiFeedforward::compensate|piezo_core::feedforward::MultiFeedforward::compensate::{{closure}}"
 python3 .ci/firmware-code.py "$work/spi-converters.elf" TIM2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
   "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
   piezo_core::drivers::ad5791::Ad5791::set_code

@@ -48,8 +48,8 @@ impl Fake {
             let volts = self.dac as f64 * 150.0 / control::DAC_MAX as f64;
             self.y_um += 0.3 * (0.16 * volts - self.y_um);
             let code = (self.y_um * 655.35).clamp(0.0, 65535.0) as i32;
-            self.dac = self.ctl.lp.step(code);
-            self.ctl.record(code, self.dac);
+            [self.dac] = self.ctl.lp.step([code]);
+            self.ctl.record([code], [self.dac]);
             self.ctl.timing.step.record(40);
             self.ctl.timing.isr.record(60);
         }
@@ -264,6 +264,8 @@ fn the_recorder_comes_back_as_csv_with_units() {
             pre: 64,
             wait_s: 10.0,
             no_arm: false,
+            xy: false,
+            every: 1,
             out: csv.clone(),
             svg: Some(svg.clone()),
         }),
@@ -307,6 +309,8 @@ fn the_recorder_comes_back_as_csv_with_units() {
             pre: 64,
             wait_s: 1.0,
             no_arm: true,
+            xy: false,
+            every: 1,
             out: tmp("unused.csv"),
             svg: None,
         },
@@ -426,6 +430,8 @@ fn a_trigger_that_never_fires_times_out_and_does_not_block_the_next_capture() {
         pre: 0,
         wait_s,
         no_arm: false,
+        xy: false,
+        every: 1,
         out: tmp("never.csv"),
         svg: None,
     };
@@ -513,6 +519,8 @@ fn a_table_from_a_file_is_loaded_in_lines_and_the_reference_follows_it() {
             pre: 0,
             wait_s: 10.0,
             no_arm: false,
+            xy: false,
+            every: 1,
             out: tmp("table.csv"),
             svg: None,
         },
@@ -557,4 +565,46 @@ fn a_table_from_a_file_is_loaded_in_lines_and_the_reference_follows_it() {
     )
     .unwrap();
     assert_eq!(out, "ok wave steps 10 30 5 2\n");
+}
+
+#[test]
+fn a_divided_capture_spans_longer() {
+    let addr = spawn_firmware();
+    run(
+        &addr,
+        Action::Send {
+            lines: vec!["wave triangle 10 100 20".into()],
+        },
+    )
+    .unwrap();
+    let mut c = connect(&conn(&addr)).unwrap();
+    let rec = record(
+        &mut c,
+        &RecordArgs {
+            signals: vec!["ref_um".into()],
+            trigger: "now".into(),
+            pre: 0,
+            wait_s: 10.0,
+            no_arm: false,
+            xy: false,
+            every: 5,
+            out: tmp("every.csv"),
+            svg: None,
+        },
+    )
+    .unwrap();
+    // Every 5th period: 20 kHz of frames; the 4000 um/s triangle moves 0.2 um per frame.
+    assert_eq!(rec.sample_hz, 20_000.0);
+    assert!((rec.t_s(1) - rec.t_s(0) - 5e-5).abs() < 1e-12);
+    let mut d: Vec<f64> = rec
+        .frames
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).abs())
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let median = d[d.len() / 2];
+    assert!((median - 0.2).abs() < 1e-3, "{median}");
+    // Out of range: refused by the firmware.
+    let e = c.send(&Command::Rec(RecCmd::Divider(Some(0)))).unwrap_err();
+    assert!(e.to_string().contains("firmware error 8"), "{e}");
 }

@@ -113,9 +113,7 @@ fn cbw_n1_piece_unchecked<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
     // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as selects.
     let h_up = if h == T::ZERO { up } else { h > T::ZERO };
     let k = if up { m.beta() } else { -m.beta() } + if h_up { m.gamma() } else { -m.gamma() };
-    let x = k * du;
-    let em = (-x).exp_m1();
-    let phi = if x == T::ZERO { T::ONE } else { -em / x };
+    let (phi, _) = (k * du).phi_expm1_neg();
     let h1 = h + (m.alpha() - k * h) * du * phi;
     if h * h1 < T::ZERO {
         None

@@ -77,9 +77,7 @@ fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T,
     let mut du = r / slope;
     // An exclusive range: `1..=MAX` costs a flag test per iteration on thumbv7.
     for i in 1..CBW_NEWTON_MAX + 1 {
-        let x = k * du;
-        let em = (-x).exp_m1(); // e^-x - 1
-        let phi = if x == T::ZERO { T::ONE } else { -em / x };
+        let (phi, em) = (k * du).phi_expm1_neg(); // em = e^-(k du) - 1
         let dh = c * du * phi;
         let res = d * du - dh - r;
         if !(res.abs() > tol) {

@@ -13,7 +13,7 @@
 //! its observer yet or a non-finite command leave the sample (or its end) to the generic
 //! path's safe-state handling, and the final range and slew limits are the same code.
 
-use super::{Fault, Pipeline};
+use super::Pipeline;
 use crate::feedback::guard::INPUT_BOUND;
 use crate::feedback::Feedback;
 use crate::feedforward::{Feedforward, MultiFeedforward};
@@ -121,25 +121,23 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         *sp_tr = sp;
         let u_ff = ims.compensate_plain_cbw_n1(sp.y_um);
         *u_ff_tr = u_ff;
-        let mut u = law.update_fused(&LoopSignals {
+        // The generic step's test for a non-finite command is left out: the robust law
+        // returns a finite command or, if its own would not be, the applied voltage (finite
+        // here), so the law's test is the one that matters. Whatever `u` is, the limits
+        // below keep the code inside the range and the slew limit (NaN -> lowest code).
+        let u = law.update_fused(&LoopSignals {
             setpoint: sp,
             y_um: y,
             u_ff,
             u_applied: *u_applied,
         });
-        // The law never returns a non-finite command; should it, the safe state as in
-        // the generic step.
-        let ok = u.is_finite();
-        if !ok {
-            st.fault = Some(Fault::NonFiniteCommand { axis: 0 });
-            st.counters.nonfinite_commands = st.counters.nonfinite_commands.saturating_add(1);
-            u = axis.safe_volts;
-        }
         *u_cmd_tr = u;
-        let l = out.limit(u, *code);
+        // The last code is always inside the output range (`new`, `limit` and
+        // `dac_write_failed` put it there).
+        let l = out.limit_from_code_in_range(u, *code);
         *code = l.code;
         *u_applied = out.dac.volts(l.code);
-        if l.saturated && ok {
+        if l.saturated {
             st.counters.saturated_samples = st.counters.saturated_samples.saturating_add(1);
         }
         Some(st.code)

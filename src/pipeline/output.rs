@@ -139,6 +139,13 @@ impl<T: Real> Output<T> {
     /// lowest code of the range, then slew-limited).
     #[inline]
     pub fn limit(&self, volts: T, prev: i32) -> Limited {
+        // max/min, not `clamp`: `clamp` asserts lo <= hi, a panic path in the ISR.
+        self.limit_from_code_in_range(volts, prev.max(self.code_lo).min(self.code_hi))
+    }
+
+    /// [`Output::limit`] from a `prev` known to lie in [`Output::code_range`].
+    #[inline(always)]
+    pub(crate) fn limit_from_code_in_range(&self, volts: T, prev: i32) -> Limited {
         // Codes above the range's lowest, as a real: `clamp_to` maps NaN to 0 (the lowest).
         let x = (volts - self.dac.volts_at_zero) * self.codes_per_volt - self.code_lo_real;
         let in_range = x >= T::ZERO && x <= self.code_span_real;
@@ -149,8 +156,6 @@ impl<T: Real> Output<T> {
             .code_lo
             .saturating_add((x + T::HALF).to_i32())
             .min(self.code_hi);
-        // max/min, not `clamp`: `clamp` asserts lo <= hi, a panic path in the ISR.
-        let prev = prev.max(self.code_lo).min(self.code_hi);
         let code = want
             .max(prev.saturating_sub(self.max_step))
             .min(prev.saturating_add(self.max_step));

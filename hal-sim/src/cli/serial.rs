@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use piezo_core::command::{
-    self, Command, Points, RecCmd, Shape, TriggerCmd, MAX_LEVELS, MAX_LINE, MAX_WORDS,
+    self, Command, Points, RecCmd, Shape, TriggerCmd, MAX_LEVELS, MAX_LINE, MAX_LINES, MAX_WORDS,
     TABLE_ADD_MAX, TABLE_LEN,
 };
 use piezo_core::recorder::Signal;
@@ -67,6 +67,20 @@ pub fn format_command(cmd: &Command<'_>) -> String {
             freq_hz,
         } => format!("wave steps {low_um} {high_um} {levels} {freq_hz}"),
         Command::WaveTable(freq_hz) => format!("wave table {freq_hz}"),
+        Command::WaveRaster {
+            span_um: [sx, sy],
+            lines,
+            line_hz,
+            center_um: [cx, cy],
+        } => format!("wave raster {sx} {sy} {lines} {line_hz} {cx} {cy}"),
+        Command::WaveLissajous {
+            amp_um: [ax, ay],
+            freq_hz: [fx, fy],
+            phase_deg,
+            center_um: [cx, cy],
+        } => format!("wave lissajous {ax} {ay} {fx} {fy} {phase_deg} {cx} {cy}"),
+        Command::Axis(None) => "axis".into(),
+        Command::Axis(Some(n)) => format!("axis {n}"),
         Command::TableClear => "table clear".into(),
         Command::TableLen => "table len".into(),
         Command::TableAdd(points) => {
@@ -109,6 +123,8 @@ pub fn format_command(cmd: &Command<'_>) -> String {
             RecCmd::Stop => "rec stop".into(),
             RecCmd::Status => "rec status".into(),
             RecCmd::Read { start, count } => format!("rec read {start} {count}"),
+            RecCmd::Divider(None) => "rec div".into(),
+            RecCmd::Divider(Some(n)) => format!("rec div {n}"),
         },
         Command::Fault => "fault".into(),
         Command::FaultClear => "fault clear".into(),
@@ -265,9 +281,14 @@ pub fn known_error(code: u8) -> Option<command::Error> {
 /// Unit of a recorder signal (for the CSV header and the plots).
 pub fn signal_unit(s: Signal) -> &'static str {
     match s {
-        Signal::RefUm | Signal::YUm | Signal::ErrorUm => "um",
-        Signal::FfVolts | Signal::UVolts => "V",
-        Signal::AdcCode | Signal::DacCode => "code",
+        Signal::RefUm
+        | Signal::YUm
+        | Signal::ErrorUm
+        | Signal::RefUm1
+        | Signal::YUm1
+        | Signal::ErrorUm1 => "um",
+        Signal::FfVolts | Signal::UVolts | Signal::FfVolts1 | Signal::UVolts1 => "V",
+        Signal::AdcCode | Signal::DacCode | Signal::AdcCode1 | Signal::DacCode1 => "code",
     }
 }
 
@@ -901,6 +922,9 @@ pub enum Action {
     /// Start a waveform, hold a position or stop (hold where it is).
     #[command(subcommand)]
     Wave(WaveCmd),
+    /// Select the axis the 1-axis waves (sine, triangle, square, steps, table, hold) go to
+    /// (`axis 1`: y of an XY build); with no number, print it.
+    Axis { axis: Option<usize> },
     /// Link, parameters, timing and recorder state.
     Status,
     /// Timing of the control task (counts: DWT cycles on the H743, SysTick ticks in QEMU).
@@ -948,8 +972,52 @@ pub enum WaveCmd {
         #[arg(value_parser = parse_um, allow_hyphen_values = true)]
         position: f64,
     },
-    /// Stop the waveform and hold where it is.
+    /// Stop the waveform and hold where it is (every axis).
     Off,
+    /// XY raster (2-axis firmware, `--features xy`): x triangle over X_SPAN at LINE_FREQ,
+    /// y triangle over Y_SPAN, one y sweep per LINES x periods (`wave raster 20um 20um 16
+    /// 50Hz --center 30um,30um`).
+    Raster {
+        #[arg(value_parser = parse_um)]
+        x_span: f64,
+        #[arg(value_parser = parse_um)]
+        y_span: f64,
+        /// x periods per y sweep, 1 to 4096.
+        #[arg(value_parser = clap::value_parser!(u16).range(1..=MAX_LINES as i64))]
+        lines: u16,
+        #[arg(value_parser = parse_hz)]
+        line_freq: f64,
+        /// Centre `x,y` of the scan (default: half the spans, so it starts at 0).
+        #[arg(long, value_delimiter = ',', num_args = 1, value_parser = parse_um, allow_hyphen_values = true)]
+        center: Option<Vec<f64>>,
+    },
+    /// XY Lissajous scan (2-axis firmware): sines of X_AMP at FX and Y_AMP at FY, y --phase
+    /// ahead (`wave lissajous 10um 10um 40Hz 30Hz --center 30um,30um`).
+    Lissajous {
+        #[arg(value_parser = parse_um)]
+        x_amp: f64,
+        #[arg(value_parser = parse_um)]
+        y_amp: f64,
+        #[arg(value_parser = parse_hz)]
+        fx: f64,
+        #[arg(value_parser = parse_hz)]
+        fy: f64,
+        /// Phase of y ahead of x, degrees (-360 to 360).
+        #[arg(long, default_value_t = 90.0, allow_hyphen_values = true)]
+        phase: f64,
+        /// Centre `x,y` of the scan (default: the amplitudes, so it starts at 0).
+        #[arg(long, value_delimiter = ',', num_args = 1, value_parser = parse_um, allow_hyphen_values = true)]
+        center: Option<Vec<f64>>,
+    },
+}
+
+/// `--center x,y` (two positions), or `default`.
+fn center_of(center: &Option<Vec<f64>>, default: [f64; 2]) -> Result<[f32; 2]> {
+    match center.as_deref() {
+        None => Ok(default.map(f32_of)),
+        Some(&[x, y]) => Ok([f32_of(x), f32_of(y)]),
+        Some(v) => bail!("--center takes two positions x,y, got {}", v.len()),
+    }
 }
 
 #[derive(clap::Args, Debug)]
@@ -987,13 +1055,23 @@ pub struct TableArgs {
 #[derive(clap::Args, Debug)]
 pub struct RecordArgs {
     /// Signals, comma separated (ref_um, y_um, error_um, ff_volts, u_volts, adc_code,
-    /// dac_code); the firmware records 4 channels, unnamed ones keep their signal.
+    /// dac_code; axis 1 of an XY build: ref1_um, y1_um, error1_um, ff1_volts, u1_volts,
+    /// adc1_code, dac1_code); the firmware records 4 channels, unnamed ones keep their
+    /// signal.
     #[arg(
         long,
         value_delimiter = ',',
         default_value = "ref_um,y_um,u_volts,error_um"
     )]
     pub signals: Vec<String>,
+    /// Both axes of an XY build: the signals ref_um,y_um,ref1_um,y1_um (the SVG gets an
+    /// x-y panel of reference and measured path).
+    #[arg(long, conflicts_with = "signals")]
+    pub xy: bool,
+    /// Record every N-th control period (1 to 1000): the 1024 frames span N times longer
+    /// (`--every 20` at 100 kHz: 205 ms, a whole XY scan).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub every: u32,
     /// `now`, or `rise|fall|level:<signal>:<level>` (level in the signal's unit).
     #[arg(long, default_value = "now")]
     pub trigger: String,
@@ -1151,6 +1229,41 @@ pub fn execute(
                     writeln!(out, "{}", r.reply_line())?;
                     return Ok(());
                 }
+                WaveCmd::Raster {
+                    x_span,
+                    y_span,
+                    lines,
+                    line_freq,
+                    center,
+                } => {
+                    let center_um = center_of(&center, [x_span / 2.0, y_span / 2.0])?;
+                    let r = c.send(&Command::WaveRaster {
+                        span_um: [f32_of(x_span), f32_of(y_span)],
+                        lines,
+                        line_hz: f32_of(line_freq),
+                        center_um,
+                    })?;
+                    writeln!(out, "{}", r.reply_line())?;
+                    return Ok(());
+                }
+                WaveCmd::Lissajous {
+                    x_amp,
+                    y_amp,
+                    fx,
+                    fy,
+                    phase,
+                    center,
+                } => {
+                    let center_um = center_of(&center, [x_amp, y_amp])?;
+                    let r = c.send(&Command::WaveLissajous {
+                        amp_um: [f32_of(x_amp), f32_of(y_amp)],
+                        freq_hz: [f32_of(fx), f32_of(fy)],
+                        phase_deg: f32_of(phase),
+                        center_um,
+                    })?;
+                    writeln!(out, "{}", r.reply_line())?;
+                    return Ok(());
+                }
                 WaveCmd::Steps {
                     low,
                     high,
@@ -1193,6 +1306,10 @@ pub fn execute(
                 freq_hz: f32_of(a.freq),
                 offset_um: f32_of(a.offset),
             })?;
+            writeln!(out, "{}", r.reply_line())?;
+        }
+        Action::Axis { axis } => {
+            let r = c.send(&Command::Axis(axis))?;
             writeln!(out, "{}", r.reply_line())?;
         }
         Action::Status => status(c, out)?,
@@ -1313,10 +1430,14 @@ fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
     Ok(())
 }
 
+/// The signals of `record --xy`: reference and position of both axes.
+pub const XY_SIGNALS: [&str; 4] = ["ref_um", "y_um", "ref1_um", "y1_um"];
+
 /// A finished capture.
 #[derive(Debug, Clone)]
 pub struct Recording {
     pub channels: Vec<String>,
+    /// Frames per second (the control rate over the recorder's divider).
     pub sample_hz: f64,
     /// Frames before the trigger (time 0 is frame `pre`).
     pub pre: usize,
@@ -1391,7 +1512,44 @@ impl Recording {
             }
             plots.push(p);
         }
+        // Both axes' reference and position: the path in the x-y plane.
+        if let [Some(rx), Some(x), Some(ry), Some(y)] = XY_SIGNALS.map(|n| self.column(n)) {
+            plots.push(
+                Plot::new(
+                    &format!("x-y path, trigger {}", self.trigger),
+                    "x [um]",
+                    "y [um]",
+                )
+                .line("reference (ref_um, ref1_um)", &rx, &ry)
+                .line("measured (y_um, y1_um)", &x, &y),
+            );
+        }
         write_grid(path, &plots, 1).with_context(|| format!("writing {}", path.display()))
+    }
+
+    /// The values of channel `name`, if it was recorded.
+    pub fn column(&self, name: &str) -> Option<Vec<f64>> {
+        let k = self.channels.iter().position(|c| c == name)?;
+        Some(
+            self.frames
+                .iter()
+                .map(|f| f.get(k).copied().unwrap_or(f64::NAN))
+                .collect(),
+        )
+    }
+
+    /// RMS of reference minus position per axis whose pair was recorded (axis, um).
+    pub fn tracking_rms(&self) -> Vec<(usize, f64)> {
+        [("ref_um", "y_um"), ("ref1_um", "y1_um")]
+            .iter()
+            .enumerate()
+            .filter_map(|(axis, (r, y))| {
+                let (r, y) = (self.column(r)?, self.column(y)?);
+                let n = r.len().max(1) as f64;
+                let e2: f64 = r.iter().zip(&y).map(|(r, y)| (r - y) * (r - y)).sum();
+                Some((axis, (e2 / n).sqrt()))
+            })
+            .collect()
     }
 
     /// Min/mean/max per channel.
@@ -1421,6 +1579,9 @@ impl Recording {
                 "  {name:<10} min {lo:>12.5} mean {mean:>12.5} max {hi:>12.5} {}",
                 name_unit(name)
             )?;
+        }
+        for (axis, rms) in self.tracking_rms() {
+            writeln!(out, "  tracking error axis {axis}: {rms:.5} um RMS")?;
         }
         Ok(())
     }
@@ -1489,7 +1650,12 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
         (names, "unknown (--no-arm)".to_string(), a.pre)
     } else {
         let mut signals = Vec::new();
-        for name in &a.signals {
+        let names = if a.xy {
+            XY_SIGNALS.map(String::from).to_vec()
+        } else {
+            a.signals.clone()
+        };
+        for name in &names {
             let s = Signal::from_name(name.trim()).ok_or_else(|| {
                 anyhow!(
                     "--signals: unknown signal `{name}`; one of {}",
@@ -1509,9 +1675,13 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
         })?;
         let trig = parse_trigger(&a.trigger, &channels, a.pre)?;
         c.send(&Command::Rec(RecCmd::Trigger(trig)))?;
+        c.send(&Command::Rec(RecCmd::Divider(Some(a.every as usize))))?;
         c.send(&Command::Rec(RecCmd::Arm))?;
         (channels, a.trigger.clone(), a.pre)
     };
+    // Frames per second: the control rate over the divider the capture ran with.
+    let div = rec_divider(c)?;
+    let sample_hz = sample_hz / div as f64;
     let deadline = Instant::now() + Duration::from_secs_f64(a.wait_s);
     let n = loop {
         let (state, n) = rec_status(c)?;
@@ -1577,6 +1747,23 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
         trigger,
         frames,
     })
+}
+
+/// The recorder's divider (`rec div` -> `ok rec div <n>`).
+fn rec_divider(c: &mut Client) -> Result<u32> {
+    let r = c.send(&Command::Rec(RecCmd::Divider(None)))?;
+    r.details
+        .strip_prefix("rec div ")
+        .and_then(|n| n.parse::<u32>().ok())
+        .filter(|n| *n >= 1)
+        .ok_or_else(|| {
+            SerialError::BadReply {
+                command: "rec div".into(),
+                line: r.reply_line(),
+                why: "expected `ok rec div <n>`, n >= 1".into(),
+            }
+            .into()
+        })
 }
 
 fn rec_status(c: &mut Client) -> Result<(String, usize)> {

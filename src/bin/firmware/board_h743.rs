@@ -6,6 +6,12 @@
 //! * The ADC1 end-of-conversion interrupt is the highest-priority task: read the sample, run
 //!   the step, write the DAC (PA4, DAC1 channel 1). Analog input: PA3 (ADC12_INP15, CN9
 //!   pin 1 "A0" on the Nucleo-144).
+//! * Feature `xy` (two axes): ADC2 converts the y input on the same TIM2 TRGO edge (PC0,
+//!   ADC123_INP10, CN9 pin 3 "A1"); the ADC1 interrupt reads both (ADC2, started on the same
+//!   edge with the same timing, is waited for a bounded number of polls; late counts as an
+//!   overrun and gives a code outside the sensor window, the safe state). The y output is
+//!   DAC1 channel 2 (PA5, CN7 pin 10 "D13"; the green LED LD1 is on PB0, not PA5, on the
+//!   Nucleo-144).
 //!
 //! Converters, external SPI pair (feature `spi-converters`), through the drivers of
 //! [`piezo_core::drivers`] (the ones hal-sim runs on its mock chips):
@@ -16,6 +22,8 @@
 //!   control task: `Ad4000::read`, the step, `Ad5791::set_code`.
 //! * AD5791 DAC on SPI4 (SCK PE2, SDO -> MISO PE5, SDIN <- MOSI PE6), SYNC on PE4, LDAC on
 //!   PE3.
+//! * The SPI pair drives one axis; `xy` with `spi-converters` does not compile (a second
+//!   AD4020/AD5791 pair needs its own buses or chip selects, not wired here).
 //! * stm32h7xx-hal 0.16 implements embedded-hal 0.2 SPI; [`spi`] adapts it to the
 //!   embedded-hal 1.0 `SpiDevice` the drivers take (byte-wise full-duplex exchanges with a
 //!   bounded wait, chip select around each transaction).
@@ -28,7 +36,14 @@
 //!   logger lock is never contended and no handler reaches its reentrancy panic. Timing is
 //!   kept by the DWT cycle counter: no monotonic timer, no async task, no dispatcher.
 
+use crate::control::AXES;
 pub use crate::control::SAMPLE_HZ;
+
+#[cfg(all(feature = "spi-converters", feature = "xy"))]
+compile_error!(
+    "feature `xy` (two axes) needs the on-chip converters: the SPI pair (`spi-converters`) drives one axis"
+);
+
 /// Core clock (Hz): DWT cycle counts are in these cycles.
 pub const SYSCLK_HZ: u32 = 400_000_000;
 /// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
@@ -193,35 +208,77 @@ pub struct Hw {
 /// The converters the control task touches, for the selected variant.
 #[cfg(not(feature = "spi-converters"))]
 pub mod io {
+    use super::AXES;
     use stm32h7xx_hal::{adc, pac, timer::Timer, traits::DacOut};
 
     pub type DacChannel = stm32h7xx_hal::dac::C1<pac::DAC, stm32h7xx_hal::dac::Enabled>;
+    #[cfg(feature = "xy")]
+    pub type DacChannel2 = stm32h7xx_hal::dac::C2<pac::DAC, stm32h7xx_hal::dac::Enabled>;
 
-    /// On-chip ADC1 (16 bit, started by TIM2 TRGO) and DAC1 channel 1 (12 bit).
+    /// Polls of ADC2's end of conversion after ADC1's (same trigger, same timing: it is
+    /// normally done already).
+    #[cfg(feature = "xy")]
+    const ADC2_POLLS: u32 = 64;
+
+    /// On-chip ADC1 (16 bit, started by TIM2 TRGO) and DAC1 channel 1 (12 bit); with `xy`
+    /// also ADC2 (same trigger) and DAC1 channel 2.
     pub struct Io {
         pub adc: adc::Adc<pac::ADC1, adc::Enabled>,
         pub dac: DacChannel,
+        #[cfg(feature = "xy")]
+        pub adc2: adc::Adc<pac::ADC2, adc::Enabled>,
+        #[cfg(feature = "xy")]
+        pub dac2: DacChannel2,
         pub timer: Timer<pac::TIM2>,
     }
 
+    /// The conversion result of `regs`, and whether one was overwritten (OVR).
+    #[inline(always)]
+    fn take(regs: &pac::adc1::RegisterBlock) -> (i32, bool) {
+        // Reading DR clears EOC. OVR means a conversion was overwritten.
+        let overrun = regs.isr.read().ovr().bit_is_set();
+        if overrun {
+            regs.isr.write(|w| w.ovr().set_bit());
+        }
+        (regs.dr.read().bits() as i32, overrun)
+    }
+
     impl Io {
-        /// This period's ADC code, and whether a conversion was lost (a missed deadline).
+        /// This period's ADC codes, and whether a conversion was lost (a missed deadline).
         #[inline(always)]
-        pub fn sample(&mut self) -> (i32, bool) {
-            let regs = self.adc.inner();
-            // Reading DR clears EOC. OVR means a conversion was overwritten.
-            let overrun = regs.isr.read().ovr().bit_is_set();
-            if overrun {
-                regs.isr.write(|w| w.ovr().set_bit());
+        pub fn sample(&mut self) -> ([i32; AXES], bool) {
+            let (x, overrun) = take(self.adc.inner());
+            #[cfg(not(feature = "xy"))]
+            return ([x], overrun);
+            #[cfg(feature = "xy")]
+            {
+                let regs: &pac::adc1::RegisterBlock = self.adc2.inner();
+                let mut ready = false;
+                for _ in 0..ADC2_POLLS {
+                    if regs.isr.read().eoc().bit_is_set() {
+                        ready = true;
+                        break;
+                    }
+                }
+                let (y, overrun2) = take(regs);
+                // Late: an old sample would be stale; outside the sensor window instead.
+                let y = if ready { y } else { i32::MIN };
+                ([x, y], overrun || overrun2 || !ready)
             }
-            (regs.dr.read().bits() as i32, overrun)
         }
 
-        /// Writes the DAC; on failure returns the code it still holds (never, on-chip).
+        /// Writes the DACs; per axis, the code a DAC still holds after a failed write
+        /// (never, on-chip).
         #[inline(always)]
-        pub fn write(&mut self, code: i32) -> Result<(), i32> {
-            self.dac.set_value(code as u16);
-            Ok(())
+        pub fn write(&mut self, codes: [i32; AXES]) -> [Option<i32>; AXES] {
+            #[cfg(not(feature = "xy"))]
+            let [x] = codes;
+            #[cfg(feature = "xy")]
+            let [x, y] = codes;
+            self.dac.set_value(x as u16);
+            #[cfg(feature = "xy")]
+            self.dac2.set_value(y as u16);
+            [None; AXES]
         }
     }
 }
@@ -239,6 +296,8 @@ pub mod io {
     pub type Adc = PositionAdc<AdcBus, HardwarePin>;
     pub type Dac = ActuatorDac<DacBus, Gpio<PE3<Output<PushPull>>>>;
 
+    use super::AXES;
+
     /// AD4020 (CNV from TIM2 CH1) and AD5791 through the core's drivers.
     pub struct Io {
         pub adc: Adc,
@@ -252,24 +311,25 @@ pub mod io {
         /// This period's ADC code (a failed read gives a code outside every sensor window:
         /// the pipeline's range check takes the safe state), and whether a period was lost.
         #[inline(always)]
-        pub fn sample(&mut self) -> (i32, bool) {
+        pub fn sample(&mut self) -> ([i32; AXES], bool) {
             let tim = self.timer.inner();
             // CC1OF: a CNV edge came while the previous one was still pending.
             let overrun = tim.sr.read().cc1of().bit_is_set();
             tim.sr
                 .modify(|_, w| w.cc1if().clear_bit().cc1of().clear_bit());
-            (self.adc.read().unwrap_or(i32::MIN), overrun)
+            ([self.adc.read().unwrap_or(i32::MIN); AXES], overrun)
         }
 
         /// Writes and loads the DAC; on failure returns the code it still holds.
         #[inline(always)]
-        pub fn write(&mut self, code: i32) -> Result<(), i32> {
+        pub fn write(&mut self, codes: [i32; AXES]) -> [Option<i32>; AXES] {
+            let [code] = codes;
             match self.dac.set_code(code) {
                 Ok(()) => {
                     self.held = code;
-                    Ok(())
+                    [None]
                 }
-                Err(_) => Err(self.held),
+                Err(_) => [Some(self.held)],
             }
         }
     }
@@ -333,13 +393,23 @@ mod app {
         #[cfg(not(feature = "spi-converters"))]
         let io = {
             use stm32h7xx_hal::adc;
-            // DAC1 channel 1 on PA4.
+            // DAC1 channel 1 on PA4 (xy: channel 2 on PA5).
+            #[cfg(not(feature = "xy"))]
             let dac = dp
                 .DAC
                 .dac(gpioa.pa4, ccdr.peripheral.DAC12)
                 .calibrate_buffer(&mut delay)
                 .enable();
-            // ADC1, 16 bit, triggered by TIM2 TRGO.
+            #[cfg(feature = "xy")]
+            let (dac, dac2) = {
+                let (c1, c2) = dp.DAC.dac((gpioa.pa4, gpioa.pa5), ccdr.peripheral.DAC12);
+                (
+                    c1.calibrate_buffer(&mut delay).enable(),
+                    c2.calibrate_buffer(&mut delay).enable(),
+                )
+            };
+            // ADC1 (xy: and ADC2), 16 bit, triggered by TIM2 TRGO.
+            #[cfg(not(feature = "xy"))]
             let mut adc = adc::Adc::adc1(
                 dp.ADC1,
                 36.MHz(),
@@ -348,17 +418,47 @@ mod app {
                 &ccdr.clocks,
             )
             .enable();
+            #[cfg(feature = "xy")]
+            let (mut adc, mut adc2) = {
+                let (a1, a2) = adc::adc12(
+                    dp.ADC1,
+                    dp.ADC2,
+                    36.MHz(),
+                    &mut delay,
+                    ccdr.peripheral.ADC12,
+                    &ccdr.clocks,
+                );
+                (a1.enable(), a2.enable())
+            };
             adc.set_resolution(adc::Resolution::SixteenBit);
             adc.set_sample_time(adc::AdcSampleTime::T_8);
-            configure_adc_trigger(adc.inner_mut());
+            configure_adc_trigger(adc.inner(), true);
             let mut ain = gpioa.pa3.into_analog();
             adc.start_conversion(&mut ain);
+            #[cfg(feature = "xy")]
+            {
+                let gpioc = dp.GPIOC.split(ccdr.peripheral.GPIOC);
+                adc2.set_resolution(adc::Resolution::SixteenBit);
+                adc2.set_sample_time(adc::AdcSampleTime::T_8);
+                // Its result is read by ADC1's interrupt.
+                configure_adc_trigger(adc2.inner(), false);
+                let mut ain2 = gpioc.pc0.into_analog();
+                adc2.start_conversion(&mut ain2);
+            }
             let mut timer = dp
                 .TIM2
                 .timer(SAMPLE_HZ.Hz(), ccdr.peripheral.TIM2, &ccdr.clocks);
             timer.pause();
             timer.inner_mut().cr2.modify(|_, w| w.mms().update());
-            Io { adc, dac, timer }
+            Io {
+                adc,
+                dac,
+                #[cfg(feature = "xy")]
+                adc2,
+                #[cfg(feature = "xy")]
+                dac2,
+                timer,
+            }
         };
         #[cfg(feature = "spi-converters")]
         let io = {
@@ -469,16 +569,16 @@ mod app {
         )
     }
 
-    /// ADC1: external trigger TIM2_TRGO (EXTSEL 11, RM0433 table 205), rising edge, and the
-    /// end-of-conversion interrupt.
+    /// ADC1 (or ADC2): external trigger TIM2_TRGO (EXTSEL 11, RM0433 table 205), rising
+    /// edge, and the end-of-conversion interrupt if `eoc_interrupt`.
     #[cfg(not(feature = "spi-converters"))]
-    fn configure_adc_trigger(adc: &mut pac::ADC1) {
+    fn configure_adc_trigger(adc: &pac::adc1::RegisterBlock, eoc_interrupt: bool) {
         // SAFETY: EXTSEL is a 5-bit field; 11 selects tim2_trgo.
         #[allow(unsafe_code)]
         adc.cfgr
             .modify(|_, w| unsafe { w.extsel().bits(11) }.exten().rising_edge());
         adc.ier
-            .modify(|_, w| w.eocie().set_bit().ovrie().clear_bit());
+            .modify(|_, w| w.eocie().bit(eoc_interrupt).ovrie().clear_bit());
     }
 
     /// The control period, on-chip converters: ADC1 end of conversion. Highest priority.
@@ -510,8 +610,10 @@ mod app {
             let t1 = DWT::cycle_count();
             let dac_code = ctl.lp.step(code);
             let t2 = DWT::cycle_count();
-            if let Err(held) = io.write(dac_code) {
-                ctl.lp.dac_write_failed(held);
+            for (axis, held) in io.write(dac_code).into_iter().enumerate() {
+                if let Some(held) = held {
+                    ctl.lp.dac_write_failed(axis, held);
+                }
             }
             ctl.record(code, dac_code);
             let isr = DWT::cycle_count().wrapping_sub(t0);

@@ -21,6 +21,7 @@
 //!   command arrived within [`PERIODS_MAX`] periods), so a host (`piezo serial`) can hold a
 //!   session of several commands.
 
+use crate::control::AXES;
 /// Sample rate of the control loop (Hz of virtual time): 100 kHz in f32, 16 384 Hz in Q16.16.
 pub use crate::control::SAMPLE_HZ;
 /// SysTick clock of QEMU's mps2 machines (Hz).
@@ -143,8 +144,8 @@ impl SimStage {
 }
 
 /// No_std mock converter chips on a simulated SPI bus, for the firmware's own drivers.
-/// They keep their state in atomics (one chip of each kind), so the pins and the bus of a
-/// chip are separate handles like on a board.
+/// They keep their state in atomics (one chip of each kind per axis; the const parameter
+/// `A` is the axis), so the pins and the bus of a chip are separate handles like on a board.
 pub mod chips {
     use crate::control::{ADC_CONFIG, DAC_CONFIG};
     use core::convert::Infallible;
@@ -153,40 +154,65 @@ pub mod chips {
     use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
     use piezo_core::drivers::{ad4000, ad5791};
 
-    /// The code the ADC's input corresponds to now (the stage writes it every sample).
+    /// Axes of mock chips (the xy build uses both).
+    const CHIPS: usize = 2;
+    const I0: AtomicI32 = AtomicI32::new(0);
+    const U0: AtomicU32 = AtomicU32::new(0);
+
+    /// The code axis 0's ADC input corresponds to now (the stage writes it every sample).
     pub static INPUT_CODE: AtomicI32 = AtomicI32::new(0);
+    /// The same for axis 1.
+    static INPUT_CODE_1: AtomicI32 = AtomicI32::new(0);
     /// The code sampled at the last CNV rising edge (what the next read shifts out).
-    static SAMPLED: AtomicI32 = AtomicI32::new(0);
-    static ADC_REG: AtomicU32 = AtomicU32::new(0);
+    static SAMPLED: [AtomicI32; CHIPS] = [I0; CHIPS];
+    static ADC_REG: [AtomicU32; CHIPS] = [U0; CHIPS];
     /// AD5791 registers (DAC, control) and the code the output holds (set at LDAC falls).
-    static DAC_REG: AtomicU32 = AtomicU32::new(0);
-    static DAC_CTRL: AtomicU32 = AtomicU32::new(0);
-    static DAC_READ: AtomicU32 = AtomicU32::new(0);
-    pub static DAC_OUT: AtomicU32 = AtomicU32::new(0);
+    static DAC_REG: [AtomicU32; CHIPS] = [U0; CHIPS];
+    static DAC_CTRL: [AtomicU32; CHIPS] = [U0; CHIPS];
+    static DAC_READ: [AtomicU32; CHIPS] = [U0; CHIPS];
+    static DAC_OUT: [AtomicU32; CHIPS] = [U0; CHIPS];
+
+    /// The input code of axis `a`'s ADC.
+    pub fn input_code(a: usize) -> &'static AtomicI32 {
+        if a == 0 {
+            &INPUT_CODE
+        } else {
+            &INPUT_CODE_1
+        }
+    }
+
+    /// `reg[A]`, or nothing for an axis without a chip (never taken: `A < CHIPS`).
+    fn at<T>(reg: &'static [T; CHIPS], a: usize) -> Option<&'static T> {
+        reg.get(a)
+    }
 
     /// The AD4020's CNV pin: the rising edge samples the input.
-    pub struct Cnv;
+    pub struct Cnv<const A: usize>;
     /// The AD5791's LDAC pin: the falling edge loads the DAC register into the output.
-    pub struct Ldac;
+    pub struct Ldac<const A: usize>;
 
-    impl PinErrorType for Cnv {
+    impl<const A: usize> PinErrorType for Cnv<A> {
         type Error = Infallible;
     }
-    impl OutputPin for Cnv {
+    impl<const A: usize> OutputPin for Cnv<A> {
         fn set_low(&mut self) -> Result<(), Infallible> {
             Ok(())
         }
         fn set_high(&mut self) -> Result<(), Infallible> {
-            SAMPLED.store(INPUT_CODE.load(Relaxed), Relaxed);
+            if let Some(s) = at(&SAMPLED, A) {
+                s.store(input_code(A).load(Relaxed), Relaxed);
+            }
             Ok(())
         }
     }
-    impl PinErrorType for Ldac {
+    impl<const A: usize> PinErrorType for Ldac<A> {
         type Error = Infallible;
     }
-    impl OutputPin for Ldac {
+    impl<const A: usize> OutputPin for Ldac<A> {
         fn set_low(&mut self) -> Result<(), Infallible> {
-            DAC_OUT.store(DAC_REG.load(Relaxed), Relaxed);
+            if let (Some(out), Some(reg)) = (at(&DAC_OUT, A), at(&DAC_REG, A)) {
+                out.store(reg.load(Relaxed), Relaxed);
+            }
             Ok(())
         }
         fn set_high(&mut self) -> Result<(), Infallible> {
@@ -196,25 +222,28 @@ pub mod chips {
 
     /// The AD4020's serial interface: register write (`0x14`, value), register read
     /// (`0x54`), and the conversion result as a left-aligned frame.
-    pub struct AdcSpi;
+    pub struct AdcSpi<const A: usize>;
     /// The AD5791's serial interface: 24-bit frames, a read answered in the next frame.
-    pub struct DacSpi;
+    pub struct DacSpi<const A: usize>;
 
-    impl ErrorType for AdcSpi {
+    impl<const A: usize> ErrorType for AdcSpi<A> {
         type Error = Infallible;
     }
-    impl SpiDevice for AdcSpi {
+    impl<const A: usize> SpiDevice for AdcSpi<A> {
         fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
+            let (Some(adc_reg), Some(sampled)) = (at(&ADC_REG, A), at(&SAMPLED, A)) else {
+                return Ok(());
+            };
             for op in ops.iter_mut() {
                 match op {
-                    Operation::Write([ad4000::CMD_WRITE, v]) => ADC_REG.store(*v as u32, Relaxed),
+                    Operation::Write([ad4000::CMD_WRITE, v]) => adc_reg.store(*v as u32, Relaxed),
                     Operation::Transfer(read, [ad4000::CMD_READ, ..]) => {
                         if let Some(r) = read.get_mut(1) {
-                            *r = ADC_REG.load(Relaxed) as u8;
+                            *r = adc_reg.load(Relaxed) as u8;
                         }
                     }
                     Operation::Read(buf) => {
-                        let frame = ad4000::encode(&ADC_CONFIG, SAMPLED.load(Relaxed));
+                        let frame = ad4000::encode(&ADC_CONFIG, sampled.load(Relaxed));
                         for (b, f) in buf.iter_mut().zip(frame) {
                             *b = f;
                         }
@@ -226,11 +255,16 @@ pub mod chips {
         }
     }
 
-    impl ErrorType for DacSpi {
+    impl<const A: usize> ErrorType for DacSpi<A> {
         type Error = Infallible;
     }
-    impl SpiDevice for DacSpi {
+    impl<const A: usize> SpiDevice for DacSpi<A> {
         fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), Infallible> {
+            let (Some(dac_reg), Some(dac_ctrl), Some(dac_read)) =
+                (at(&DAC_REG, A), at(&DAC_CTRL, A), at(&DAC_READ, A))
+            else {
+                return Ok(());
+            };
             for op in ops.iter_mut() {
                 match op {
                     Operation::Write([a, b, c]) => {
@@ -238,21 +272,21 @@ pub mod chips {
                         let (reg, data) = ((word >> 20) & 0b111, word & ad5791::DATA_MASK);
                         if word & ad5791::READ != 0 {
                             let v = match reg {
-                                ad5791::REG_DAC => DAC_REG.load(Relaxed),
-                                ad5791::REG_CTRL => DAC_CTRL.load(Relaxed),
+                                ad5791::REG_DAC => dac_reg.load(Relaxed),
+                                ad5791::REG_CTRL => dac_ctrl.load(Relaxed),
                                 _ => 0,
                             };
-                            DAC_READ.store(v | (reg << 20) | ad5791::READ, Relaxed);
+                            dac_read.store(v | (reg << 20) | ad5791::READ, Relaxed);
                         } else {
                             match reg {
-                                ad5791::REG_DAC => DAC_REG.store(data, Relaxed),
-                                ad5791::REG_CTRL => DAC_CTRL.store(data, Relaxed),
+                                ad5791::REG_DAC => dac_reg.store(data, Relaxed),
+                                ad5791::REG_CTRL => dac_ctrl.store(data, Relaxed),
                                 _ => {}
                             }
                         }
                     }
                     Operation::Transfer(read, _) => {
-                        let b = DAC_READ.load(Relaxed).to_be_bytes();
+                        let b = dac_read.load(Relaxed).to_be_bytes();
                         for (r, v) in read.iter_mut().zip([b[1], b[2], b[3]]) {
                             *r = v;
                         }
@@ -264,11 +298,16 @@ pub mod chips {
         }
     }
 
-    pub type Adc = crate::control::PositionAdc<AdcSpi, Cnv>;
-    pub type Dac = crate::control::ActuatorDac<DacSpi, Ldac>;
+    pub type Adc<const A: usize = 0> = crate::control::PositionAdc<AdcSpi<A>, Cnv<A>>;
+    pub type Dac<const A: usize = 0> = crate::control::ActuatorDac<DacSpi<A>, Ldac<A>>;
 
-    /// The drivers on the mock chips, initialised (register written and read back).
+    /// The drivers on axis 0's mock chips, initialised (register written and read back).
     pub fn drivers() -> (Adc, Dac) {
+        drivers_of::<0>()
+    }
+
+    /// The drivers on axis `A`'s mock chips, initialised.
+    pub fn drivers_of<const A: usize>() -> (Adc<A>, Dac<A>) {
         let mut adc = Adc::new(AdcSpi, Cnv, ADC_CONFIG).expect("AD4020 driver");
         adc.init().expect("AD4020 mock answers");
         let mut dac = Dac::new(DacSpi, Ldac, DAC_CONFIG).expect("AD5791 driver");
@@ -276,16 +315,90 @@ pub mod chips {
         (adc, dac)
     }
 
-    /// The DAC output code (what the stage sees).
-    pub fn dac_out() -> i32 {
-        DAC_OUT.load(Relaxed) as i32
+    /// Axis `A`'s DAC output code (what the stage sees).
+    pub fn dac_out<const A: usize>() -> i32 {
+        at(&DAC_OUT, A).map_or(0, |o| o.load(Relaxed) as i32)
+    }
+}
+
+/// The simulated stage and the converter drivers of every axis the build drives (xy build:
+/// two independent, identical stages, each behind its own AD4020/AD5791 pair).
+pub struct Io {
+    stage: [SimStage; AXES],
+    adc: chips::Adc<0>,
+    dac: chips::Dac<0>,
+    #[cfg(feature = "xy")]
+    adc1: chips::Adc<1>,
+    #[cfg(feature = "xy")]
+    dac1: chips::Dac<1>,
+}
+
+impl Io {
+    pub fn new() -> Self {
+        let (adc, dac) = chips::drivers_of::<0>();
+        #[cfg(feature = "xy")]
+        let (adc1, dac1) = chips::drivers_of::<1>();
+        Self {
+            stage: core::array::from_fn(|_| SimStage::new(SAMPLE_HZ as f32)),
+            adc,
+            dac,
+            #[cfg(feature = "xy")]
+            adc1,
+            #[cfg(feature = "xy")]
+            dac1,
+        }
+    }
+
+    /// One sample of every axis: the stage moves under its DAC's output, the ADC driver
+    /// samples and reads it. A failed read gives a code outside every sensor window (the
+    /// safe state).
+    #[inline(always)]
+    pub fn read(&mut self) -> [i32; AXES] {
+        let mut codes = [i32::MIN; AXES];
+        let (mut stage, mut code) = (self.stage.iter_mut(), codes.iter_mut());
+        if let (Some(s), Some(c)) = (stage.next(), code.next()) {
+            *c = read_axis(s, &mut self.adc);
+        }
+        #[cfg(feature = "xy")]
+        if let (Some(s), Some(c)) = (stage.next(), code.next()) {
+            *c = read_axis(s, &mut self.adc1);
+        }
+        codes
+    }
+
+    /// Writes and loads every axis' DAC code; a failed write reports the code its DAC
+    /// still holds.
+    #[inline(always)]
+    pub fn write(&mut self, codes: [i32; AXES]) -> [Option<i32>; AXES] {
+        let mut held = [None; AXES];
+        let (mut code, mut h) = (codes.iter(), held.iter_mut());
+        if let (Some(c), Some(h)) = (code.next(), h.next()) {
+            *h = self.dac.set_code(*c).err().map(|_| chips::dac_out::<0>());
+        }
+        #[cfg(feature = "xy")]
+        if let (Some(c), Some(h)) = (code.next(), h.next()) {
+            *h = self.dac1.set_code(*c).err().map(|_| chips::dac_out::<1>());
+        }
+        held
+    }
+}
+
+/// One axis: stage step, conversion, read. Not inlined: one call per axis, and the ELF's
+/// debug info keeps naming `Ad4000::read` in the control interrupt (`.ci/firmware-code.py`).
+#[inline(never)]
+fn read_axis<const A: usize>(stage: &mut SimStage, adc: &mut chips::Adc<A>) -> i32 {
+    let y = stage.step(chips::dac_out::<A>());
+    chips::input_code(A).store(y, core::sync::atomic::Ordering::Relaxed);
+    match adc.start_conversion() {
+        Ok(()) => adc.read().unwrap_or(i32::MIN),
+        Err(_) => i32::MIN,
     }
 }
 
 /// Instruction counts per control step, measured in `init`.
 pub mod bench {
     use super::{uart, SimStage, BENCH_STEPS, SAMPLE_HZ};
-    use crate::control::{c, Ctl, FFS, LAWS};
+    use crate::control::{c, Ctl, AXES, FFS, LAWS};
     use core::hint::black_box;
     use cortex_m::peripheral::{syst::SystClkSource, SYST};
     use piezo_core::command::Reply;
@@ -419,7 +532,7 @@ pub mod bench {
                 let mut dac = 0;
                 for c in codes.iter_mut() {
                     *c = stage.step(dac);
-                    dac = ctl.lp.step(*c);
+                    [dac, ..] = ctl.lp.step([*c; AXES]);
                 }
                 // Same codes, same initial state: the timed run repeats that trajectory.
                 let Some(mut ctl) = configured(law, ff) else {
@@ -428,7 +541,7 @@ pub mod bench {
                 let mut worst = 0;
                 for c in codes.iter().take(50) {
                     let t = SYST::get_current();
-                    black_box(ctl.lp.step(black_box(*c)));
+                    black_box(ctl.lp.step(black_box([*c; AXES])));
                     worst = worst.max(ticks(t, SYST::get_current()));
                 }
                 let Some(mut ctl) = configured(law, ff) else {
@@ -437,7 +550,7 @@ pub mod bench {
                 mark(1);
                 let t0 = SYST::get_current();
                 for c in codes.iter() {
-                    black_box(ctl.lp.step(black_box(*c)));
+                    black_box(ctl.lp.step(black_box([*c; AXES])));
                 }
                 let dt = ticks(t0, SYST::get_current()).saturating_sub(overhead_ticks);
                 mark(2);
@@ -518,10 +631,7 @@ pub mod bench {
 
 #[rtic::app(device = crate::board_qemu::pac, peripherals = false)]
 mod app {
-    use super::{
-        bench, chips, uart, SimStage, PERIODS_MAX, PERIODS_MIN, QUIET_PERIODS, SAMPLE_HZ,
-        SYSTICK_HZ,
-    };
+    use super::{bench, uart, Io, PERIODS_MAX, PERIODS_MIN, QUIET_PERIODS, SAMPLE_HZ, SYSTICK_HZ};
     use crate::control::{c, stream_frames, Ctl};
     use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
@@ -534,9 +644,7 @@ mod app {
 
     #[local]
     struct Local {
-        stage: SimStage,
-        adc: chips::Adc,
-        dac: chips::Dac,
+        io: Io,
         line: LineBuffer,
         table: bench::Table,
     }
@@ -559,18 +667,17 @@ mod app {
         syst.enable_counter();
         defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
         uart::line("ready");
-        let (adc, dac) = chips::drivers();
         let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
-        ctl.lp
-            .p
-            .set_wave(0, piezo_core::pipeline::Wave::Hold { y_um: c(10.0) })
-            .ok();
+        for axis in 0..crate::control::AXES {
+            ctl.lp
+                .p
+                .set_wave(axis, piezo_core::pipeline::Wave::Hold { y_um: c(10.0) })
+                .ok();
+        }
         (
             Shared { ctl, periods: 0 },
             Local {
-                stage: SimStage::new(SAMPLE_HZ as f32),
-                adc,
-                dac,
+                io: Io::new(),
                 line: LineBuffer::new(),
                 table,
             },
@@ -579,25 +686,21 @@ mod app {
 
     /// The control period. SysTick ticks stand in for cycles (x40 = instructions with
     /// `-icount shift=0`). The stage moves under the voltage of the DAC's output, the ADC
-    /// driver samples and reads it, the DAC driver writes and loads the new code.
-    #[task(binds = SysTick, priority = 2, shared = [ctl, periods], local = [stage, adc, dac])]
+    /// driver samples and reads it, the DAC driver writes and loads the new code (every
+    /// axis).
+    #[task(binds = SysTick, priority = 2, shared = [ctl, periods], local = [io])]
     fn sample(cx: sample::Context) {
-        use core::sync::atomic::Ordering::Relaxed;
         let t0 = SYST::get_current();
-        let y = cx.local.stage.step(chips::dac_out());
-        chips::INPUT_CODE.store(y, Relaxed);
-        let (adc, dac) = (cx.local.adc, cx.local.dac);
-        // A failed read gives a code outside every sensor window: the safe state.
-        let code = match adc.start_conversion() {
-            Ok(()) => adc.read().unwrap_or(i32::MIN),
-            Err(_) => i32::MIN,
-        };
+        let io = cx.local.io;
+        let code = io.read();
         (cx.shared.ctl, cx.shared.periods).lock(|ctl, periods| {
             let t1 = SYST::get_current();
             let dac_code = ctl.lp.step(code);
             let t2 = SYST::get_current();
-            if dac.set_code(dac_code).is_err() {
-                ctl.lp.dac_write_failed(chips::dac_out());
+            for (axis, held) in io.write(dac_code).into_iter().enumerate() {
+                if let Some(held) = held {
+                    ctl.lp.dac_write_failed(axis, held);
+                }
             }
             ctl.record(code, dac_code);
             let overrun = SCB::is_pendst_pending();

@@ -11,7 +11,7 @@ use piezo_core::feedback::{
 use piezo_core::feedforward::{Feedforward, Ims, ImsLoop, LinearFf, MultiFeedforward};
 use piezo_core::hysteresis::Cbw;
 use piezo_core::pipeline::{
-    AxisConfig, Config, DacScale, Mode, OutputLimits, Sensor, Wave, TABLE_LEN,
+    lissajous, raster, AxisConfig, Config, DacScale, Mode, OutputLimits, Sensor, Wave, TABLE_LEN,
 };
 use piezo_core::recorder::{self, Recorder, Signal};
 use piezo_core::Real;
@@ -24,12 +24,22 @@ pub type R = f32;
 #[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
 pub type R = piezo_core::fixed::Q16;
 
+/// Axes the firmware drives: 2 with feature `xy` (an XY scanner: raster and Lissajous
+/// scans), else 1.
+pub const AXES: usize = if cfg!(feature = "xy") { 2 } else { 1 };
+
 /// The pipeline of the control task: [`piezo_core::pipeline::FirmwarePipeline`] (the type
-/// hal-sim runs) with an FPU, its Q16.16 twin without one.
-#[cfg(any(target_abi = "eabihf", not(target_os = "none")))]
+/// hal-sim runs), [`piezo_core::pipeline::FirmwarePipeline2`] with feature `xy`, with an
+/// FPU; their Q16.16 twins without one.
+#[cfg(all(
+    any(target_abi = "eabihf", not(target_os = "none")),
+    not(feature = "xy")
+))]
 pub type LoopPipeline = piezo_core::pipeline::FirmwarePipeline;
+#[cfg(all(any(target_abi = "eabihf", not(target_os = "none")), feature = "xy"))]
+pub type LoopPipeline = piezo_core::pipeline::FirmwarePipeline2;
 #[cfg(not(any(target_abi = "eabihf", not(target_os = "none"))))]
-pub type LoopPipeline = piezo_core::pipeline::Pipeline<R, 1>;
+pub type LoopPipeline = piezo_core::pipeline::Pipeline<R, AXES>;
 
 /// A constant of the control path (folded at compile time).
 #[inline(always)]
@@ -108,7 +118,8 @@ pub const SPI_CENTER_UM: f64 = 50.0;
 /// The converters over the stage: ADC over 0..100 um (on-chip straight binary from 0 um;
 /// SPI two's complement over [`SPI_SPAN_UM`], a clipped code is out of range), DAC over
 /// 0..150 V (amplifier gain 45 V/V at 3.3 V on-chip), slew limit 20 V/ms, safe state 0 V.
-pub fn converter_config(sample_hz: R) -> Config<R, 1> {
+/// Every axis alike.
+pub fn converter_config(sample_hz: R) -> Config<R, AXES> {
     let sensor = if SPI_CONVERTERS {
         let half = 1i32 << (ADC_KEEP - 1);
         Sensor {
@@ -146,12 +157,13 @@ pub fn converter_config(sample_hz: R) -> Config<R, 1> {
                 code_max: DAC_MAX,
             },
             safe_volts: c(0.0),
-        }],
+        }; AXES],
     }
 }
 
-/// One axis: the core pipeline (sensor scaling, reference, feedforward, feedback, limits,
-/// DAC code) plus the names of what is selected.
+/// The axes: the core pipeline (sensor scaling, reference, feedforward, feedback, limits,
+/// DAC code) plus the names of what is selected (the same law and compensator on every
+/// axis).
 pub struct Loop {
     pub p: LoopPipeline,
     pub sample_hz: R,
@@ -163,15 +175,17 @@ pub struct Loop {
 impl Loop {
     /// Open loop, holding 0 um, in the safe state's voltage.
     pub fn new(sample_hz: R) -> Self {
-        let ff = MultiFeedforward::PerAxis([Feedforward::Linear(LinearFf {
-            um_per_volt: c(0.16),
-            offset_um: c(0.0),
-        })]);
+        let ff = MultiFeedforward::PerAxis(core::array::from_fn(|_| {
+            Feedforward::Linear(LinearFf {
+                um_per_volt: c(0.16),
+                offset_um: c(0.0),
+            })
+        }));
         let p = LoopPipeline::new(
             converter_config(sample_hz),
-            [Wave::Hold { y_um: c(0.0) }],
+            [Wave::Hold { y_um: c(0.0) }; AXES],
             ff,
-            [Feedback::OpenLoop],
+            core::array::from_fn(|_| Feedback::OpenLoop),
         )
         .expect("the converter configuration is valid");
         Self {
@@ -182,39 +196,60 @@ impl Loop {
         }
     }
 
-    /// One control period: ADC code in, DAC code out (the converters' own codes, 0 ..=
-    /// [`DAC_FULL`]). No panic, bounded, NaN-safe.
+    /// One control period: ADC codes in, DAC codes out (the converters' own codes, 0 ..=
+    /// [`DAC_FULL`]), one per axis. No panic, bounded, NaN-safe.
     #[inline(always)]
-    pub fn step(&mut self, adc_code: i32) -> i32 {
-        let [code] = self.p.step([adc_code >> ADC_SHIFT]);
+    pub fn step(&mut self, adc_code: [i32; AXES]) -> [i32; AXES] {
+        let codes = self.p.step(adc_code.map(|c| c >> ADC_SHIFT));
         // max/min, not clamp: clamp asserts min <= max (a panic path in the handler).
         #[allow(clippy::manual_clamp)]
-        let code = code.max(0).min(DAC_MAX);
-        code << DAC_SHIFT
+        codes.map(|code| code.max(0).min(DAC_MAX) << DAC_SHIFT)
     }
 
-    /// The DAC write of this period failed; the converter still holds `held_code` (its own
-    /// code): the pipeline takes that as applied and latches the safe state.
+    /// The DAC write of `axis` failed this period; the converter still holds `held_code`
+    /// (its own code): the pipeline takes that as applied and latches the safe state.
     #[inline(always)]
-    pub fn dac_write_failed(&mut self, held_code: i32) {
-        self.p.dac_write_failed(0, held_code >> DAC_SHIFT);
+    #[cfg_attr(
+        not(any(feature = "spi-converters", feature = "board-qemu")),
+        allow(dead_code)
+    )]
+    pub fn dac_write_failed(&mut self, axis: usize, held_code: i32) {
+        self.p.dac_write_failed(axis, held_code >> DAC_SHIFT);
     }
 
-    /// This period's signals, indexed by [`Signal::index`] (recorder input). Codes as the
-    /// pipeline sees them (Q16.16: shifted to 15 bits).
+    /// This period's signals, indexed by [`Signal::index`] (recorder input; axis `a` at
+    /// `a * Signal::PER_AXIS`, axes the board lacks read 0). Codes as the pipeline sees
+    /// them (Q16.16: shifted to 15 bits).
     #[inline(always)]
-    pub fn signals(&self, adc_code: i32, dac_code: i32) -> [R; Signal::COUNT] {
+    pub fn signals(&self, adc_code: [i32; AXES], dac_code: [i32; AXES]) -> [R; Signal::COUNT] {
         let st = self.p.state();
-        let (r, y) = (st.trace.setpoint[0].y_um, st.trace.y_um[0]);
-        [
-            r,
-            y,
-            r - y,
-            st.trace.u_ff[0],
-            st.u_applied[0],
-            R::from_i32(adc_code >> ADC_SHIFT),
-            R::from_i32(dac_code >> DAC_SHIFT),
-        ]
+        let mut s = [R::ZERO; Signal::COUNT];
+        for (a, chunk) in s.chunks_exact_mut(Signal::PER_AXIS).enumerate().take(AXES) {
+            let (Some(sp), Some(&y), Some(&ff), Some(&u), Some(&adc), Some(&dac)) = (
+                st.trace.setpoint.get(a),
+                st.trace.y_um.get(a),
+                st.trace.u_ff.get(a),
+                st.u_applied.get(a),
+                adc_code.get(a),
+                dac_code.get(a),
+            ) else {
+                continue;
+            };
+            let r = sp.y_um;
+            let v = [
+                r,
+                y,
+                r - y,
+                ff,
+                u,
+                R::from_i32(adc >> ADC_SHIFT),
+                R::from_i32(dac >> DAC_SHIFT),
+            ];
+            for (d, v) in chunk.iter_mut().zip(v) {
+                *d = v;
+            }
+        }
+        s
     }
 
     /// Selects `open-loop`, `feedforward` or a feedback law (bumpless).
@@ -231,6 +266,12 @@ impl Loop {
                     Error::UnknownMode
                 })?;
                 self.p.set_feedback(0, fb).map_err(|_| Error::OutOfRange)?;
+                for axis in (0..AXES).skip(1) {
+                    let fb = law_by_name(name, self.sample_hz).ok_or(Error::UnknownMode)?;
+                    self.p
+                        .set_feedback(axis, fb)
+                        .map_err(|_| Error::OutOfRange)?;
+                }
                 self.p.set_mode(Mode::ClosedLoop);
             }
         }
@@ -246,30 +287,31 @@ impl Loop {
     /// Selects the feedforward compensator (restarts at the current setpoint).
     pub fn set_ff(&mut self, name: &str) -> Result<(), Error> {
         let ff = ff_by_name(name, self.sample_hz).ok_or(Error::UnknownMode)?;
-        self.p.set_feedforward(MultiFeedforward::PerAxis([ff]));
+        self.p
+            .set_feedforward(MultiFeedforward::PerAxis(core::array::from_fn(|_| {
+                ff.clone()
+            })));
         self.ff = FFS.iter().find(|f| **f == name).copied().unwrap_or("?");
         Ok(())
     }
 
-    /// Rebuilds the pipeline with new limits, starting from the applied voltage (so the
-    /// output does not jump) in the same mode, law and compensator.
-    fn set_limits(&mut self, f: impl FnOnce(&mut OutputLimits<R>)) -> Result<(), Error> {
-        let mut cfg = *self.p.config();
-        let axis = &mut cfg.axes[0];
-        f(&mut axis.limits);
-        let u = self.p.state().u_applied[0];
-        axis.safe_volts = u.clamp_to(axis.limits.volts_min, axis.limits.volts_max);
-        let wave = *self.p.reference(0).ok_or(Error::OutOfRange)?.wave();
-        let mode = self.p.state().mode;
-        let p = LoopPipeline::new(
-            cfg,
-            [wave],
-            self.p.feedforward().clone(),
-            self.p.feedback().clone(),
-        )
-        .map_err(|_| Error::OutOfRange)?;
-        self.p = p;
-        self.p.set_mode(mode);
+    /// Changes the limits of every axis in place (mode, wave, law and compensator keep
+    /// running; no pipeline is rebuilt on the serial task's stack). All axes or none.
+    fn set_limits(&mut self, f: impl Fn(&mut OutputLimits<R>)) -> Result<(), Error> {
+        let cfg = self.p.config();
+        let new = cfg.axes.map(|a| {
+            let mut l = a.limits;
+            f(&mut l);
+            l
+        });
+        // Validate all first, so a rejected change leaves every axis as it was.
+        for (a, l) in cfg.axes.iter().zip(&new) {
+            piezo_core::pipeline::Output::new(l, &a.dac, cfg.sample_hz)
+                .map_err(|_| Error::OutOfRange)?;
+        }
+        for (axis, l) in new.into_iter().enumerate() {
+            self.p.set_limits(axis, l).map_err(|_| Error::OutOfRange)?;
+        }
         Ok(())
     }
 }
@@ -332,6 +374,8 @@ pub struct Ctl {
     pub rec: Recorder<R, REC_CH, REC_N>,
     pub timing: Timing,
     pub table: PointTable,
+    /// The axis the 1-axis waves go to (`axis <n>`).
+    pub axis: usize,
 }
 
 /// Points of `wave table` as `table add` appends them (um).
@@ -498,12 +542,13 @@ impl Ctl {
             rec: Recorder::new(),
             timing: Timing::new(),
             table: PointTable::new(),
+            axis: 0,
         }
     }
 
     /// Feeds the recorder (only while it captures: the signals cost a few instructions).
     #[inline(always)]
-    pub fn record(&mut self, adc_code: i32, dac_code: i32) {
+    pub fn record(&mut self, adc_code: [i32; AXES], dac_code: [i32; AXES]) {
         if matches!(
             self.rec.state(),
             recorder::State::Armed | recorder::State::Triggered
@@ -530,12 +575,13 @@ impl Ctl {
         out: &mut command::Reply<N>,
     ) -> Result<(), Error> {
         let lp = &mut self.lp;
+        let axis = self.axis;
         match cmd {
             Command::Empty => {}
             Command::Ping => out.push_str("ok pong"),
             Command::Help => {
                 out.push_str(
-                    "ok ping help get set mode ff wave table stats rec fault bench; params:",
+                    "ok ping help get set mode ff wave axis table stats rec fault bench; params:",
                 );
                 for p in PARAMS {
                     out.push_str(" ");
@@ -567,13 +613,16 @@ impl Ctl {
                 out.push_str(lp.ff);
             }
             Command::WaveOff => {
-                let y_um = lp.p.state().trace.setpoint[0].y_um;
-                lp.p.set_wave(0, Wave::Hold { y_um })
-                    .map_err(|_| Error::OutOfRange)?;
+                // Every axis holds where its reference is now.
+                let sp = lp.p.state().trace.setpoint;
+                for (a, s) in sp.iter().enumerate() {
+                    lp.p.set_wave(a, Wave::Hold { y_um: s.y_um })
+                        .map_err(|_| Error::OutOfRange)?;
+                }
                 out.push_str("ok wave off");
             }
             Command::WaveHold(y) => {
-                lp.p.set_wave(0, Wave::Hold { y_um: c(y as f64) })
+                lp.p.set_wave(axis, Wave::Hold { y_um: c(y as f64) })
                     .map_err(|_| Error::OutOfRange)?;
                 out.push_str("ok wave hold ");
                 out.push_f32(y);
@@ -605,7 +654,7 @@ impl Ctl {
                         freq_hz: f,
                     },
                 };
-                lp.p.set_wave(0, wave).map_err(|_| Error::OutOfRange)?;
+                lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
                 out.push_str("ok wave ");
                 out.push_str(shape.name());
                 for v in [a, f, o] {
@@ -621,7 +670,7 @@ impl Ctl {
             } => {
                 let (lo, hi, f) = (c(low_um as f64), c(high_um as f64), c(freq_hz as f64));
                 lp.p.set_wave(
-                    0,
+                    axis,
                     Wave::Steps {
                         low_um: lo,
                         high_um: hi,
@@ -659,11 +708,72 @@ impl Ctl {
                 }
                 let f = c(freq_hz as f64);
                 let wave = Wave::table(points, f).map_err(|_| Error::OutOfRange)?;
-                lp.p.set_wave(0, wave).map_err(|_| Error::OutOfRange)?;
+                lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
                 out.push_str("ok wave table ");
                 push_real(out, f);
                 out.push_str(" ");
                 out.push_usize(points.len());
+            }
+            Command::WaveRaster {
+                span_um,
+                lines,
+                line_hz,
+                center_um,
+            } => {
+                let (half, center) = (span_um.map(|s| c(s as f64 * 0.5)), center_um.map(rc));
+                let line_hz = c(line_hz as f64);
+                // One y sweep per `lines` x periods: y runs at line_hz / (2 lines).
+                let frame_hz = line_hz / R::from_i32(2 * lines as i32);
+                set_scan(lp, raster(center, half, line_hz, frame_hz))?;
+                out.push_str("ok wave raster ");
+                push_real(out, half[0] + half[0]);
+                out.push_str(" ");
+                push_real(out, half[1] + half[1]);
+                out.push_str(" ");
+                out.push_u32(lines as u32);
+                out.push_str(" ");
+                push_real(out, line_hz);
+                for v in center {
+                    out.push_str(" ");
+                    push_real(out, v);
+                }
+            }
+            Command::WaveLissajous {
+                amp_um,
+                freq_hz,
+                phase_deg,
+                center_um,
+            } => {
+                let (amp, f, center) = (amp_um.map(rc), freq_hz.map(rc), center_um.map(rc));
+                // The core's lissajous(), with y `phase_deg` ahead of x instead of 90 deg.
+                let mut waves = lissajous(center, amp, f);
+                if let [_, Wave::Sine { phase_turns, .. }] = &mut waves {
+                    *phase_turns = c(phase_deg as f64 / 360.0);
+                }
+                set_scan(lp, waves)?;
+                out.push_str("ok wave lissajous");
+                for v in amp.into_iter().chain(f) {
+                    out.push_str(" ");
+                    push_real(out, v);
+                }
+                out.push_str(" ");
+                out.push_f32(phase_deg);
+                for v in center {
+                    out.push_str(" ");
+                    push_real(out, v);
+                }
+            }
+            Command::Axis(n) => {
+                if let Some(n) = n {
+                    if n >= AXES {
+                        return Err(Error::OutOfRange);
+                    }
+                    self.axis = n;
+                }
+                out.push_str("ok axis ");
+                out.push_usize(self.axis);
+                out.push_str(" of ");
+                out.push_usize(AXES);
             }
             Command::Stats => {
                 let t = &self.timing;
@@ -706,6 +816,7 @@ impl Ctl {
             recorder::ConfigError::NoSuchChannel => Error::UnknownSignal,
             recorder::ConfigError::PreTooLong => Error::OutOfRange,
             recorder::ConfigError::Busy => Error::Busy,
+            recorder::ConfigError::BadDivider => Error::OutOfRange,
         };
         match r {
             RecCmd::Select(names) => {
@@ -715,6 +826,9 @@ impl Ctl {
                 let mut sel = *self.rec.channels();
                 for (slot, name) in sel.iter_mut().zip(names.iter()) {
                     *slot = Signal::from_name(name).ok_or(Error::UnknownSignal)?;
+                    if slot.axis() >= AXES {
+                        return Err(Error::Unsupported);
+                    }
                 }
                 self.rec.select(&sel).map_err(cfg)?;
                 out.push_str("ok rec sel");
@@ -777,6 +891,14 @@ impl Ctl {
                 out.push_str(" ");
                 out.push_usize(self.rec.len());
             }
+            RecCmd::Divider(n) => {
+                if let Some(n) = n {
+                    let n = u32::try_from(n).unwrap_or(u32::MAX);
+                    self.rec.set_divider(n).map_err(cfg)?;
+                }
+                out.push_str("ok rec div ");
+                out.push_u32(self.rec.divider());
+            }
             RecCmd::Read { .. } => return Err(Error::Unsupported),
         }
         Ok(())
@@ -813,6 +935,27 @@ pub fn stream_frames(
         r.push_usize(sent);
     }
     line(r.as_str());
+}
+
+/// A command's number as a control-path value.
+fn rc(v: f32) -> R {
+    c(v as f64)
+}
+
+/// Starts a 2-axis scan on axes 0 and 1 in the same sample (the caller holds the loop);
+/// a 1-axis board answers [`Error::Unsupported`]. Both waves are checked before either runs.
+fn set_scan(lp: &mut Loop, waves: [Wave<R>; 2]) -> Result<(), Error> {
+    if AXES < 2 {
+        return Err(Error::Unsupported);
+    }
+    let fs = lp.p.config().sample_hz;
+    for w in &waves {
+        w.validate(fs).map_err(|_| Error::OutOfRange)?;
+    }
+    for (axis, w) in waves.into_iter().enumerate() {
+        lp.p.set_wave(axis, w).map_err(|_| Error::OutOfRange)?;
+    }
+    Ok(())
 }
 
 /// `ok fault <state> sensor <n> nonfinite <n> dac <n>`: the latched fault and the counters.
