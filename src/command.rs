@@ -26,7 +26,7 @@
 //! | `axis [<n>]` | axis the 1-axis waves (`hold`, `sine`, `triangle`, `square`, `steps`, `table`) apply to (default 0; `err 8` beyond the board's axes); without `n`: report it | `ok axis <n> of <axes>` |
 //! | `wave table <freq_hz>` | periodic spline through the table's points, one period per `1/freq_hz` (fewer than 2 points: `err 12`) | `ok wave table <freq_hz> <n>` |
 //! | `stats` / `stats reset` | timing (cycles min/max/last, overruns) / reset it | `ok ...` |
-//! | `rec sel <signal>...` | recorder channels (up to its channel count) | `ok rec sel ...` |
+//! | `rec sel <signal>...` | recorder channels (up to its channel count): `ref_um y_um error_um ff_volts u_volts adc_code dac_code` of axis 0, `ref1_um y1_um error1_um ff1_volts u1_volts adc1_code dac1_code` of axis 1 (1-axis board: `err 13`) | `ok rec sel ...` |
 //! | `rec trig now` | trigger at once when armed | `ok` |
 //! | `rec trig rise\|fall\|level <channel> <level> [<pre>]` | trigger on a channel | `ok` |
 //! | `rec arm` / `rec stop` | start / abort a capture | `ok` |
@@ -36,6 +36,9 @@
 //! | `fault` | latched fault (`none`, `sensor-range`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
+//!
+//! On a 2-axis (XY) board `mode`, `ff`, `set` (limits) and `wave off` act on every axis;
+//! `get` reads axis 0 (the axes are configured alike).
 //!
 //! Parameter, law and signal names are checked by whoever executes the command (the
 //! firmware), which answers [`Error::UnknownParam`], [`Error::UnknownMode`] or

@@ -1,22 +1,22 @@
 #!/usr/bin/env bash
-# The XY scanner: the 2-axis firmware (`--features xy`, `Pipeline<f32, 2>`) boots on QEMU
-# mps2-an386 with two simulated stages, each behind its own AD4020/AD5791 pair of mock
-# chips, its UART on a TCP socket. `piezo serial` closes both loops (ff+hgo-robust with
-# IMS), runs a raster and a Lissajous scan, reads both axes from the recorder and checks
-# the tracking; a raster with 0 lines must be refused with err 8. Before the boot, the
-# command executor of the xy build runs on the host (scan references, axis selection,
-# modes and limits on both axes) and its pipeline type is compared with hal-sim's 2-axis
-# one; the Q16.16 (Cortex-M3) xy firmware must build too.
+# The XY scanner: the 2-axis firmware (`--features xy`, `Pipeline<_, 2>`) boots on QEMU
+# with two simulated stages, each behind its own AD4020/AD5791 pair of mock chips, its UART
+# on a TCP socket, twice: mps2-an386 (Cortex-M4F, f32, 100 kHz) and mps2-an385 (Cortex-M3,
+# Q16.16, 16 384 Hz). `piezo serial` closes both loops (ff+hgo-robust with IMS), runs a
+# raster and a Lissajous scan, reads both axes from the recorder (divided: whole scans)
+# and checks the tracking; a raster with 0 lines must be refused with err 8. Before the
+# boots, the command executor of the xy build runs on the host (scan references, axis
+# selection, modes and limits on both axes) and its pipeline type is compared with
+# hal-sim's 2-axis one.
 # PIEZO_SERIAL_OUT=<dir> keeps the CSVs and SVGs there.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
 cargo test -q -p piezo-core --features xy --test same_pipeline_executor --test same_pipeline
-cargo build --release --target thumbv7m-none-eabi -p piezo-core --bin firmware \
-  --no-default-features --features board-qemu,xy
-target=thumbv7em-none-eabihf
-cargo build --release --target "$target" -p piezo-core --bin firmware \
-  --no-default-features --features board-qemu,xy
+for target in thumbv7m-none-eabi thumbv7em-none-eabihf; do
+  cargo build --release --target "$target" -p piezo-core --bin firmware \
+    --no-default-features --features board-qemu,xy
+done
 if [ -n "${PIEZO_BIN:-}" ]; then
   piezo=$PIEZO_BIN
 else
@@ -24,48 +24,19 @@ else
   piezo=target/debug/piezo
 fi
 work=$(mktemp -d)
-cp "target/$target/release/firmware" "$work/firmware-xy.elf"
-# The control interrupt runs the pipeline (its feedforward stage names it, see
-# 20-firmware.sh) and both converter drivers.
-python3 .ci/firmware-code.py "$work/firmware-xy.elf" SysTick \
-  "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}|piezo_core::feedforward::MultiFeedforward::compensate|piezo_core::feedforward::MultiFeedforward::compensate::{{closure}}" \
-  "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
-  piezo_core::drivers::ad5791::Ad5791::set_code
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-
-qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none -icount shift=0 \
-  -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
-  -semihosting-config enable=on,target=native -kernel "$work/firmware-xy.elf" >"$work/defmt.bin" &
-qemu=$!
+qemu=
 cleanup() {
-  kill "$qemu" 2>/dev/null || true
-  wait "$qemu" 2>/dev/null || true
+  if [ -n "$qemu" ]; then
+    kill "$qemu" 2>/dev/null || true
+    wait "$qemu" 2>/dev/null || true
+  fi
   rm -rf "$work"
 }
 trap cleanup EXIT
 fail() {
-  echo "36-qemu-xy: FAIL: $*"
+  echo "36-qemu-xy: FAIL ($name): $*"
   exit 1
 }
-
-s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
-for _ in $(seq 50); do
-  if s ping >"$work/ping.txt" 2>&1; then break; fi
-  sleep 0.2
-done
-cat "$work/ping.txt"
-grep -q '^ok pong' "$work/ping.txt" || fail "no answer to ping"
-
-run() {
-  echo "\$ piezo serial $*"
-  s "$@" | tee "$work/last.txt"
-}
-run axis
-grep -qx 'ok axis 0 of 2' "$work/last.txt" || fail "not a 2-axis build"
-run mode ff+hgo-robust --ff ims-cbw
-grep -qx 'ok mode ff+hgo-robust' "$work/last.txt" || fail "mode not selected"
-run limits --u-max 140V --slew 20V/ms
-grep -qx 'output 0 V .. 140 V, slew limit 20000 V/s (20 V/ms)' "$work/last.txt" || fail "limits not set"
 
 # check <csv> <frame_s> <x_lo> <x_hi> <y_lo> <y_hi> <rms_bound_um>: 1024 frames of
 # frame_s, references covering the scan's rectangle and inside it, positions in the sensor
@@ -102,45 +73,91 @@ check() {
 # the scans stay within 4..16 um, and slow enough for the 20 V/ms slew limit (3.2 um/ms;
 # the IMS inverse asks for more near the turning points): a 100 Hz line rate or a 6 um
 # 100 Hz sine is slew-limited (measured 1.2 and 2.0 um RMS).
-# Bound: 0.1 um RMS on each axis, 1 % of the 10 um scan. Measured in this script (QEMU,
-# ff+hgo-robust + ims-cbw): raster x 0.026-0.028 / y 0.0015 um, Lissajous x 0.048 / y 0.025 um;
-# open loop on the same Lissajous and a 20 Hz raster: 1.1 to 1.5 um on each axis.
-bound=${XY_RMS_BOUND_UM:-0.1}
+# Bounds: f32 (M4F, 100 kHz) 0.1 um RMS on each axis, 1 % of the 10 um scan; Q16.16 (M3,
+# 16 384 Hz, 15-bit codes) 0.25 um. Measured in this script (ff+hgo-robust + ims-cbw):
+# f32 raster x 0.026-0.028 / y 0.0015 um, Lissajous x 0.048 / y 0.025 um; Q16.16 raster
+# x 0.048 / y 0.0046 um, Lissajous x 0.114 / y 0.071 um. Open loop on the same Lissajous
+# and a 20 Hz raster: 1.1 to 1.5 um on each axis (f32).
+#
+# session <name> <target> <machine> <cpu> <frame_s raster> <every raster> <frame_s
+# Lissajous> <every Lissajous> <bound um>: boots the xy firmware and runs the scans.
+session() {
+  name=$1
+  local target=$2 machine=$3 cpu=$4 dt_r=$5 every_r=$6 dt_l=$7 every_l=$8 bound=$9
+  local elf="$work/$name.elf" port
+  cp "target/$target/release/firmware" "$elf"
+  # The control interrupt runs the pipeline (its feedforward stage names it where the
+  # debug info does not name the step itself, see 20-firmware.sh) and both drivers.
+  python3 .ci/firmware-code.py "$elf" SysTick \
+    "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}|piezo_core::feedforward::MultiFeedforward::compensate|piezo_core::feedforward::MultiFeedforward::compensate::{{closure}}" \
+    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
+    piezo_core::drivers::ad5791::Ad5791::set_code
+  port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+  qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none -icount shift=0 \
+    -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
+    -semihosting-config enable=on,target=native -kernel "$elf" >"$work/$name.defmt" &
+  qemu=$!
+  s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
+  run() {
+    echo "\$ piezo serial $*"
+    s "$@" | tee "$work/last.txt"
+  }
+  for _ in $(seq 100); do
+    if s ping >"$work/ping.txt" 2>&1; then break; fi
+    sleep 0.2
+  done
+  cat "$work/ping.txt"
+  grep -q '^ok pong' "$work/ping.txt" || fail "no answer to ping"
 
-# Raster: 10 x 10 um around (10, 10), 4 lines at 20 Hz (x at 0.4 um/ms; at 40 Hz the
-# triangle's corners give 0.077 um); one y sweep takes 200 ms, up and down 400 ms: every
-# 50th period recorded, the 1024 frames span 512 ms, both turning points of y whenever
-# the capture starts.
-run wave raster 10um 10um 4 20Hz --center 10um,10um
-grep -qx 'ok wave raster 10 10 4 20 10 10' "$work/last.txt" || fail "raster not started"
-run record --xy --every 50 --out "$work/raster.csv" --svg "$work/raster.svg"
-grep -q 'x-y path' "$work/raster.svg" || fail "no x-y panel in the SVG"
-check "$work/raster.csv" 5e-4 5 15 5 15 "$bound" || fail "raster capture"
+  run axis
+  grep -qx 'ok axis 0 of 2' "$work/last.txt" || fail "not a 2-axis build"
+  run mode ff+hgo-robust --ff ims-cbw
+  grep -qx 'ok mode ff+hgo-robust' "$work/last.txt" || fail "mode not selected"
+  run limits --u-max 140V --slew 20V/ms
+  grep -qx 'output 0 V .. 140 V, slew limit 20000 V/s (20 V/ms)' "$work/last.txt" || fail "limits not set"
 
-# Lissajous: 6 and 5 um at 40 and 30 Hz, y 90 deg ahead, around (10, 10); the figure
-# repeats every 100 ms: every 10th period, 102.4 ms.
-run wave lissajous 6um 5um 40Hz 30Hz --center 10um,10um
-grep -qx 'ok wave lissajous 6 5 40 30 90 10 10' "$work/last.txt" || fail "Lissajous not started"
-run record --xy --every 10 --out "$work/lissajous.csv" --svg "$work/lissajous.svg"
-check "$work/lissajous.csv" 1e-4 4 16 5 15 "$bound" || fail "Lissajous capture"
+  # Raster: 10 x 10 um around (10, 10), 4 lines at 20 Hz (x at 0.4 um/ms; at 40 Hz the
+  # triangle's corners give 0.077 um); one y sweep takes 200 ms, up and down 400 ms: the
+  # divided capture spans about 500 ms, both turning points of y whenever it starts.
+  run wave raster 10um 10um 4 20Hz --center 10um,10um
+  grep -qx 'ok wave raster 10 10 4 20 10 10' "$work/last.txt" || fail "raster not started"
+  run record --xy --every "$every_r" --out "$work/$name-raster.csv" --svg "$work/$name-raster.svg"
+  grep -q 'x-y path' "$work/$name-raster.svg" || fail "no x-y panel in the SVG"
+  check "$work/$name-raster.csv" "$dt_r" 5 15 5 15 "$bound" || fail "raster capture"
 
-# The 1-axis waves go to the selected axis.
-run -- "axis 1" "wave sine 2 100 20" "axis 0"
-grep -qx 'ok axis 1 of 2' "$work/last.txt" || fail "axis 1 not selected"
+  # Lissajous: 6 and 5 um at 40 and 30 Hz, y 90 deg ahead, around (10, 10); the figure
+  # repeats every 100 ms, the divided capture spans at least that.
+  run wave lissajous 6um 5um 40Hz 30Hz --center 10um,10um
+  grep -qx 'ok wave lissajous 6 5 40 30 90 10 10' "$work/last.txt" || fail "Lissajous not started"
+  run record --xy --every "$every_l" --out "$work/$name-lissajous.csv" --svg "$work/$name-lissajous.svg"
+  check "$work/$name-lissajous.csv" "$dt_l" 4 16 5 15 "$bound" || fail "Lissajous capture"
 
-# A bad raster: refused with the firmware's numbered error, the scan keeps running.
-echo "\$ piezo serial -- \"wave raster 10 10 0 100\""
-if s -- "wave raster 10 10 0 100" >"$work/bad.txt" 2>&1; then fail "raster with 0 lines accepted"; fi
-cat "$work/bad.txt"
-grep -q '`wave raster 10 10 0 100`: firmware error 8: value out of range' "$work/bad.txt" ||
-  fail "bad raster not refused with err 8"
-run -- fault
-grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' "$work/last.txt" || fail "fault state not clean"
+  # The 1-axis waves go to the selected axis.
+  run -- "axis 1" "wave sine 2 20 10" "axis 0"
+  grep -qx 'ok axis 1 of 2' "$work/last.txt" || fail "axis 1 not selected"
 
-kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
-if [ -n "${PIEZO_SERIAL_OUT:-}" ]; then
-  mkdir -p "$PIEZO_SERIAL_OUT"
-  cp "$work"/{raster,lissajous}.{csv,svg} "$PIEZO_SERIAL_OUT/"
-  echo "wrote $PIEZO_SERIAL_OUT/{raster,lissajous}.{csv,svg}"
-fi
+  # A bad raster: refused with the firmware's numbered error, nothing latched.
+  echo "\$ piezo serial -- \"wave raster 10 10 0 20\""
+  if s -- "wave raster 10 10 0 20" >"$work/bad.txt" 2>&1; then fail "raster with 0 lines accepted"; fi
+  cat "$work/bad.txt"
+  grep -q '`wave raster 10 10 0 20`: firmware error 8: value out of range' "$work/bad.txt" ||
+    fail "bad raster not refused with err 8"
+  run -- fault
+  grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' "$work/last.txt" || fail "fault state not clean"
+
+  kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
+  kill "$qemu" 2>/dev/null || true
+  wait "$qemu" 2>/dev/null || true
+  qemu=
+  if [ -n "${PIEZO_SERIAL_OUT:-}" ]; then
+    mkdir -p "$PIEZO_SERIAL_OUT"
+    cp "$work/$name"-{raster,lissajous}.{csv,svg} "$PIEZO_SERIAL_OUT/"
+    echo "wrote $PIEZO_SERIAL_OUT/$name-{raster,lissajous}.{csv,svg}"
+  fi
+  echo "=== $name: ok"
+}
+
+# f32 at 100 kHz: every 50th / 10th period; Q16.16 at 16 384 Hz: every 8th / 2nd.
+session m4f-f32-xy thumbv7em-none-eabihf mps2-an386 cortex-m4 5e-4 50 1e-4 10 "${XY_RMS_BOUND_UM:-0.1}"
+session m3-q16-xy thumbv7m-none-eabi mps2-an385 cortex-m3 0.00048828125 8 0.0001220703125 2 "${XY_Q16_RMS_BOUND_UM:-0.25}"
 echo "36-qemu-xy: ok"

@@ -145,10 +145,12 @@ impl AdcChip {
         if !self.cnv_high && self.ready_at_ns <= now {
             self.result = self.converting;
             self.result_frame = self.converting_frame;
+            // Straight from the conversion (one store-to-load hop less on the loop's chain).
+            self.converting_frame
         } else {
             self.stats.early_reads += 1;
+            self.result_frame
         }
-        self.result_frame
     }
 
     /// CNV rising edge: samples the input and starts a conversion.
