@@ -198,6 +198,43 @@ fn typed_commands_drive_the_firmware_executor() {
     .unwrap();
     assert!(out.starts_with("ok wave sine 5"), "{out}");
 
+    // A 2-axis scan on this 1-axis firmware: refused with err 13, the command named as
+    // sent (the default centre made explicit).
+    let e = run(
+        &addr,
+        Action::Wave(WaveCmd::Raster {
+            x_span: 10.0,
+            y_span: 6.0,
+            lines: 4,
+            line_freq: 20.0,
+            center: None,
+        }),
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("`wave raster 10 6 4 20 5 3`: firmware error 13"),
+        "{e}"
+    );
+    let e = run(
+        &addr,
+        Action::Wave(WaveCmd::Lissajous {
+            x_amp: 6.0,
+            y_amp: 5.0,
+            fx: 40.0,
+            fy: 30.0,
+            phase: 45.0,
+            center: Some(vec![10.0]),
+        }),
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().contains("--center takes two positions x,y"),
+        "{e}"
+    );
+    let out = run(&addr, Action::Axis { axis: None }).unwrap();
+    assert_eq!(out, "ok axis 0 of 1\n");
+
     // The firmware refuses; the error names the command and the numbered error.
     let e = run(
         &addr,

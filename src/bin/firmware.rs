@@ -2,7 +2,8 @@
 //!
 //! Board-independent code: [`control`]. Each board is one module selected by a cargo
 //! feature (exactly one): `board-h743` (default, Nucleo-H743ZI2) or `board-qemu`
-//! (QEMU mps2-an386 with a simulated stage, for CI).
+//! (QEMU mps2-an386 with a simulated stage, for CI). Feature `xy` builds the two-axis XY
+//! scanner (`Pipeline<_, 2>`, raster and Lissajous scans; on-chip converters on the H743).
 //!
 //! Build and flash: `cargo run --release --target thumbv7em-none-eabihf --bin firmware`.
 #![cfg_attr(target_os = "none", no_std, no_main)]

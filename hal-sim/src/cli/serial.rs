@@ -2141,7 +2141,7 @@ mod tests {
         /// parser (or the host refuses it before sending).
         #[test]
         fn every_built_command_round_trips(
-            which in 0usize..25, a in finite(), b in finite(), d in finite(),
+            which in 0usize..30, a in finite(), b in finite(), d in finite(),
             n in name(), i in 0usize..5000, k in 0usize..5000,
         ) {
             let shape = [Shape::Sine, Shape::Triangle, Shape::Square][which % 3];
@@ -2173,6 +2173,21 @@ mod tests {
                 21 => Command::TableClear,
                 22 => Command::TableLen,
                 23 => Command::TableAdd(Points::from_slice(&[a, b, d][..1 + i % 3]).unwrap()),
+                24 => Command::WaveRaster {
+                    span_um: [a.abs(), b.abs()],
+                    lines: 1 + (i % MAX_LINES as usize) as u16,
+                    line_hz: d.abs(),
+                    center_um: [d, a],
+                },
+                25 => Command::WaveLissajous {
+                    amp_um: [a.abs(), d.abs()],
+                    freq_hz: [b.abs(), a.abs()],
+                    phase_deg: (d % 360.0),
+                    center_um: [b, d],
+                },
+                26 => Command::Axis(Some(i)),
+                27 => Command::Axis(None),
+                28 => Command::Rec(RecCmd::Divider([None, Some(k)][i % 2])),
                 _ => Command::Bench,
             };
             let line = format_command(&cmd);

@@ -6,7 +6,9 @@
 //!   task runs `Ad4000::start_conversion` + `Ad4000::read` and `Ad5791::set_code` (the
 //!   drivers of `piezo_core::drivers`, the ones hal-sim runs) over the no_std mock chips of
 //!   [`chips`] (an AD4020 whose CNV edge samples the stage, an AD5791 whose LDAC edge sets
-//!   the stage's voltage), with the 20-bit codes of the SPI converter pair.
+//!   the stage's voltage), with the 20-bit codes of the SPI converter pair. With feature
+//!   `xy` there are two identical, independent stages, each behind its own pair of chips
+//!   ([`Io`]).
 //! * The CMSDK UART0 (0x4000_4000, QEMU `-serial`) carries the command protocol, polled from
 //!   the idle task (lowest priority).
 //! * defmt logs go out over semihosting (decode with `defmt-print -e <elf>`).
