@@ -296,18 +296,27 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         self.restart();
     }
 
-    /// Replaces the output limits of `axis` in place (validated like [`Pipeline::new`]):
-    /// mode, wave, compensator and law keep running. `safe_volts` is clamped into the new
-    /// range. A range that excludes the present code moves the output into the range at the
+    /// Replaces the output limits and the safe voltage of `axis` in place (validated like
+    /// [`Pipeline::new`]): mode, wave, compensator and law keep running. The caller passes
+    /// the safe voltage so that narrowing and widening the range again restores it. A range that excludes the present code moves the output into the range at the
     /// next sample (the range wins over the slew limit); within it the new slew limit holds.
-    pub fn set_limits(&mut self, axis: usize, limits: OutputLimits<T>) -> Result<(), ConfigError> {
+    pub fn set_limits(
+        &mut self,
+        axis: usize,
+        limits: OutputLimits<T>,
+        safe_volts: T,
+    ) -> Result<(), ConfigError> {
         let fs = self.config.sample_hz;
         let (Some(a), Some(o)) = (self.config.axes.get_mut(axis), self.output.get_mut(axis)) else {
             return Err(ConfigError::new("axis index out of range"));
         };
-        *o = Output::new(&limits, &a.dac, fs).map_err(|e| e.on_axis(axis))?;
+        let out = Output::new(&limits, &a.dac, fs).map_err(|e| e.on_axis(axis))?;
+        if !(safe_volts >= limits.volts_min && safe_volts <= limits.volts_max) {
+            return Err(ConfigError::new("safe_volts must lie within the limits").on_axis(axis));
+        }
+        *o = out;
         a.limits = limits;
-        a.safe_volts = a.safe_volts.clamp_to(limits.volts_min, limits.volts_max);
+        a.safe_volts = safe_volts;
         Ok(())
     }
 
@@ -598,15 +607,22 @@ mod tests {
             volts_max: 5.0,
             slew_volts_per_s: 1e4,
         };
-        let e = p.set_limits(0, bad).unwrap_err();
+        let e = p.set_limits(0, bad, 7.0).unwrap_err();
         assert!(e.what.contains("volts_min"), "{e}");
-        assert!(p.set_limits(1, axis().limits).is_err());
+        assert!(p.set_limits(1, axis().limits, 0.0).is_err());
         let new = OutputLimits {
             volts_min: 20.0,
             volts_max: 60.0,
             slew_volts_per_s: 5_000.0,
         };
-        p.set_limits(0, new).unwrap();
+        let e = p.set_limits(0, new, 0.0).unwrap_err();
+        assert!(e.what.contains("safe_volts"), "{e}");
+        assert_eq!(
+            p.config().axes[0].limits,
+            axis().limits,
+            "a rejected change keeps the old"
+        );
+        p.set_limits(0, new, 20.0).unwrap();
         assert_eq!(p.state().mode, Mode::Feedforward);
         assert_eq!(p.config().axes[0].limits, new);
         assert_eq!(p.config().axes[0].safe_volts, 20.0);

@@ -268,3 +268,22 @@ fn xy_build_scans_both_axes() {
         "ok rec sel ref_um y_um ref1_um y1_um"
     );
 }
+
+#[test]
+fn narrowing_and_widening_the_range_restores_the_safe_voltage() {
+    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let safe = |ctl: &control::Ctl| ctl.lp.p.config().axes[0].safe_volts as f64;
+    assert_eq!(safe(&ctl), control::SAFE_VOLTS);
+    assert_eq!(ask(&mut ctl, "set u_min 10"), "ok u_min 10");
+    assert_eq!(
+        safe(&ctl),
+        10.0,
+        "the range excludes 0 V: safe state at its edge"
+    );
+    assert_eq!(ask(&mut ctl, "set u_min 0"), "ok u_min 0");
+    assert_eq!(
+        safe(&ctl),
+        control::SAFE_VOLTS,
+        "back to the configured safe state"
+    );
+}

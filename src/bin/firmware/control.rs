@@ -115,6 +115,9 @@ pub const DAC_FULL: i32 = (1 << DAC_BITS) - 1;
 pub const SPI_SPAN_UM: f64 = 120.0;
 pub const SPI_CENTER_UM: f64 = 50.0;
 
+/// Safe state of every axis (V): where the output goes at start-up and on a fault.
+pub const SAFE_VOLTS: f64 = 0.0;
+
 /// The converters over the stage: ADC over 0..100 um (on-chip straight binary from 0 um;
 /// SPI two's complement over [`SPI_SPAN_UM`], a clipped code is out of range), DAC over
 /// 0..150 V (amplifier gain 45 V/V at 3.3 V on-chip), slew limit 20 V/ms, safe state 0 V.
@@ -156,7 +159,7 @@ pub fn converter_config(sample_hz: R) -> Config<R, AXES> {
                 code_min: 0,
                 code_max: DAC_MAX,
             },
-            safe_volts: c(0.0),
+            safe_volts: c(SAFE_VOLTS),
         }; AXES],
     }
 }
@@ -310,7 +313,11 @@ impl Loop {
                 .map_err(|_| Error::OutOfRange)?;
         }
         for (axis, l) in new.into_iter().enumerate() {
-            self.p.set_limits(axis, l).map_err(|_| Error::OutOfRange)?;
+            // The safe voltage is SAFE_VOLTS, moved into the range while the range excludes it.
+            let safe = c(SAFE_VOLTS).clamp_to(l.volts_min, l.volts_max);
+            self.p
+                .set_limits(axis, l, safe)
+                .map_err(|_| Error::OutOfRange)?;
         }
         Ok(())
     }
