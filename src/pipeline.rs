@@ -317,6 +317,8 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         *o = out;
         a.limits = limits;
         a.safe_volts = safe_volts;
+        // The fused step's guard proof covers the output range: decide again.
+        self.fused = self.fusable();
         Ok(())
     }
 
