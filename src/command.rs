@@ -10,9 +10,10 @@
 //! | command | effect | reply |
 //! |---|---|---|
 //! | `ping` | liveness | `ok pong` |
-//! | `help` | list of commands | `ok ping help get set mode ff wave table stats rec fault bench; params: ...` |
+//! | `help` | list of commands and parameters | `ok ping help get set cbw mode ff wave axis table stats rec fault bench; params: ...` |
 //! | `get <param>` | read a parameter | `ok <param> <value>` |
 //! | `set <param> <value>` | write a parameter (range-checked) | `ok <param> <value>` |
+//! | `cbw <d> <alpha> <beta> <gamma>` | the CBW model (um/V, um/V, 1/V, 1/V) at once, as `piezo fit --model cbw` reports it | `ok cbw <d> <alpha> <beta> <gamma>` |
 //! | `mode <law>` | select the feedback law (bumpless) | `ok mode <law>` |
 //! | `ff <compensator>` | select the feedforward compensator | `ok ff <name>` |
 //! | `wave off` / `wave hold <um>` | stop the waveform (every axis) / hold a position | `ok wave ...` |
@@ -37,7 +38,16 @@
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
 //!
-//! On a 2-axis (XY) board `mode`, `ff`, `set` (limits) and `wave off` act on every axis;
+//! Parameters (the firmware's `help` lists them): `u_min`, `u_max` (V), `slew` (V/s);
+//! read-only `um_per_code`, `volts_per_code`, `sample_hz`; the hysteresis model and gains
+//! the laws and compensators are built from: `cbw_d`, `cbw_alpha` (um/V), `cbw_beta`,
+//! `cbw_gamma` (1/V) of the CBW (n = 1) that `piezo fit --model cbw` identifies,
+//! `um_per_volt`, `offset_um` (open-loop scaling), `hgo_eps` (s), `lambda1`, `lambda2`
+//! (1/s, robust law), `pid_kp` (V/um), `pid_ki` (V/(um s)). A model or gain `set` is
+//! checked by the core's constructors and installs the rebuilt law and compensator
+//! bumplessly; a refused value (`err 8`) changes nothing.
+//!
+//! On a 2-axis (XY) board `mode`, `ff`, `set` (limits and model) and `wave off` act on every axis;
 //! `get` reads axis 0 (the axes are configured alike).
 //!
 //! Parameter, law and signal names are checked by whoever executes the command (the
@@ -246,6 +256,9 @@ pub enum Command<'a> {
     Help,
     Get(&'a str),
     Set(&'a str, f32),
+    /// `cbw <d> <alpha> <beta> <gamma>`: the four CBW parameters at once (one check, one
+    /// rebuild: a fitted model can be valid where a mix of old and new values is not).
+    Cbw([f32; 4]),
     Mode(&'a str),
     Feedforward(&'a str),
     WaveOff,
@@ -714,6 +727,10 @@ fn parse_words<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
             w.at_most(3)?;
             let name = w.arg(1)?;
             Command::Set(name, w.num(2)?)
+        }
+        "cbw" => {
+            w.at_most(5)?;
+            Command::Cbw([w.num(1)?, w.num(2)?, w.num(3)?, w.num(4)?])
         }
         "mode" => {
             w.at_most(2)?;
@@ -1252,6 +1269,12 @@ mod tests {
         assert_eq!(p(""), Ok(Command::Empty));
         assert_eq!(p("get kp"), Ok(Command::Get("kp")));
         assert_eq!(p("set kp 1.5e-3"), Ok(Command::Set("kp", 1.5e-3)));
+        assert_eq!(
+            p("cbw 0.39 0.27 1e-3 1.8e-4"),
+            Ok(Command::Cbw([0.39, 0.27, 1e-3, 1.8e-4]))
+        );
+        assert_eq!(p("cbw 0.39 0.27 1e-3"), Err(Error::MissingArgument));
+        assert_eq!(p("cbw 0.39 0.27 1e-3 1 2"), Err(Error::TooManyArguments));
         assert_eq!(p("mode hgo"), Ok(Command::Mode("hgo")));
         assert_eq!(p("ff ims-cbw"), Ok(Command::Feedforward("ims-cbw")));
         assert_eq!(p("wave off"), Ok(Command::WaveOff));

@@ -289,6 +289,32 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         self.restart();
     }
 
+    /// Replaces the open-loop scaling of `axis` (validated like [`Pipeline::new`]); the
+    /// compensator and the law restart bumplessly.
+    pub fn set_open_loop(
+        &mut self,
+        axis: usize,
+        open_loop: LinearFf<T>,
+    ) -> Result<(), ConfigError> {
+        let a = self
+            .config
+            .axes
+            .get_mut(axis)
+            .ok_or(ConfigError::new("axis index out of range"))?;
+        if !(open_loop.um_per_volt.is_finite()
+            && open_loop.um_per_volt != T::ZERO
+            && open_loop.offset_um.is_finite())
+        {
+            return Err(ConfigError::new(
+                "open_loop: um_per_volt must be finite and non-zero, offset_um finite",
+            )
+            .on_axis(axis));
+        }
+        a.open_loop = open_loop;
+        self.restart();
+        Ok(())
+    }
+
     /// Switches mode without a bump: the compensator and the feedback law restart from
     /// the applied voltage, and the slew limit bounds whatever difference remains.
     pub fn set_mode(&mut self, mode: Mode) {

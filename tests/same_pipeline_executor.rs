@@ -9,7 +9,7 @@ mod control;
 use piezo_core::command::{parse, Reply};
 
 fn ask(ctl: &mut control::Ctl, line: &str) -> String {
-    let mut r = Reply::<160>::new();
+    let mut r = Reply::<{ control::REPLY_LEN }>::new();
     match parse(line.as_bytes()) {
         Ok(c) => ctl.execute(c, &mut r),
         Err(e) => r.push_error(e),
@@ -286,4 +286,161 @@ fn narrowing_and_widening_the_range_restores_the_safe_voltage() {
         control::SAFE_VOLTS,
         "back to the configured safe state"
     );
+}
+
+/// The CBW model of the IMS compensator on every axis.
+fn ims_models(ctl: &control::Ctl) -> Vec<piezo_core::hysteresis::Cbw<f32>> {
+    use piezo_core::feedforward::{Feedforward, MultiFeedforward};
+    let MultiFeedforward::PerAxis(ffs) = ctl.lp.p.feedforward() else {
+        panic!("per-axis feedforward expected");
+    };
+    ffs.iter()
+        .map(|f| match f {
+            Feedforward::ImsCbw(ims) => *ims.model(),
+            other => panic!("IMS-CBW expected, got {}", other.name()),
+        })
+        .collect()
+}
+
+/// The observer's `eps_s` and the robust gains on every axis.
+fn robust_gains(ctl: &control::Ctl) -> Vec<(f32, f32, f32)> {
+    use piezo_core::feedback::Feedback;
+    ctl.lp
+        .p
+        .feedback()
+        .iter()
+        .map(|f| match f {
+            Feedback::Robust(r) => (r.observer().eps_s(), r.config().lambda1, r.config().lambda2),
+            other => panic!("robust law expected, got {}", other.name()),
+        })
+        .collect()
+}
+
+#[test]
+fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
+    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let help = ask(&mut ctl, "help");
+    for p in control::PARAMS {
+        assert!(help.contains(&format!(" {p}")), "help lacks {p}: {help}");
+        assert!(ask(&mut ctl, &format!("get {p}")).starts_with(&format!("ok {p} ")));
+    }
+    assert_eq!(ask(&mut ctl, "get cbw_d"), "ok cbw_d 0.16");
+    assert_eq!(ask(&mut ctl, "get hgo_eps"), "ok hgo_eps 0.0002");
+    assert_eq!(ask(&mut ctl, "ff ims-cbw"), "ok ff ims-cbw");
+    assert_eq!(ask(&mut ctl, "mode ff+hgo-robust"), "ok mode ff+hgo-robust");
+    let mid = 1 << (control::ADC_BITS - 1);
+    assert_eq!(ask(&mut ctl, "wave sine 5 100 20"), "ok wave sine 5 100 20");
+    for _ in 0..200 {
+        ctl.lp.step([mid; control::AXES]);
+    }
+    let fused = ctl.lp.p.is_fused();
+    assert_eq!(
+        fused,
+        control::AXES == 1,
+        "the 1-axis build runs the fused step"
+    );
+
+    // A new model: the compensator and the observer take it, on every axis.
+    assert_eq!(ask(&mut ctl, "set cbw_alpha 0.05"), "ok cbw_alpha 0.05");
+    assert_eq!(ask(&mut ctl, "set cbw_d 0.2"), "ok cbw_d 0.2");
+    for m in ims_models(&ctl) {
+        assert_eq!(
+            (m.d(), m.alpha(), m.beta(), m.gamma()),
+            (0.2, 0.05, 0.02, 0.01)
+        );
+    }
+    for f in ctl.lp.p.feedback() {
+        let piezo_core::feedback::Feedback::Robust(r) = f else {
+            panic!("robust law expected");
+        };
+        assert_eq!(r.observer().d_p(), 0.2);
+    }
+    assert_eq!(ask(&mut ctl, "set hgo_eps 1e-4"), "ok hgo_eps 0.0001");
+    assert_eq!(ask(&mut ctl, "set lambda2 3000"), "ok lambda2 3000");
+    for g in robust_gains(&ctl) {
+        assert_eq!(g, (1e-4, 2_000.0, 3_000.0));
+    }
+    assert_eq!(ctl.lp.law, "ff+hgo-robust");
+    assert_eq!(ctl.lp.ff, "ims-cbw");
+    assert_eq!(ctl.lp.p.is_fused(), fused, "the fast path is decided again");
+    // Still tracking the sine after the change (bumpless, finite).
+    for _ in 0..200 {
+        let codes = ctl.lp.step([mid; control::AXES]);
+        assert!(codes.iter().all(|c| (0..=control::DAC_FULL).contains(c)));
+    }
+    assert_eq!(
+        ask(&mut ctl, "fault"),
+        "ok fault none sensor 0 nonfinite 0 dac 0"
+    );
+
+    // Refused values: beta < gamma (004 eq. 3), alpha <= 0, eps <= 0, negative gains,
+    // zero scaling; a model IMS cannot invert (d below the hysteresis slope).
+    let before_ff = ctl.lp.p.feedforward().clone();
+    let before_fb = ctl.lp.p.feedback().clone();
+    let before_cfg = ctl.lp.p.config().axes.map(|a| a.open_loop);
+    for bad in [
+        "set cbw_beta 0.001",
+        "set cbw_alpha 0",
+        "set cbw_d 0.01",
+        "set hgo_eps 0",
+        "set lambda1 -5",
+        "set pid_kp -1",
+        "set pid_ki -1",
+        "set um_per_volt 0",
+        "set cbw_gamma 0.03",
+    ] {
+        assert_eq!(ask(&mut ctl, bad), "err 8 value out of range", "{bad}");
+    }
+    assert_eq!(ask(&mut ctl, "set kp 1"), "err 7 unknown parameter");
+    assert!(ctl.lp.p.feedforward() == &before_ff, "compensator changed");
+    assert!(ctl.lp.p.feedback() == &before_fb, "law changed");
+    assert_eq!(ctl.lp.p.config().axes.map(|a| a.open_loop), before_cfg);
+    assert_eq!(ask(&mut ctl, "get cbw_beta"), "ok cbw_beta 0.02");
+
+    // The whole model at once: valid as a whole, though not through single `set`s from
+    // the present one (beta 0.005 below the present gamma 0.01 breaks 004 eq. 3).
+    assert_eq!(
+        ask(&mut ctl, "set cbw_beta 0.005"),
+        "err 8 value out of range"
+    );
+    assert_eq!(
+        ask(&mut ctl, "cbw 0.21 0.06 0.005 0.002"),
+        "ok cbw 0.21 0.06 0.005 0.002"
+    );
+    for m in ims_models(&ctl) {
+        assert_eq!(
+            (m.d(), m.alpha(), m.beta(), m.gamma()),
+            (0.21, 0.06, 0.005, 0.002)
+        );
+    }
+    assert_eq!(ctl.lp.p.is_fused(), fused);
+    // beta < gamma (004 eq. 3); and the CBW `piezo fit` finds on the smarthysteresis
+    // record: its h bound (230 um) puts the largest slope dh/du above d, which IMS refuses.
+    let before_ff = ctl.lp.p.feedforward().clone();
+    for bad in [
+        "cbw 0.2 0.05 0.01 0.02",
+        "cbw 0.394516 0.270568 0.000996874 0.000177702",
+    ] {
+        assert_eq!(ask(&mut ctl, bad), "err 8 value out of range", "{bad}");
+    }
+    assert!(ctl.lp.p.feedforward() == &before_ff, "compensator changed");
+    assert_eq!(ask(&mut ctl, "get cbw_gamma"), "ok cbw_gamma 0.002");
+
+    // PID gains and the open-loop scaling.
+    assert_eq!(ask(&mut ctl, "set pid_kp 0.25"), "ok pid_kp 0.25");
+    assert_eq!(ask(&mut ctl, "mode pid"), "ok mode pid");
+    for f in ctl.lp.p.feedback() {
+        let piezo_core::feedback::Feedback::Pid(p) = f else {
+            panic!("PID expected");
+        };
+        assert_eq!((p.config().kp, p.config().ki), (0.25, 2_000.0));
+    }
+    assert_eq!(ask(&mut ctl, "set um_per_volt 0.5"), "ok um_per_volt 0.5");
+    assert_eq!(ask(&mut ctl, "set offset_um -1"), "ok offset_um -1");
+    for a in &ctl.lp.p.config().axes {
+        assert_eq!(
+            (a.open_loop.um_per_volt, a.open_loop.offset_um),
+            (0.5, -1.0)
+        );
+    }
 }

@@ -58,7 +58,7 @@ impl Fake {
     /// What the boards' command task does with one line.
     fn answer(&mut self, line: Result<&[u8], command::Error>, out: &mut Vec<u8>) {
         self.run(PERIODS_PER_LINE);
-        let mut reply = command::Reply::<160>::new();
+        let mut reply = command::Reply::<{ control::REPLY_LEN }>::new();
         match line.and_then(command::parse) {
             Ok(Command::Empty) => return,
             Ok(Command::Rec(RecCmd::Read { start, count })) => {

@@ -50,6 +50,7 @@ pub fn format_command(cmd: &Command<'_>) -> String {
         Command::Help => "help".into(),
         Command::Get(name) => format!("get {name}"),
         Command::Set(name, v) => format!("set {name} {v}"),
+        Command::Cbw([d, a, b, g]) => format!("cbw {d} {a} {b} {g}"),
         Command::Mode(law) => format!("mode {law}"),
         Command::Feedforward(name) => format!("ff {name}"),
         Command::WaveOff => "wave off".into(),
@@ -2141,7 +2142,7 @@ mod tests {
         /// parser (or the host refuses it before sending).
         #[test]
         fn every_built_command_round_trips(
-            which in 0usize..30, a in finite(), b in finite(), d in finite(),
+            which in 0usize..31, a in finite(), b in finite(), d in finite(),
             n in name(), i in 0usize..5000, k in 0usize..5000,
         ) {
             let shape = [Shape::Sine, Shape::Triangle, Shape::Square][which % 3];
@@ -2188,6 +2189,7 @@ mod tests {
                 26 => Command::Axis(Some(i)),
                 27 => Command::Axis(None),
                 28 => Command::Rec(RecCmd::Divider([None, Some(k)][i % 2])),
+                29 => Command::Cbw([a, b, d, -a]),
                 _ => Command::Bench,
             };
             let line = format_command(&cmd);

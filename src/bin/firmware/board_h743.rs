@@ -637,7 +637,7 @@ mod app {
             let Some(line) = cx.local.line.push(byte) else {
                 continue;
             };
-            let mut reply = cmd::Reply::<160>::new();
+            let mut reply = cmd::Reply::<{ crate::control::REPLY_LEN }>::new();
             match line.and_then(cmd::parse) {
                 Ok(Command::Empty) => continue,
                 Ok(Command::Rec(RecCmd::Read { start, count })) => {

@@ -739,7 +739,7 @@ mod app {
                 let Some(line) = cx.local.line.push(byte) else {
                     continue;
                 };
-                let mut reply = cmd::Reply::<160>::new();
+                let mut reply = cmd::Reply::<{ crate::control::REPLY_LEN }>::new();
                 match line.and_then(cmd::parse) {
                     Ok(Command::Empty) => continue,
                     Ok(Command::Bench) => {

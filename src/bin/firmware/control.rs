@@ -144,10 +144,7 @@ pub fn converter_config(sample_hz: R) -> Config<R, AXES> {
         sample_hz,
         axes: [AxisConfig {
             sensor,
-            open_loop: LinearFf {
-                um_per_volt: c(0.16),
-                offset_um: c(0.0),
-            },
+            open_loop: Params::default().linear(),
             limits: OutputLimits {
                 volts_min: c(0.0),
                 volts_max: c(150.0),
@@ -173,16 +170,16 @@ pub struct Loop {
     /// Selected law (`open-loop`, `feedforward` or a law of [`LAWS`]) and feedforward.
     pub law: &'static str,
     pub ff: &'static str,
+    /// Model, open-loop scaling and gains the law and compensator are built from.
+    pub params: Params,
 }
 
 impl Loop {
     /// Open loop, holding 0 um, in the safe state's voltage.
     pub fn new(sample_hz: R) -> Self {
+        let params = Params::default();
         let ff = MultiFeedforward::PerAxis(core::array::from_fn(|_| {
-            Feedforward::Linear(LinearFf {
-                um_per_volt: c(0.16),
-                offset_um: c(0.0),
-            })
+            Feedforward::Linear(params.linear())
         }));
         let p = LoopPipeline::new(
             converter_config(sample_hz),
@@ -196,6 +193,7 @@ impl Loop {
             sample_hz,
             law: "open-loop",
             ff: "linear",
+            params,
         }
     }
 
@@ -263,14 +261,17 @@ impl Loop {
             _ => {
                 // A known law whose configuration this number type cannot hold (ADRC's
                 // gain in Q16.16) is "unsupported", not "unknown".
-                let fb = law_by_name(name, self.sample_hz).ok_or(if LAWS.contains(&name) {
-                    Error::Unsupported
-                } else {
-                    Error::UnknownMode
-                })?;
+                let fb = law_with(name, &self.params, self.sample_hz).ok_or(
+                    if LAWS.contains(&name) {
+                        Error::Unsupported
+                    } else {
+                        Error::UnknownMode
+                    },
+                )?;
                 self.p.set_feedback(0, fb).map_err(|_| Error::OutOfRange)?;
                 for axis in (0..AXES).skip(1) {
-                    let fb = law_by_name(name, self.sample_hz).ok_or(Error::UnknownMode)?;
+                    let fb =
+                        law_with(name, &self.params, self.sample_hz).ok_or(Error::UnknownMode)?;
                     self.p
                         .set_feedback(axis, fb)
                         .map_err(|_| Error::OutOfRange)?;
@@ -289,13 +290,68 @@ impl Loop {
 
     /// Selects the feedforward compensator (restarts at the current setpoint).
     pub fn set_ff(&mut self, name: &str) -> Result<(), Error> {
-        let ff = ff_by_name(name, self.sample_hz).ok_or(Error::UnknownMode)?;
+        let ff = ff_with(name, &self.params, self.sample_hz).ok_or(Error::UnknownMode)?;
         self.p
             .set_feedforward(MultiFeedforward::PerAxis(core::array::from_fn(|_| {
                 ff.clone()
             })));
         self.ff = FFS.iter().find(|f| **f == name).copied().unwrap_or("?");
         Ok(())
+    }
+
+    /// Sets parameter `name` of [`Params`] to `v`: validated through the core's
+    /// constructors, then the open-loop scaling, the compensator and the selected law are
+    /// rebuilt from it and installed bumplessly on every axis. A refused value
+    /// ([`Error::OutOfRange`]) changes nothing.
+    fn set_params(&mut self, name: &str, v: R) -> Result<(), Error> {
+        let mut p = self.params;
+        *p.slot(name).ok_or(Error::UnknownParam)? = v;
+        self.install(p)
+    }
+
+    /// Sets the CBW model `[d, alpha, beta, gamma]` at once (like [`Loop::set_params`]).
+    fn set_cbw(&mut self, [d, alpha, beta, gamma]: [R; 4]) -> Result<(), Error> {
+        let p = Params {
+            cbw_d: d,
+            cbw_alpha: alpha,
+            cbw_beta: beta,
+            cbw_gamma: gamma,
+            ..self.params
+        };
+        self.install(p)
+    }
+
+    /// Validates `p` and, when valid, rebuilds and installs everything from it.
+    fn install(&mut self, p: Params) -> Result<(), Error> {
+        p.validate(self.sample_hz)?;
+        // The selected law must build too (validate() covers its parts; checked before
+        // anything changes).
+        if !matches!(self.law, "open-loop" | "feedforward")
+            && law_with(self.law, &p, self.sample_hz).is_none()
+        {
+            return Err(Error::OutOfRange);
+        }
+        let old = self.params;
+        self.params = p;
+        let r = self.reinstall();
+        if r.is_err() {
+            // Unreachable after validate(); keep the old model running rather than a mix.
+            self.params = old;
+            let _ = self.reinstall();
+        }
+        r
+    }
+
+    /// Rebuilds the open-loop scaling, the compensator and the selected law from
+    /// [`Loop::params`] (bumpless: the pipeline restarts them from the applied voltage).
+    fn reinstall(&mut self) -> Result<(), Error> {
+        for axis in 0..AXES {
+            self.p
+                .set_open_loop(axis, self.params.linear())
+                .map_err(|_| Error::OutOfRange)?;
+        }
+        self.set_ff(self.ff)?;
+        self.set_law(self.law)
     }
 
     /// Changes the limits of every axis in place (mode, wave, law and compensator keep
@@ -438,19 +494,116 @@ pub const LAWS: [&str; 11] = [
 /// with pole [`STAGE_POLE_PER_S`], range 0..150 V.
 pub const STAGE_POLE_PER_S: f64 = 2.0 * core::f64::consts::PI * 500.0;
 
-/// The feedback laws of the core, by name, with gains for [`STAGE_POLE_PER_S`].
+/// What `set` changes besides the limits: the hysteresis model (the one `piezo fit
+/// --model cbw` identifies), the open-loop scaling and the gains (config, apart from the
+/// laws' state). [`Params::default`] is the simulated stage: CBW set 1 of the 000 backup
+/// slide, first-order linear part with pole [`STAGE_POLE_PER_S`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// CBW (n = 1) of the IMS feedforward and the HGO's observer model: `d`, `alpha` (um/V),
+    /// `beta`, `gamma` (1/V).
+    pub cbw_d: R,
+    pub cbw_alpha: R,
+    pub cbw_beta: R,
+    pub cbw_gamma: R,
+    /// Open-loop scaling (open-loop mode and the `linear` compensator).
+    pub um_per_volt: R,
+    pub offset_um: R,
+    /// HGO `epsilon` (s), 000 eq. (8).
+    pub hgo_eps_s: R,
+    /// Robust law gains (1/s).
+    pub lambda1: R,
+    pub lambda2: R,
+    /// PID gains: V/um and V/(um s).
+    pub pid_kp: R,
+    pub pid_ki: R,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            cbw_d: c(0.16),
+            cbw_alpha: c(0.07),
+            cbw_beta: c(0.02),
+            cbw_gamma: c(0.01),
+            um_per_volt: c(0.16),
+            offset_um: c(0.0),
+            hgo_eps_s: c(2e-4),
+            lambda1: c(2_000.0),
+            lambda2: c(2_000.0),
+            pid_kp: c(0.5),
+            pid_ki: c(2_000.0),
+        }
+    }
+}
+
+impl Params {
+    pub fn model(&self) -> Option<Cbw<R>> {
+        Cbw::with_n1(self.cbw_d, self.cbw_alpha, self.cbw_beta, self.cbw_gamma).ok()
+    }
+
+    pub fn linear(&self) -> LinearFf<R> {
+        LinearFf {
+            um_per_volt: self.um_per_volt,
+            offset_um: self.offset_um,
+        }
+    }
+
+    /// The slot of a settable parameter, by its `get`/`set` name.
+    fn slot(&mut self, name: &str) -> Option<&mut R> {
+        Some(match name {
+            "cbw_d" => &mut self.cbw_d,
+            "cbw_alpha" => &mut self.cbw_alpha,
+            "cbw_beta" => &mut self.cbw_beta,
+            "cbw_gamma" => &mut self.cbw_gamma,
+            "um_per_volt" => &mut self.um_per_volt,
+            "offset_um" => &mut self.offset_um,
+            "hgo_eps" => &mut self.hgo_eps_s,
+            "lambda1" => &mut self.lambda1,
+            "lambda2" => &mut self.lambda2,
+            "pid_kp" => &mut self.pid_kp,
+            "pid_ki" => &mut self.pid_ki,
+            _ => return None,
+        })
+    }
+
+    /// Every consumer accepts these values: the core's constructors decide (CBW bounds,
+    /// IMS invertibility, HGO gains, robust and PID gains, open-loop scaling), so any law
+    /// and compensator can be selected afterwards.
+    #[inline(never)]
+    pub fn validate(&self, sample_hz: R) -> Result<(), Error> {
+        let ok = ff_with("ims-cbw", self, sample_hz).is_some()
+            && law_with("hgo-robust", self, sample_hz).is_some()
+            && law_with("pid", self, sample_hz).is_some()
+            && self.um_per_volt.is_finite()
+            && self.um_per_volt != R::ZERO
+            && self.offset_um.is_finite();
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::OutOfRange)
+        }
+    }
+}
+
+/// The feedback laws of the core, by name, with the default [`Params`].
 pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
+    law_with(name, &Params::default(), sample_hz)
+}
+
+/// The feedback laws of the core, by name, with the model and gains of `p`.
+pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
     let dt_s = c(1.0) / sample_hz;
     let (ff, base) = match name.strip_prefix("ff+") {
         Some(b) => (true, b),
         None => (false, name),
     };
-    let model = Cbw::with_n1(c(0.16), c(0.07), c(0.02), c(0.01)).ok()?;
+    let model = p.model()?;
     let hgo = || {
         Hgo::new(
             ObserverModel::Cbw(model),
             c(STAGE_POLE_PER_S),
-            c(2e-4),
+            p.hgo_eps_s,
             c(hgo::K1),
             c(hgo::K2),
             dt_s,
@@ -461,8 +614,8 @@ pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
         Robust::new(
             hgo()?,
             RobustConfig {
-                lambda1: c(2_000.0),
-                lambda2: c(2_000.0),
+                lambda1: p.lambda1,
+                lambda2: p.lambda2,
                 feedforward: ff,
                 convergence,
             },
@@ -473,8 +626,8 @@ pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
     match base {
         "open-loop" if !ff => Some(Feedback::OpenLoop),
         "pid" => Pid::new(PidConfig {
-            kp: c(0.5),
-            ki: c(2_000.0),
+            kp: p.pid_kp,
+            ki: p.pid_ki,
             kd: c(0.0),
             tf_s: c(1e-4),
             kb: c(1.0),
@@ -522,20 +675,22 @@ pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
 #[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
 pub const FFS: [&str; 3] = ["linear", "ims-cbw", "ims-cbw-delayed"];
 
-/// The feedforward compensators, by name: linear scaling, or IMS around the CBW model of
-/// 000 backup slide set 1 (0..150 V).
+/// The feedforward compensators, by name, with the default [`Params`].
 pub fn ff_by_name(name: &str, sample_hz: R) -> Option<Feedforward<R>> {
+    ff_with(name, &Params::default(), sample_hz)
+}
+
+/// The feedforward compensators, by name: linear scaling, or IMS around the CBW model of
+/// `p` (0..150 V).
+pub fn ff_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedforward<R>> {
     let ims = |closure| {
-        let model = Cbw::with_n1(c(0.16), c(0.07), c(0.02), c(0.01)).ok()?;
+        let model = p.model()?;
         Ims::new(model, closure, c(0.0), c(150.0), c(1.0) / sample_hz)
             .ok()
             .map(Feedforward::ImsCbw)
     };
     match name {
-        "linear" => Some(Feedforward::Linear(LinearFf {
-            um_per_volt: c(0.16),
-            offset_um: c(0.0),
-        })),
+        "linear" => Some(Feedforward::Linear(p.linear())),
         "ims-cbw" => ims(ImsLoop::Solved),
         "ims-cbw-delayed" => ims(ImsLoop::Delayed),
         _ => None,
@@ -588,7 +743,7 @@ impl Ctl {
             Command::Ping => out.push_str("ok pong"),
             Command::Help => {
                 out.push_str(
-                    "ok ping help get set mode ff wave axis table stats rec fault bench; params:",
+                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench; params:",
                 );
                 for p in PARAMS {
                     out.push_str(" ");
@@ -608,6 +763,20 @@ impl Ctl {
                 out.push_str(name);
                 out.push_str(" ");
                 push_real(out, get_param(lp, name)?);
+            }
+            Command::Cbw(v) => {
+                let v = v.map(rc);
+                lp.set_cbw(v)?;
+                out.push_str("ok cbw");
+                for v in [
+                    lp.params.cbw_d,
+                    lp.params.cbw_alpha,
+                    lp.params.cbw_beta,
+                    lp.params.cbw_gamma,
+                ] {
+                    out.push_str(" ");
+                    push_real(out, v);
+                }
             }
             Command::Mode(name) => {
                 lp.set_law(name)?;
@@ -992,15 +1161,30 @@ pub fn push_real<const N: usize>(out: &mut command::Reply<N>, v: R) {
     out.push_f32(v.to_f64() as f32);
 }
 
-/// Parameter names of `get`/`set` (`sample_hz` and the scalings are read-only).
-pub const PARAMS: [&str; 6] = [
+/// Parameter names of `get`/`set` (`sample_hz` and the converter scalings are read-only;
+/// from `cbw_d` on they are the [`Params`]).
+pub const PARAMS: [&str; 17] = [
     "u_min",
     "u_max",
     "slew",
     "um_per_code",
     "volts_per_code",
     "sample_hz",
+    "cbw_d",
+    "cbw_alpha",
+    "cbw_beta",
+    "cbw_gamma",
+    "um_per_volt",
+    "offset_um",
+    "hgo_eps",
+    "lambda1",
+    "lambda2",
+    "pid_kp",
+    "pid_ki",
 ];
+
+/// Capacity of a command's reply line (`help` lists every parameter).
+pub const REPLY_LEN: usize = 256;
 
 fn get_param(lp: &Loop, name: &str) -> Result<R, Error> {
     let cfg = lp.p.config();
@@ -1012,7 +1196,10 @@ fn get_param(lp: &Loop, name: &str) -> Result<R, Error> {
         "um_per_code" => a.sensor.um_per_code,
         "volts_per_code" => a.dac.volts_per_code,
         "sample_hz" => cfg.sample_hz,
-        _ => return Err(Error::UnknownParam),
+        _ => {
+            let mut p = lp.params;
+            *p.slot(name).ok_or(Error::UnknownParam)?
+        }
     })
 }
 
@@ -1036,6 +1223,6 @@ fn set_param(lp: &mut Loop, name: &str, v: R) -> Result<(), Error> {
             lp.set_limits(|l| l.slew_volts_per_s = v)
         }
         "um_per_code" | "volts_per_code" | "sample_hz" => Err(Error::Busy),
-        _ => Err(Error::UnknownParam),
+        _ => lp.set_params(name, v),
     }
 }
