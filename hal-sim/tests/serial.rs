@@ -645,3 +645,118 @@ fn a_divided_capture_spans_longer() {
     let e = c.send(&Command::Rec(RecCmd::Divider(Some(0)))).unwrap_err();
     assert!(e.to_string().contains("firmware error 8"), "{e}");
 }
+
+/// A report in the shape `piezo fit --model cbw --out <dir>` writes (`fit.json`).
+fn fit_json(name: &str, model: &str, params: &[(&str, f64)]) -> PathBuf {
+    let params: Vec<serde_json::Value> = params
+        .iter()
+        .map(|(k, v)| serde_json::json!([k, v]))
+        .collect();
+    let report = serde_json::json!({
+        "model": model, "train": "rec.csv", "valid": null, "linear_step": null,
+        "parts": [{"kind": "siso", "input": 0, "output": 0, "fit": {
+            "model": model, "params": params, "sign": 1.0, "offset": -0.5,
+            "upsample": 1, "linear": []}}],
+        "train_metrics": [], "valid_metrics": [], "valid_from_rest_metrics": [], "seconds": 0.1
+    });
+    let path = tmp(name);
+    std::fs::write(&path, serde_json::to_string_pretty(&report).unwrap()).unwrap();
+    path
+}
+
+/// The value `piezo serial params` prints for `name`.
+fn param(listing: &str, name: &str) -> f64 {
+    listing
+        .lines()
+        .find_map(|l| {
+            let mut w = l.split_whitespace();
+            (w.next() == Some(name)).then(|| w.next().unwrap().parse().unwrap())
+        })
+        .unwrap_or_else(|| panic!("no {name} in {listing}"))
+}
+
+#[test]
+fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
+    let addr = spawn_firmware();
+    let before = run(&addr, Action::Params).unwrap();
+    assert_eq!(param(&before, "cbw_d"), 0.16, "{before}");
+    assert_eq!(param(&before, "u_max"), 150.0);
+    assert_eq!(param(&before, "pid_ki"), 2000.0);
+
+    // gamma/beta 0.4 of beta 0.005: gamma 0.002.
+    let good = fit_json(
+        "fit-good.json",
+        "cbw",
+        &[
+            ("d", 0.21),
+            ("alpha", 0.06),
+            ("beta", 0.005),
+            ("gamma/beta", 0.4),
+        ],
+    );
+    let out = run(&addr, Action::LoadFit { fit: good.clone() }).unwrap();
+    assert!(out.contains("ok cbw 0.21 0.06 0.005 0.002"), "{out}");
+    assert!(out.contains("offset -0.5 um is not sent"), "{out}");
+    let after = run(&addr, Action::Params).unwrap();
+    for (k, v) in [
+        ("cbw_d", 0.21),
+        ("cbw_alpha", 0.06),
+        ("cbw_beta", 0.005),
+        ("cbw_gamma", 0.002),
+    ] {
+        assert!((param(&after, k) - v).abs() < 1e-6, "{k}: {after}");
+    }
+    assert_eq!(param(&after, "pid_ki"), 2000.0);
+
+    // The firmware refuses a model IMS cannot invert (the smarthysteresis fit): the error
+    // names the file and the firmware's reply, and the model stays.
+    let refused = fit_json(
+        "fit-refused.json",
+        "cbw",
+        &[
+            ("d", 0.394516),
+            ("alpha", 0.270568),
+            ("beta", 0.000996874),
+            ("gamma/beta", 0.178262),
+        ],
+    );
+    let e = run(
+        &addr,
+        Action::LoadFit {
+            fit: refused.clone(),
+        },
+    )
+    .unwrap_err();
+    let msg = format!("{e:#}");
+    assert!(msg.contains(&refused.display().to_string()), "{msg}");
+    assert!(msg.contains("refused the CBW model of parts[0]"), "{msg}");
+    assert!(msg.contains("error 8"), "{msg}");
+    let still = run(&addr, Action::Params).unwrap();
+    assert!((param(&still, "cbw_d") - 0.21).abs() < 1e-6, "{still}");
+
+    // Reports without a CBW fit or with a key missing: named, nothing sent.
+    let pi = fit_json("fit-pi.json", "pi", &[("c2", 0.1)]);
+    let msg = format!("{:#}", run(&addr, Action::LoadFit { fit: pi }).unwrap_err());
+    assert!(
+        msg.contains("fit-pi.json: no CBW fit in `parts` (found: pi (siso))"),
+        "{msg}"
+    );
+    let partial = fit_json("fit-partial.json", "cbw", &[("d", 0.21), ("alpha", 0.06)]);
+    let msg = format!(
+        "{:#}",
+        run(&addr, Action::LoadFit { fit: partial }).unwrap_err()
+    );
+    assert!(
+        msg.contains("fit-partial.json: parts[0].fit.params lacks `beta`"),
+        "{msg}"
+    );
+    let missing = tmp("fit-missing.json");
+    let msg = format!(
+        "{:#}",
+        run(&addr, Action::LoadFit { fit: missing }).unwrap_err()
+    );
+    assert!(
+        msg.contains("cannot read") && msg.contains("fit-missing.json"),
+        "{msg}"
+    );
+}
