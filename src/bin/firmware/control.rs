@@ -586,7 +586,8 @@ impl Params {
     }
 }
 
-/// The feedback laws of the core, by name, with the default [`Params`].
+/// The feedback laws of the core, by name, with the default [`Params`] (host tests).
+#[allow(dead_code)]
 pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
     law_with(name, &Params::default(), sample_hz)
 }
@@ -675,7 +676,8 @@ pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
 #[cfg_attr(not(feature = "board-qemu"), allow(dead_code))]
 pub const FFS: [&str; 3] = ["linear", "ims-cbw", "ims-cbw-delayed"];
 
-/// The feedforward compensators, by name, with the default [`Params`].
+/// The feedforward compensators, by name, with the default [`Params`] (host tests).
+#[allow(dead_code)]
 pub fn ff_by_name(name: &str, sample_hz: R) -> Option<Feedforward<R>> {
     ff_with(name, &Params::default(), sample_hz)
 }
