@@ -288,7 +288,10 @@ impl Loop {
         Ok(())
     }
 
-    /// Selects the feedforward compensator (restarts at the current setpoint).
+    /// Selects the feedforward compensator (restarts at the current setpoint). Out of line:
+    /// its compensators stay out of the frame that [`Loop::install`] holds around
+    /// [`Loop::set_law`] (the serial task's stack bound).
+    #[inline(never)]
     pub fn set_ff(&mut self, name: &str) -> Result<(), Error> {
         let ff = ff_with(name, &self.params, self.sample_hz).ok_or(Error::UnknownMode)?;
         self.p
@@ -326,8 +329,7 @@ impl Loop {
         p.validate(self.sample_hz)?;
         // The selected law must build too (validate() covers its parts; checked before
         // anything changes).
-        if !matches!(self.law, "open-loop" | "feedforward")
-            && law_with(self.law, &p, self.sample_hz).is_none()
+        if !matches!(self.law, "open-loop" | "feedforward") && !builds(self.law, &p, self.sample_hz)
         {
             return Err(Error::OutOfRange);
         }
@@ -344,14 +346,23 @@ impl Loop {
 
     /// Rebuilds the open-loop scaling, the compensator and the selected law from
     /// [`Loop::params`] (bumpless: the pipeline restarts them from the applied voltage).
+    #[inline(never)]
     fn reinstall(&mut self) -> Result<(), Error> {
+        self.set_open_loop()?;
+        self.set_ff(self.ff)?;
+        self.set_law(self.law)
+    }
+
+    /// The open-loop scaling of [`Loop::params`] on every axis (out of line, like
+    /// [`Loop::set_ff`]).
+    #[inline(never)]
+    fn set_open_loop(&mut self) -> Result<(), Error> {
         for axis in 0..AXES {
             self.p
                 .set_open_loop(axis, self.params.linear())
                 .map_err(|_| Error::OutOfRange)?;
         }
-        self.set_ff(self.ff)?;
-        self.set_law(self.law)
+        Ok(())
     }
 
     /// Changes the limits of every axis in place (mode, wave, law and compensator keep
@@ -584,6 +595,12 @@ impl Params {
             Err(Error::OutOfRange)
         }
     }
+}
+
+/// `law` builds from `p` (out of line: the law is not held in the caller's frame).
+#[inline(never)]
+fn builds(law: &str, p: &Params, sample_hz: R) -> bool {
+    law_with(law, p, sample_hz).is_some()
 }
 
 /// The feedback laws of the core, by name, with the default [`Params`] (host tests).

@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# From `piezo fit` to the firmware: the QEMU build (mps2-an386, f32) boots with its UART on
+# TCP; `piezo serial load-fit` sends the CBW of a fit.json (the shape `piezo fit --model cbw
+# --out <dir>` writes), `piezo serial params` must read it back, ff+hgo-robust with IMS must
+# run on it, and a model the core refuses (the smarthysteresis fit: IMS cannot invert it)
+# must fail with the file named and the firmware's error, leaving the model as it was.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
+target=thumbv7em-none-eabihf
+cargo build --release --target "$target" -p piezo-core --bin firmware \
+  --no-default-features --features board-qemu
+if [ -n "${PIEZO_BIN:-}" ]; then
+  piezo=$PIEZO_BIN
+else
+  cargo build -q -p hal-sim --bin piezo
+  piezo=target/debug/piezo
+fi
+work=$(mktemp -d)
+cp "target/$target/release/firmware" "$work/firmware.elf"
+port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none -icount shift=0 \
+  -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
+  -semihosting-config enable=on,target=native -kernel "$work/firmware.elf" >"$work/defmt.bin" &
+qemu=$!
+cleanup() {
+  kill "$qemu" 2>/dev/null || true
+  wait "$qemu" 2>/dev/null || true
+  rm -rf "$work"
+}
+trap cleanup EXIT
+fail() {
+  echo "36-load-fit: FAIL: $*"
+  exit 1
+}
+s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
+for _ in $(seq 50); do
+  if s ping >"$work/ping.txt" 2>&1; then break; fi
+  sleep 0.2
+done
+grep -q '^ok pong' "$work/ping.txt" || { cat "$work/ping.txt"; fail "no answer to ping"; }
+
+# fit <file> <d> <alpha> <beta> <gamma/beta>: a one-part CBW report as `piezo fit` writes it.
+fit() {
+  cat >"$1" <<JSON
+{"model": "cbw", "train": "rec.csv", "valid": null, "linear_step": null,
+ "parts": [{"kind": "siso", "input": 0, "output": 0,
+   "fit": {"model": "cbw", "params": [["d", $2], ["alpha", $3], ["beta", $4], ["gamma/beta", $5]],
+           "sign": 1.0, "offset": 0.0, "upsample": 1, "linear": []}}],
+ "train_metrics": [], "valid_metrics": [], "valid_from_rest_metrics": [], "seconds": 0.1}
+JSON
+}
+fit "$work/fit.json" 0.21 0.06 0.005 0.4
+fit "$work/refused.json" 0.394516 0.270568 0.000996874 0.178262
+
+echo "\$ piezo serial load-fit fit.json"
+s load-fit "$work/fit.json" | tee "$work/load.txt"
+grep -qx 'ok cbw 0.21 0.06 0.005 0.002' "$work/load.txt" || fail "model not installed"
+echo "\$ piezo serial params"
+s params | tee "$work/params.txt"
+for kv in 'cbw_d 0.21' 'cbw_alpha 0.06' 'cbw_beta 0.005' 'cbw_gamma 0.002' 'hgo_eps 0.0002' 'pid_kp 0.5'; do
+  set -- $kv
+  awk -v k="$1" -v v="$2" '$1 == k && ($2 - v) ^ 2 < 1e-14 { ok = 1 } END { exit !ok }' \
+    "$work/params.txt" || fail "params: $1 is not $2"
+done
+s mode ff+hgo-robust --ff ims-cbw | tee "$work/mode.txt"
+grep -qx 'ok mode ff+hgo-robust' "$work/mode.txt" || fail "mode on the loaded model"
+s --keep-going -- "set lambda1 1500" "set hgo_eps 0" >"$work/gains.txt" 2>&1 || true
+cat "$work/gains.txt"
+grep -qx 'ok lambda1 1500' "$work/gains.txt" || fail "gain not set"
+grep -qx 'err 8 value out of range' "$work/gains.txt" || fail "eps 0 not refused"
+
+echo "\$ piezo serial load-fit refused.json"
+if s load-fit "$work/refused.json" >"$work/refused.txt" 2>&1; then fail "refused model accepted"; fi
+cat "$work/refused.txt"
+grep -q "refused.json: the firmware refused the CBW model of parts\[0\]: .*error 8" "$work/refused.txt" ||
+  fail "refusal does not name the file and the firmware error"
+s -- "get cbw_d" | grep -qx 'ok cbw_d 0.21' || fail "a refused model changed the firmware"
+s -- "fault" | grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' || fail "fault after the changes"
+kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
+echo "36-load-fit: ok"
