@@ -30,7 +30,7 @@ cleanup() {
 }
 trap cleanup EXIT
 fail() {
-  echo "36-load-fit: FAIL: $*"
+  echo "37-load-fit: FAIL: $*"
   exit 1
 }
 s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
@@ -78,4 +78,4 @@ grep -q "refused.json: the firmware refused the CBW model of parts\[0\]: .*error
 s -- "get cbw_d" | grep -qx 'ok cbw_d 0.21' || fail "a refused model changed the firmware"
 s -- "fault" | grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' || fail "fault after the changes"
 kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
-echo "36-load-fit: ok"
+echo "37-load-fit: ok"
