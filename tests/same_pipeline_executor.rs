@@ -414,17 +414,22 @@ fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
         );
     }
     assert_eq!(ctl.lp.p.is_fused(), fused);
-    // beta < gamma (004 eq. 3); and the CBW `piezo fit` finds on the smarthysteresis
-    // record: its h bound (230 um) puts the largest slope dh/du above d, which IMS refuses.
+    // beta < gamma (004 eq. 3); and d = 0.05 below the largest slope dh/du (0.093 um/V),
+    // which IMS refuses.
     let before_ff = ctl.lp.p.feedforward().clone();
-    for bad in [
-        "cbw 0.2 0.05 0.01 0.02",
-        "cbw 0.394516 0.270568 0.000996874 0.000177702",
-    ] {
+    for bad in ["cbw 0.2 0.05 0.01 0.02", "cbw 0.05 0.07 0.02 0.01"] {
         assert_eq!(ask(&mut ctl, bad), "err 8 value out of range", "{bad}");
     }
     assert!(ctl.lp.p.feedforward() == &before_ff, "compensator changed");
     assert_eq!(ask(&mut ctl, "get cbw_gamma"), "ok cbw_gamma 0.002");
+    // The CBW `piezo fit` finds on the smarthysteresis record: its loop bound (230 um) lies
+    // far outside 0..150 V, where |h| <= alpha * 150 V keeps dh/du below d. Accepted.
+    let fitted = ask(&mut ctl, "cbw 0.394516 0.270568 0.000996874 0.000177702");
+    assert!(fitted.starts_with("ok cbw 0.394516"), "{fitted}");
+    assert_eq!(
+        ask(&mut ctl, "cbw 0.21 0.06 0.005 0.002"),
+        "ok cbw 0.21 0.06 0.005 0.002"
+    );
 
     // PID gains and the open-loop scaling.
     assert_eq!(ask(&mut ctl, "set pid_kp 0.25"), "ok pid_kp 0.25");

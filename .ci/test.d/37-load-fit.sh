@@ -2,7 +2,7 @@
 # From `piezo fit` to the firmware: the QEMU build (mps2-an386, f32) boots with its UART on
 # TCP; `piezo serial load-fit` sends the CBW of a fit.json (the shape `piezo fit --model cbw
 # --out <dir>` writes), `piezo serial params` must read it back, ff+hgo-robust with IMS must
-# run on it, and a model the core refuses (the smarthysteresis fit: IMS cannot invert it)
+# run on it, and a model the core refuses (d below the largest hysteresis slope: IMS cannot invert it)
 # must fail with the file named and the firmware's error, leaving the model as it was.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -51,7 +51,7 @@ fit() {
 JSON
 }
 fit "$work/fit.json" 0.21 0.06 0.005 0.4
-fit "$work/refused.json" 0.394516 0.270568 0.000996874 0.178262
+fit "$work/refused.json" 0.05 0.07 0.02 0.5
 
 echo "\$ piezo serial load-fit fit.json"
 s load-fit "$work/fit.json" | tee "$work/load.txt"

@@ -708,16 +708,17 @@ fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
     }
     assert_eq!(param(&after, "pid_ki"), 2000.0);
 
-    // The firmware refuses a model IMS cannot invert (the smarthysteresis fit): the error
-    // names the file and the firmware's reply, and the model stays.
+    // The firmware refuses a model IMS cannot invert (d = 0.05 below the largest
+    // hysteresis slope 0.093 um/V): the error names the file and the firmware's reply, and
+    // the model stays.
     let refused = fit_json(
         "fit-refused.json",
         "cbw",
         &[
-            ("d", 0.394516),
-            ("alpha", 0.270568),
-            ("beta", 0.000996874),
-            ("gamma/beta", 0.178262),
+            ("d", 0.05),
+            ("alpha", 0.07),
+            ("beta", 0.02),
+            ("gamma/beta", 0.5),
         ],
     );
     let e = run(

@@ -20,8 +20,15 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     /// Piezo coefficient `d` (um/V).
     fn d(&self) -> T;
     /// An upper bound of `dh/du` over every state the model can reach from rest.
-    /// `d` must exceed it: then `y` is strictly increasing in `u` and the IMS well defined.
     fn max_h_slope(&self) -> T;
+    /// The same bound over the states reached from rest by inputs that stay inside an
+    /// interval `volts_span` wide (the IMS's voltage range). `d` must exceed it: then `y`
+    /// is strictly increasing in `u` over the range and the IMS well defined. Default:
+    /// [`ImsModel::max_h_slope`].
+    fn max_h_slope_within(&self, volts_span: T) -> T {
+        let _ = volts_span;
+        self.max_h_slope()
+    }
     /// Direct inversion of one step, for models whose step has a closed form: the input
     /// `u` whose step from `state` gives `y_model(u) = y_ref` to within `tol`, the model
     /// output there and the state after the step. `hint`: the [`Inverted::hint`] of the
@@ -130,6 +137,16 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
     /// `alpha + (beta - gamma) * alpha / (beta + gamma) = 2*alpha*beta / (beta + gamma)`.
     fn max_h_slope(&self) -> T {
         T::TWO * self.alpha() * self.beta() / (self.beta() + self.gamma())
+    }
+    /// `|h| <= alpha * volts_span` from rest: `h - alpha*(u - u_min)` never increases
+    /// (`dh/du <= alpha` while `|h|` grows; while it shrinks, `d|h|/d|u| = alpha + (beta -
+    /// gamma)|h|^n >= alpha` as `beta >= gamma`), and likewise `h + alpha*(u_max - u)` never
+    /// decreases. So `dh/du <= alpha + (beta - gamma) * min(h_max, alpha*span)^n`: a fit
+    /// whose loop would only close far outside the range (tiny `beta + gamma`) still
+    /// inverts inside it.
+    fn max_h_slope_within(&self, volts_span: T) -> T {
+        let h = (self.alpha() * volts_span).min(self.h_bound());
+        self.alpha() + (self.beta() - self.gamma()) * h.abs_pow(self.n())
     }
 
     /// `n = 1`: each monotone piece of the step is affine in `h` (see [`cbw_piece`]); the
@@ -304,10 +321,10 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     ) -> Result<Self, FfError> {
         super::check_range(volts_min, volts_max)?;
         super::check_dt(dt_s)?;
-        let min_slope = model.d() - model.max_h_slope();
+        let min_slope = model.d() - model.max_h_slope_within(volts_max - volts_min);
         super::ensure(
             min_slope.is_finite() && min_slope > T::ZERO,
-            "IMS: d must exceed the largest hysteresis slope dh/du (y must increase with u)",
+            "IMS: d must exceed the largest hysteresis slope dh/du over the voltage range (y must increase with u)",
         )?;
         let u0 = T::ZERO.clamp_to(volts_min, volts_max);
         let mut state = model.init(u0);
@@ -336,8 +353,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Refused when it would let `y` decrease with `u` inside the voltage range.
     pub fn with_quadratic(mut self, quad_um_per_v2: T) -> Result<Self, FfError> {
         let u_max = self.volts_min.abs().max(self.volts_max.abs());
-        let min_slope =
-            self.model.d() - self.model.max_h_slope() - T::TWO * quad_um_per_v2.abs() * u_max;
+        let min_slope = self.model.d()
+            - self
+                .model
+                .max_h_slope_within(self.volts_max - self.volts_min)
+            - T::TWO * quad_um_per_v2.abs() * u_max;
         super::ensure(
             quad_um_per_v2.is_finite() && min_slope > T::ZERO,
             "IMS: quadratic term too large (y must increase with u over the voltage range)",
@@ -581,6 +601,58 @@ mod tests {
         let m = Cbw::with_n1(0.05, 0.07, 0.02, 0.01).unwrap();
         let e = Ims::new(m, ImsLoop::Solved, 0.0, 100.0, 1e-4).unwrap_err();
         assert!(e.0.contains("d must exceed"));
+    }
+
+    /// The CBW `piezo fit` identifies on `piezo_150V_1Hz.csv` (tiny `beta + gamma`: its
+    /// loop bound, 230 um, lies far outside 0..150 V) inverts over 0..150 V, where `|h|`
+    /// stays below `alpha * 150 V`; the global bound alone would refuse it.
+    #[test]
+    fn a_fit_whose_loop_closes_outside_the_range_inverts_inside_it() {
+        let m = Cbw::with_n1(0.3945, 0.2706, 0.000997, 0.000178).unwrap();
+        assert!(m.max_h_slope() > m.d(), "the global bound refuses it");
+        let fs = 10_000.0;
+        let mut ff = Ims::new(m, ImsLoop::Solved, 0.0, 150.0, 1.0 / fs).unwrap();
+        let mut s = m.init(0.0);
+        let mut worst: f64 = 0.0;
+        for k in 0..(3.0 * fs) as usize {
+            // Three cycles at 1 Hz over 9..19 um (the cycle over 0..150 V spans 7.4..22 um).
+            let t = k as f64 / fs;
+            let y_ref = 14.0 - 5.0 * (2.0 * core::f64::consts::PI * t).cos();
+            let u = ff.compensate(y_ref);
+            let y = m.step(&mut s, u, 1.0 / fs);
+            worst = worst.max((y - y_ref).abs());
+        }
+        assert!(worst < 1e-9, "max |y - y_ref| {worst} um");
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+        /// The bound behind `max_h_slope_within`: from rest, `|h| <= alpha * span` and
+        /// `dh/du` stays below the bound for any input path inside the range.
+        #[test]
+        fn cbw_h_stays_within_alpha_times_the_span(
+            alpha in 0.01f64..1.0,
+            beta in 1e-5f64..0.1,
+            gamma_frac in -0.99f64..1.0,
+            lo in -50.0f64..50.0,
+            span in 1.0f64..200.0,
+            path in proptest::collection::vec(0.0f64..1.0, 1..200),
+        ) {
+            let m = Cbw::with_n1(1.0, alpha, beta, gamma_frac * beta).unwrap();
+            let bound = m.max_h_slope_within(span);
+            let mut st = m.init(lo);
+            m.step(&mut st, lo, 1e-4);
+            for p in path {
+                let u0 = st.u;
+                let u = lo + p * span;
+                let h0 = st.h;
+                let slope = m.slope(h0, (u - u0).signum());
+                proptest::prop_assert!(slope <= bound * (1.0 + 1e-12) + 1e-15);
+                m.step(&mut st, u, 1e-4);
+                proptest::prop_assert!(st.h <= alpha * (u - lo) * (1.0 + 1e-12) + 1e-12, "{} {}", st.h, u);
+                proptest::prop_assert!(st.h >= -alpha * (lo + span - u) * (1.0 + 1e-12) - 1e-12);
+            }
+        }
     }
 
     #[test]
