@@ -1337,7 +1337,8 @@ pub fn execute(
                     e @ SerialError::Firmware { .. } => anyhow!(
                         "{}: the firmware refused the CBW model of parts[{}]: {e} (the core \
                      accepts alpha > 0, beta >= |gamma| (004 eq. 3) and, for IMS, d above \
-                     the largest hysteresis slope alpha + (beta - gamma) alpha/(beta + gamma))",
+                     the largest hysteresis slope over 0..150 V, alpha + (beta - gamma) * \
+                     min(alpha/(beta + gamma), alpha * 150 V))",
                         fit.display(),
                         m.part
                     ),
