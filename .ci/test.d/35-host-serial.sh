@@ -11,40 +11,16 @@ command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
 target=thumbv7em-none-eabihf
 cargo build --release --target "$target" -p piezo-core --bin firmware \
   --no-default-features --features board-qemu
-# The dev-profile CLI (built by 10-host's `cargo test` already); PIEZO_BIN picks another.
-if [ -n "${PIEZO_BIN:-}" ]; then
-  piezo=$PIEZO_BIN
-else
-  cargo build -q -p hal-sim --bin piezo
-  piezo=target/debug/piezo
-fi
+. .ci/qemu-serial.sh
+piezo_cli
 work=$(mktemp -d)
-cp "target/$target/release/firmware" "$work/firmware.elf"
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-
-qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none -icount shift=0 \
-  -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
-  -semihosting-config enable=on,target=native -kernel "$work/firmware.elf" >"$work/defmt.bin" &
-qemu=$!
-cleanup() {
-  kill "$qemu" 2>/dev/null || true
-  wait "$qemu" 2>/dev/null || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
+trap qemu_cleanup EXIT
 fail() {
   echo "35-host-serial: FAIL: $*"
   exit 1
 }
-
-s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
-# QEMU listens at once; the firmware answers after its boot-time bench table.
-for _ in $(seq 50); do
-  if s ping >"$work/ping.txt" 2>&1; then break; fi
-  sleep 0.2
-done
-cat "$work/ping.txt"
-grep -q '^ok pong' "$work/ping.txt" || fail "no answer to ping"
+cp "target/$target/release/firmware" "$work/firmware.elf"
+qemu_boot "$work/firmware.elf" mps2-an386 cortex-m4
 
 run() {
   echo "\$ piezo serial $*"
@@ -129,7 +105,7 @@ awk -F, '
     exit bad
   }' "$work/trig.csv" || fail "triggered capture"
 
-kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
+qemu_stop
 if [ -n "${PIEZO_SERIAL_OUT:-}" ]; then
   mkdir -p "$PIEZO_SERIAL_OUT"
   cp "$work/rec.csv" "$work/rec.svg" "$work/trig.csv" "$PIEZO_SERIAL_OUT/"

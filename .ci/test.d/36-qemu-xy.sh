@@ -17,22 +17,10 @@ for target in thumbv7m-none-eabi thumbv7em-none-eabihf; do
   cargo build --release --target "$target" -p piezo-core --bin firmware \
     --no-default-features --features board-qemu,xy
 done
-if [ -n "${PIEZO_BIN:-}" ]; then
-  piezo=$PIEZO_BIN
-else
-  cargo build -q -p hal-sim --bin piezo
-  piezo=target/debug/piezo
-fi
+. .ci/qemu-serial.sh
+piezo_cli
 work=$(mktemp -d)
-qemu=
-cleanup() {
-  if [ -n "$qemu" ]; then
-    kill "$qemu" 2>/dev/null || true
-    wait "$qemu" 2>/dev/null || true
-  fi
-  rm -rf "$work"
-}
-trap cleanup EXIT
+trap qemu_cleanup EXIT
 fail() {
   echo "36-qemu-xy: FAIL ($name): $*"
   exit 1
@@ -84,7 +72,7 @@ check() {
 session() {
   name=$1
   local target=$2 machine=$3 cpu=$4 dt_r=$5 every_r=$6 dt_l=$7 every_l=$8 bound=$9
-  local elf="$work/$name.elf" port
+  local elf="$work/$name.elf"
   cp "target/$target/release/firmware" "$elf"
   # The control interrupt runs the pipeline (its feedforward stage names it where the
   # debug info does not name the step itself, see 20-firmware.sh) and both drivers.
@@ -92,22 +80,11 @@ session() {
     "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}|piezo_core::feedforward::MultiFeedforward::compensate|piezo_core::feedforward::MultiFeedforward::compensate::{{closure}}" \
     "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
     piezo_core::drivers::ad5791::Ad5791::set_code
-  port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-  qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none -icount shift=0 \
-    -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
-    -semihosting-config enable=on,target=native -kernel "$elf" >"$work/$name.defmt" &
-  qemu=$!
-  s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
+  qemu_boot "$elf" "$machine" "$cpu"
   run() {
     echo "\$ piezo serial $*"
     s "$@" | tee "$work/last.txt"
   }
-  for _ in $(seq 100); do
-    if s ping >"$work/ping.txt" 2>&1; then break; fi
-    sleep 0.2
-  done
-  cat "$work/ping.txt"
-  grep -q '^ok pong' "$work/ping.txt" || fail "no answer to ping"
 
   run axis
   grep -qx 'ok axis 0 of 2' "$work/last.txt" || fail "not a 2-axis build"
@@ -145,10 +122,7 @@ session() {
   run -- fault
   grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' "$work/last.txt" || fail "fault state not clean"
 
-  kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
-  kill "$qemu" 2>/dev/null || true
-  wait "$qemu" 2>/dev/null || true
-  qemu=
+  qemu_stop
   if [ -n "${PIEZO_SERIAL_OUT:-}" ]; then
     mkdir -p "$PIEZO_SERIAL_OUT"
     cp "$work/$name"-{raster,lissajous}.{csv,svg} "$PIEZO_SERIAL_OUT/"

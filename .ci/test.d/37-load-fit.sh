@@ -10,35 +10,16 @@ command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
 target=thumbv7em-none-eabihf
 cargo build --release --target "$target" -p piezo-core --bin firmware \
   --no-default-features --features board-qemu
-if [ -n "${PIEZO_BIN:-}" ]; then
-  piezo=$PIEZO_BIN
-else
-  cargo build -q -p hal-sim --bin piezo
-  piezo=target/debug/piezo
-fi
+. .ci/qemu-serial.sh
+piezo_cli
 work=$(mktemp -d)
-cp "target/$target/release/firmware" "$work/firmware.elf"
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none -icount shift=0 \
-  -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
-  -semihosting-config enable=on,target=native -kernel "$work/firmware.elf" >"$work/defmt.bin" &
-qemu=$!
-cleanup() {
-  kill "$qemu" 2>/dev/null || true
-  wait "$qemu" 2>/dev/null || true
-  rm -rf "$work"
-}
-trap cleanup EXIT
+trap qemu_cleanup EXIT
 fail() {
   echo "37-load-fit: FAIL: $*"
   exit 1
 }
-s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
-for _ in $(seq 50); do
-  if s ping >"$work/ping.txt" 2>&1; then break; fi
-  sleep 0.2
-done
-grep -q '^ok pong' "$work/ping.txt" || { cat "$work/ping.txt"; fail "no answer to ping"; }
+cp "target/$target/release/firmware" "$work/firmware.elf"
+qemu_boot "$work/firmware.elf" mps2-an386 cortex-m4
 
 # fit <file> <d> <alpha> <beta> <gamma/beta>: a one-part CBW report as `piezo fit` writes it.
 fit() {
@@ -77,5 +58,5 @@ grep -q "refused.json: the firmware refused the CBW model of parts\[0\]: .*error
   fail "refusal does not name the file and the firmware error"
 s -- "get cbw_d" | grep -qx 'ok cbw_d 0.21' || fail "a refused model changed the firmware"
 s -- "fault" | grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' || fail "fault after the changes"
-kill -0 "$qemu" 2>/dev/null || fail "the firmware exited during the session"
+qemu_stop
 echo "37-load-fit: ok"
