@@ -148,6 +148,21 @@ fn tmp(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("serial-{name}"))
 }
 
+/// A free-running capture of `ref_um` into `tmp(out)`, every `every`-th period.
+fn ref_capture(out: &str, every: u32) -> RecordArgs {
+    RecordArgs {
+        signals: vec!["ref_um".into()],
+        trigger: "now".into(),
+        pre: 0,
+        wait_s: 10.0,
+        no_arm: false,
+        xy: false,
+        every,
+        out: tmp(out),
+        svg: None,
+    }
+}
+
 fn read_csv(path: &PathBuf) -> (Vec<String>, Vec<Vec<f64>>) {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
@@ -462,15 +477,9 @@ fn silent_closing_and_babbling_peers_are_clear_errors() {
 fn a_trigger_that_never_fires_times_out_and_does_not_block_the_next_capture() {
     let addr = spawn_firmware();
     let args = |trigger: &str, wait_s: f64| RecordArgs {
-        signals: vec!["ref_um".into()],
         trigger: trigger.into(),
-        pre: 0,
         wait_s,
-        no_arm: false,
-        xy: false,
-        every: 1,
-        out: tmp("never.csv"),
-        svg: None,
+        ..ref_capture("never.csv", 1)
     };
     let e = run(&addr, Action::Record(args("rise:ref_um:1000", 0.3))).unwrap_err();
     assert!(
@@ -548,21 +557,7 @@ fn a_table_from_a_file_is_loaded_in_lines_and_the_reference_follows_it() {
     let out = run(&addr, table(Some(file), vec![])).unwrap();
     assert_eq!(out, "ok table 20\nok wave table 200 20\n");
     let mut c = connect(&conn(&addr)).unwrap();
-    let rec = record(
-        &mut c,
-        &RecordArgs {
-            signals: vec!["ref_um".into()],
-            trigger: "now".into(),
-            pre: 0,
-            wait_s: 10.0,
-            no_arm: false,
-            xy: false,
-            every: 1,
-            out: tmp("table.csv"),
-            svg: None,
-        },
-    )
-    .unwrap();
+    let rec = record(&mut c, &ref_capture("table.csv", 1)).unwrap();
     drop(c);
     // Two periods of 500 samples: every point is passed (within one sample's travel).
     let r: Vec<f64> = rec.frames.iter().map(|f| f[0]).collect();
@@ -615,21 +610,7 @@ fn a_divided_capture_spans_longer() {
     )
     .unwrap();
     let mut c = connect(&conn(&addr)).unwrap();
-    let rec = record(
-        &mut c,
-        &RecordArgs {
-            signals: vec!["ref_um".into()],
-            trigger: "now".into(),
-            pre: 0,
-            wait_s: 10.0,
-            no_arm: false,
-            xy: false,
-            every: 5,
-            out: tmp("every.csv"),
-            svg: None,
-        },
-    )
-    .unwrap();
+    let rec = record(&mut c, &ref_capture("every.csv", 5)).unwrap();
     // Every 5th period: 20 kHz of frames; the 4000 um/s triangle moves 0.2 um per frame.
     assert_eq!(rec.sample_hz, 20_000.0);
     assert!((rec.t_s(1) - rec.t_s(0) - 5e-5).abs() < 1e-12);
