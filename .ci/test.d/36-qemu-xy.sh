@@ -74,10 +74,9 @@ session() {
   local target=$2 machine=$3 cpu=$4 dt_r=$5 every_r=$6 dt_l=$7 every_l=$8 bound=$9
   local elf="$work/$name.elf"
   cp "target/$target/release/firmware" "$elf"
-  # The control interrupt runs the pipeline (its feedforward stage names it where the
-  # debug info does not name the step itself, see 20-firmware.sh) and both drivers.
+  # The control interrupt runs the pipeline and both drivers.
   python3 .ci/firmware-code.py "$elf" SysTick \
-    "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}|piezo_core::feedforward::MultiFeedforward::compensate|piezo_core::feedforward::MultiFeedforward::compensate::{{closure}}" \
+    "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
     "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
     piezo_core::drivers::ad5791::Ad5791::set_code
   qemu_boot "$elf" "$machine" "$cpu"
