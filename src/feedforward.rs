@@ -61,6 +61,11 @@ pub struct LinearFf<T> {
 }
 
 impl<T: Real> LinearFf<T> {
+    /// Usable: `um_per_volt` finite and non-zero, `offset_um` finite.
+    pub fn is_valid(&self) -> bool {
+        self.um_per_volt.is_finite() && self.um_per_volt != T::ZERO && self.offset_um.is_finite()
+    }
+
     #[inline]
     pub fn compensate(&self, y_ref_um: T) -> T {
         (y_ref_um - self.offset_um) / self.um_per_volt

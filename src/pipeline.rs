@@ -144,6 +144,24 @@ pub struct State<T, const N: usize> {
     pub trace: Trace<T, N>,
 }
 
+fn check_open_loop<T: Real>(ol: &LinearFf<T>) -> Result<(), ConfigError> {
+    if ol.is_valid() {
+        Ok(())
+    } else {
+        Err(ConfigError::new(
+            "open_loop: um_per_volt must be finite and non-zero, offset_um finite",
+        ))
+    }
+}
+
+fn check_safe_volts<T: Real>(limits: &OutputLimits<T>, safe_volts: T) -> Result<(), ConfigError> {
+    if safe_volts >= limits.volts_min && safe_volts <= limits.volts_max {
+        Ok(())
+    } else {
+        Err(ConfigError::new("safe_volts must lie within the limits"))
+    }
+}
+
 /// The per-sample pipeline of an `N`-axis stage.
 #[derive(Debug, Clone)]
 pub struct Pipeline<T: Real, const N: usize> {
@@ -181,19 +199,8 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         let mut gens = [WaveGen::new(Wave::Hold { y_um: T::ZERO }, fs)?; N];
         for (i, a) in config.axes.iter().enumerate() {
             a.sensor.validate().map_err(|e| e.on_axis(i))?;
-            let ol = a.open_loop;
-            if !(ol.um_per_volt.is_finite()
-                && ol.um_per_volt != T::ZERO
-                && ol.offset_um.is_finite())
-            {
-                return Err(ConfigError::new(
-                    "open_loop: um_per_volt must be finite and non-zero, offset_um finite",
-                )
-                .on_axis(i));
-            }
-            if !(a.safe_volts >= a.limits.volts_min && a.safe_volts <= a.limits.volts_max) {
-                return Err(ConfigError::new("safe_volts must lie within the limits").on_axis(i));
-            }
+            check_open_loop(&a.open_loop).map_err(|e| e.on_axis(i))?;
+            check_safe_volts(&a.limits, a.safe_volts).map_err(|e| e.on_axis(i))?;
             output[i] = Output::new(&a.limits, &a.dac, fs).map_err(|e| e.on_axis(i))?;
             gens[i] = WaveGen::new(reference[i], fs).map_err(|e| e.on_axis(i))?;
         }
@@ -301,15 +308,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             .axes
             .get_mut(axis)
             .ok_or(ConfigError::new("axis index out of range"))?;
-        if !(open_loop.um_per_volt.is_finite()
-            && open_loop.um_per_volt != T::ZERO
-            && open_loop.offset_um.is_finite())
-        {
-            return Err(ConfigError::new(
-                "open_loop: um_per_volt must be finite and non-zero, offset_um finite",
-            )
-            .on_axis(axis));
-        }
+        check_open_loop(&open_loop).map_err(|e| e.on_axis(axis))?;
         a.open_loop = open_loop;
         self.restart();
         Ok(())
@@ -337,9 +336,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             return Err(ConfigError::new("axis index out of range"));
         };
         let out = Output::new(&limits, &a.dac, fs).map_err(|e| e.on_axis(axis))?;
-        if !(safe_volts >= limits.volts_min && safe_volts <= limits.volts_max) {
-            return Err(ConfigError::new("safe_volts must lie within the limits").on_axis(axis));
-        }
+        check_safe_volts(&limits, safe_volts).map_err(|e| e.on_axis(axis))?;
         *o = out;
         a.limits = limits;
         a.safe_volts = safe_volts;

@@ -586,9 +586,7 @@ impl Params {
         let ok = ff_with("ims-cbw", self, sample_hz).is_some()
             && law_with("hgo-robust", self, sample_hz).is_some()
             && law_with("pid", self, sample_hz).is_some()
-            && self.um_per_volt.is_finite()
-            && self.um_per_volt != R::ZERO
-            && self.offset_um.is_finite();
+            && self.linear().is_valid();
         if ok {
             Ok(())
         } else {
