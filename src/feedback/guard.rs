@@ -36,17 +36,22 @@ fn hold<T: Real>(x: T, prev: T) -> T {
     }
 }
 
+#[inline(always)]
+fn hold_setpoint<T: Real>(sp: &Setpoint<T>, prev: &Setpoint<T>) -> Setpoint<T> {
+    Setpoint {
+        y_um: hold(sp.y_um, prev.y_um),
+        dy: hold(sp.dy, prev.dy),
+        ddy: hold(sp.ddy, prev.ddy),
+    }
+}
+
 impl<T: Real> InputGuard<T> {
     /// Finite, bounded copy of `io`; remembers it for the next sample.
     #[inline]
     pub fn clean(&mut self, io: &LoopSignals<T>) -> LoopSignals<T> {
         let l = &self.last;
         let c = LoopSignals {
-            setpoint: Setpoint {
-                y_um: hold(io.setpoint.y_um, l.setpoint.y_um),
-                dy: hold(io.setpoint.dy, l.setpoint.dy),
-                ddy: hold(io.setpoint.ddy, l.setpoint.ddy),
-            },
+            setpoint: hold_setpoint(&io.setpoint, &l.setpoint),
             y_um: hold(io.y_um, l.y_um),
             u_ff: hold(io.u_ff, l.u_ff),
             u_applied: hold(io.u_applied, l.u_applied),
@@ -72,11 +77,7 @@ impl<T: Real> InputGuard<T> {
     pub(crate) fn clean_bounded(&mut self, io: &LoopSignals<T>) -> LoopSignals<T> {
         let l = &self.last;
         let c = LoopSignals {
-            setpoint: Setpoint {
-                y_um: hold(io.setpoint.y_um, l.setpoint.y_um),
-                dy: hold(io.setpoint.dy, l.setpoint.dy),
-                ddy: hold(io.setpoint.ddy, l.setpoint.ddy),
-            },
+            setpoint: hold_setpoint(&io.setpoint, &l.setpoint),
             y_um: io.y_um,
             u_ff: io.u_ff,
             u_applied: io.u_applied,
