@@ -337,6 +337,17 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         };
         let out = Output::new(&limits, &a.dac, fs).map_err(|e| e.on_axis(axis))?;
         check_safe_volts(&limits, safe_volts).map_err(|e| e.on_axis(axis))?;
+        // The last code stays inside the output range (every step starts from there): a
+        // range that excludes it takes its nearest code now, as the next sample's limit
+        // would (the range wins over the slew limit).
+        if let (Some(code), Some(u)) = (
+            self.state.code.get_mut(axis),
+            self.state.u_applied.get_mut(axis),
+        ) {
+            let (lo, hi) = out.code_range();
+            *code = (*code).max(lo).min(hi);
+            *u = out.dac.volts(*code);
+        }
         *o = out;
         a.limits = limits;
         a.safe_volts = safe_volts;

@@ -139,6 +139,12 @@ enum Op {
         amp_um: f32,
         freq_hz: f32,
     },
+    /// New output limits in place (V, V, V/s), the safe voltage clamped into them.
+    Limits {
+        lo: f32,
+        hi: f32,
+        slew: f32,
+    },
 }
 
 fn op() -> impl Strategy<Value = Op> {
@@ -151,6 +157,8 @@ fn op() -> impl Strategy<Value = Op> {
         1 => (-10i32..1 << 21).prop_map(Op::DacFailed),
         1 => (prop_oneof![0.0f32..40.0, Just(1e30f32), Just(3e38f32)], 0.0f32..2_000.0)
             .prop_map(|(amp_um, freq_hz)| Op::Sine { amp_um, freq_hz }),
+        1 => (0.0f32..100.0, 1.0f32..150.0, prop_oneof![100.0f32..1e5, Just(1e9f32)])
+            .prop_map(|(lo, w, slew)| Op::Limits { lo, hi: (lo + w).min(150.0), slew }),
     ]
 }
 
@@ -171,6 +179,8 @@ fn apply(
         let [a] = fast.lp.p.step([code]);
         let [b] = reference.lp.p.step_generic([code]);
         assert_eq!(a, b, "DAC code of ADC code {code}");
+        let (lo, hi) = fast.lp.p.output(0).unwrap().code_range();
+        assert!(a >= lo && a <= hi, "DAC code {a} outside {lo}..={hi}");
         a
     };
     match *op {
@@ -217,6 +227,17 @@ fn apply(
             };
             let a = fast.lp.p.set_wave(0, w);
             let b = reference.lp.p.set_wave(0, w);
+            assert_eq!(a, b);
+        }
+        Op::Limits { lo, hi, slew } => {
+            let l = piezo_core::pipeline::OutputLimits {
+                volts_min: lo,
+                volts_max: hi,
+                slew_volts_per_s: slew,
+            };
+            let safe = c(control::SAFE_VOLTS).clamp(lo, hi);
+            let a = fast.lp.p.set_limits(0, l, safe);
+            let b = reference.lp.p.set_limits(0, l, safe);
             assert_eq!(a, b);
         }
     }
