@@ -323,8 +323,9 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
 
     /// Replaces the output limits and the safe voltage of `axis` in place (validated like
     /// [`Pipeline::new`]): mode, wave, compensator and law keep running. The caller passes
-    /// the safe voltage so that narrowing and widening the range again restores it. A range that excludes the present code moves the output into the range at the
-    /// next sample (the range wins over the slew limit); within it the new slew limit holds.
+    /// the safe voltage so that narrowing and widening the range again restores it. A range
+    /// that excludes the present code moves the output to its nearest code at the next
+    /// sample (the range wins over the slew limit); within it the new slew limit holds.
     pub fn set_limits(
         &mut self,
         axis: usize,
