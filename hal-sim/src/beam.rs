@@ -20,7 +20,8 @@ use piezo_core::manipulation::beam::ModalModel;
 use piezo_core::manipulation::{Hgo, Nno, NnoConfig, VoltageInput};
 use serde::Serialize;
 
-use crate::object::{Gauss, ManipRow};
+use crate::numeric::Rng;
+use crate::object::ManipRow;
 use crate::plot::{write_grid, Plot};
 
 /// Modes of the simulated beam.
@@ -300,7 +301,7 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
     let mut hs = hgo.init(0.0);
     let mut ns = nno.init(0.0);
     let mut ls = lue.init(0.0);
-    let mut rng = Gauss::new(cfg.seed);
+    let mut rng = Rng::new(cfg.seed);
     let n = (cfg.duration_s * cfg.rate_hz) as usize;
     let mut run = BeamRun {
         skip: (0.3 * cfg.rate_hz) as usize,
@@ -311,8 +312,8 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
         let u = beam_input(t);
         plant.step(&mut ps, u, dt);
         let y_tip = plant.deflection(&ps, 1.0);
-        let y_meas = y_tip + rng.sample(cfg.noise_y_um);
-        let u_meas = u + rng.sample(cfg.noise_u_volts);
+        let y_meas = y_tip + rng.normal(cfg.noise_y_um);
+        let u_meas = u + rng.normal(cfg.noise_u_volts);
         run.t.push(t);
         run.y_c.push(plant.deflection(&ps, cfg.x_c));
         run.y_tip.push(y_tip);

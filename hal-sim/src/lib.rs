@@ -8,6 +8,7 @@ pub mod cli;
 pub mod faults;
 pub mod ident;
 pub mod mock;
+pub mod numeric;
 pub mod object;
 pub mod plot;
 pub mod record;

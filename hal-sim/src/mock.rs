@@ -6,7 +6,7 @@
 //! device, the control pin (CNV or LDAC) and the simulation's analog side. Time comes from a
 //! shared [`MockClock`] advanced by [`MockDelay`] and by the simulation loop.
 
-use crate::stage::Rng;
+use crate::numeric::Rng;
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{self, ErrorType, Operation, SpiDevice};

@@ -17,41 +17,8 @@ use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 use piezo_core::manipulation::{BlfForce, ForceEso, StageDynamics, VoltageInput};
 use serde::Serialize;
 
+use crate::numeric::{lowpass, rms, Rng};
 use crate::plot::{write_grid, Plot};
-
-/// Gaussian noise from a seeded xorshift64* generator (Box-Muller); reproducible runs.
-#[derive(Debug, Clone)]
-pub struct Gauss {
-    s: u64,
-    spare: Option<f64>,
-}
-
-impl Gauss {
-    pub fn new(seed: u64) -> Self {
-        Self {
-            s: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
-            spare: None,
-        }
-    }
-    fn uniform(&mut self) -> f64 {
-        self.s ^= self.s >> 12;
-        self.s ^= self.s << 25;
-        self.s ^= self.s >> 27;
-        let r = self.s.wrapping_mul(0x2545_F491_4F6C_DD1D);
-        ((r >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    /// One sample of N(0, sigma^2).
-    pub fn sample(&mut self, sigma: f64) -> f64 {
-        if let Some(z) = self.spare.take() {
-            return sigma * z;
-        }
-        let (u1, u2) = (self.uniform(), self.uniform());
-        let r = (-2.0 * u1.ln()).sqrt();
-        let a = 2.0 * std::f64::consts::PI * u2;
-        self.spare = Some(r * a.sin());
-        sigma * r * a.cos()
-    }
-}
 
 /// Nonlinear viscoelastic object.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -402,7 +369,7 @@ pub fn indentation(cfg: &ManipConfig, duration_s: f64) -> Result<Traces> {
     let plant = &cfg.plant;
     let mut ps = plant.init();
     let mut es = eso.init(0.0, 0.0);
-    let mut rng = Gauss::new(cfg.seed);
+    let mut rng = Rng::new(cfg.seed);
     let mut pi = PositionPi {
         ff: piezo_core::feedforward::LinearFf {
             um_per_volt: plant.cbw.d(),
@@ -423,8 +390,8 @@ pub fn indentation(cfg: &ManipConfig, duration_s: f64) -> Result<Traces> {
         u = limit(cmd, u, cfg, &mut tr.saturated);
         pi.applied(u);
         plant.step(&mut ps, u, dt);
-        y_meas = ps.y + rng.sample(cfg.noise.y_um);
-        let u_meas = u + rng.sample(cfg.noise.u_volts);
+        y_meas = ps.y + rng.normal(cfg.noise.y_um);
+        let u_meas = u + rng.normal(cfg.noise.u_volts);
         let f_hat = eso.update(&mut es, y_meas, u_meas);
         tr.t.push(t);
         tr.y_ref.push(y_ref);
@@ -436,15 +403,6 @@ pub fn indentation(cfg: &ManipConfig, duration_s: f64) -> Result<Traces> {
         tr.force_hat.push(f_hat);
     }
     Ok(tr)
-}
-
-fn rms(v: impl Iterator<Item = f64>) -> f64 {
-    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
-    if n == 0 {
-        f64::NAN
-    } else {
-        (s / n as f64).sqrt()
-    }
 }
 
 /// Identified object (least squares, linear in `k1, k3, c`; the gap by a 1-D search).
@@ -461,39 +419,17 @@ pub struct ObjectFit {
 /// Triple first-order low-pass at `w` (rad/s): the transfer `w^3/(s+w)^3` from the true force
 /// to the ESO estimate, applied to the regressors so the fit is not biased by the lag.
 fn lowpass3(x: &[f64], w: f64, dt: f64) -> Vec<f64> {
-    let mut s = [x.first().copied().unwrap_or(0.0); 3];
-    x.iter()
-        .map(|&xi| {
-            let f = |z: [f64; 3]| [w * (xi - z[0]), w * (z[0] - z[1]), w * (z[1] - z[2])];
-            let k1 = f(s);
-            let a = |z: [f64; 3], k: [f64; 3], h: f64| {
-                [z[0] + h * k[0], z[1] + h * k[1], z[2] + h * k[2]]
-            };
-            let k2 = f(a(s, k1, dt / 2.0));
-            let k3 = f(a(s, k2, dt / 2.0));
-            let k4 = f(a(s, k3, dt));
-            for i in 0..3 {
-                s[i] += dt / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
-            }
-            s[2]
-        })
-        .collect()
+    let tau_s = 1.0 / w;
+    lowpass(&lowpass(&lowpass(x, tau_s, dt), tau_s, dt), tau_s, dt)
 }
 
 /// Zero-phase one-pole smoothing (forward then backward), cutoff `fc` Hz.
 fn smooth(x: &[f64], fc: f64, dt: f64) -> Vec<f64> {
-    let a = 1.0 - (-std::f64::consts::TAU * fc * dt).exp();
-    let mut y: Vec<f64> = Vec::with_capacity(x.len());
-    let mut s = x.first().copied().unwrap_or(0.0);
-    for &xi in x {
-        s += a * (xi - s);
-        y.push(s);
-    }
-    let mut s = y.last().copied().unwrap_or(0.0);
-    for yi in y.iter_mut().rev() {
-        s += a * (*yi - s);
-        *yi = s;
-    }
+    let tau_s = 1.0 / (std::f64::consts::TAU * fc);
+    let mut y = lowpass(x, tau_s, dt);
+    y.reverse();
+    let mut y = lowpass(&y, tau_s, dt);
+    y.reverse();
     y
 }
 
@@ -656,7 +592,7 @@ pub fn blf_force(
     let plant = &cfg.plant;
     let mut ps = plant.init();
     let mut es = eso.init(0.0, 0.0);
-    let mut rng = Gauss::new(cfg.seed.wrapping_add(17));
+    let mut rng = Rng::new(cfg.seed.wrapping_add(17));
     let mut tr = Traces::default();
     let mut u = 0.0;
     let mut f_fb = 0.0;
@@ -687,9 +623,9 @@ pub fn blf_force(
         };
         u = limit(cmd, u, cfg, &mut tr.saturated);
         plant.step(&mut ps, u, dt);
-        let y_meas = ps.y + rng.sample(cfg.noise.y_um);
-        let u_meas = u + rng.sample(cfg.noise.u_volts);
-        let f_meas = ps.force + rng.sample(cfg.noise.f_mn);
+        let y_meas = ps.y + rng.normal(cfg.noise.y_um);
+        let u_meas = u + rng.normal(cfg.noise.u_volts);
+        let f_meas = ps.force + rng.normal(cfg.noise.f_mn);
         let f_hat = eso.update(&mut es, y_meas, u_meas);
         f_fb = if estimated { f_hat } else { f_meas };
         tr.t.push(t);
@@ -928,15 +864,6 @@ mod tests {
         assert_eq!(o.force(3.0, 100.0), 0.0);
         assert!((o.force(5.0, 0.0) - 44.0).abs() < 1e-12);
         assert_eq!(o.force(4.1, -1e6), 0.0);
-    }
-
-    #[test]
-    fn gauss_has_unit_variance() {
-        let mut g = Gauss::new(3);
-        let v: Vec<f64> = (0..20_000).map(|_| g.sample(2.0)).collect();
-        let m = v.iter().sum::<f64>() / v.len() as f64;
-        let s = (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64).sqrt();
-        assert!(m.abs() < 0.05 && (s - 2.0).abs() < 0.05, "{m} {s}");
     }
 
     #[test]
