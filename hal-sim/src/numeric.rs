@@ -6,5 +6,5 @@ pub mod series;
 pub mod solve;
 
 pub use rng::Rng;
-pub use series::{lowpass, rms, rmse, rmse_all};
+pub use series::{lowpass, lowpass_n, rms, rmse, rmse_all};
 pub use solve::solve_spd;

@@ -17,7 +17,7 @@ use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 use piezo_core::manipulation::{BlfForce, ForceEso, StageDynamics, VoltageInput};
 use serde::Serialize;
 
-use crate::numeric::{lowpass, rms, Rng};
+use crate::numeric::{lowpass, lowpass_n, rms, Rng};
 use crate::plot::{write_grid, Plot};
 
 /// Nonlinear viscoelastic object.
@@ -416,13 +416,6 @@ pub struct ObjectFit {
     pub residual_rms_mn: f64,
 }
 
-/// Triple first-order low-pass at `w` (rad/s): the transfer `w^3/(s+w)^3` from the true force
-/// to the ESO estimate, applied to the regressors so the fit is not biased by the lag.
-fn lowpass3(x: &[f64], w: f64, dt: f64) -> Vec<f64> {
-    let tau_s = 1.0 / w;
-    lowpass(&lowpass(&lowpass(x, tau_s, dt), tau_s, dt), tau_s, dt)
-}
-
 /// Zero-phase one-pole smoothing (forward then backward), cutoff `fc` Hz.
 fn smooth(x: &[f64], fc: f64, dt: f64) -> Vec<f64> {
     let tau_s = 1.0 / (std::f64::consts::TAU * fc);
@@ -443,7 +436,9 @@ pub fn identify(tr: &Traces, observer_hz: f64, rate_hz: f64, skip: usize) -> Res
         skip + 100
     );
     let dt = 1.0 / rate_hz;
-    let w = std::f64::consts::TAU * observer_hz;
+    // G = w^3/(s+w)^3, the ESO's force transfer, applied to the regressors so the fit is
+    // not biased by the lag.
+    let g = |x: &[f64]| lowpass_n(x, 1.0 / (std::f64::consts::TAU * observer_hz), dt, 3);
     let y = smooth(&tr.y_meas, 500.0, dt);
     let mut v = vec![0.0; n];
     for i in 1..n - 1 {
@@ -452,16 +447,13 @@ pub fn identify(tr: &Traces, observer_hz: f64, rate_hz: f64, skip: usize) -> Res
     let target = &tr.force_hat[skip..];
     let fit_at = |gap: f64| -> Option<(f64, [f64; 3])> {
         let d: Vec<f64> = y.iter().map(|y| (y - gap).max(0.0)).collect();
-        let r1 = lowpass3(&d, w, dt);
-        let r3 = lowpass3(&d.iter().map(|d| d * d * d).collect::<Vec<_>>(), w, dt);
-        let rc = lowpass3(
-            &d.iter()
-                .zip(&v)
-                .map(|(d, v)| if *d > 0.0 { *v } else { 0.0 })
-                .collect::<Vec<_>>(),
-            w,
-            dt,
-        );
+        let r1 = g(&d);
+        let r3 = g(&d.iter().map(|d| d * d * d).collect::<Vec<_>>());
+        let rc = g(&d
+            .iter()
+            .zip(&v)
+            .map(|(d, v)| if *d > 0.0 { *v } else { 0.0 })
+            .collect::<Vec<_>>());
         let cols = [&r1[skip..], &r3[skip..], &rc[skip..]];
         let mut ata = [[0.0; 3]; 3];
         let mut atb = [0.0; 3];
