@@ -1,6 +1,7 @@
 //! `piezo fit`: identify a model of the core from a CSV record.
 use crate::ident::fit::resample::Edge;
 use crate::ident::fit::{fit_siso, metrics, models, FitOptions, Fitted, Metrics};
+use crate::ident::optim::Optimizer;
 use crate::plot::{write_grid, Plot};
 use crate::record::Record;
 use anyhow::{Context, Result};
@@ -39,10 +40,13 @@ pub struct Args {
     /// Folder for plots (loops, time series, residuals) and fit.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Differential-evolution generations of the global search (0: LM only).
+    /// Global search: differential evolution or particle swarm (002 sec. 3).
+    #[arg(long, value_enum, default_value_t = Optimizer::De)]
+    pub optimizer: Optimizer,
+    /// Generations (DE) / iterations (PSO) of the global search (0: LM only).
     #[arg(long, default_value_t = 300)]
     pub generations: usize,
-    /// DE population (0: 10 per parameter).
+    /// DE population / PSO swarm size (0: 10 per parameter).
     #[arg(long, default_value_t = 0)]
     pub population: usize,
     #[arg(long, default_value_t = 1)]
@@ -262,6 +266,7 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     let mut opts = FitOptions {
+        optimizer: args.optimizer,
         generations: args.generations,
         population: args.population,
         seed: args.seed,
@@ -436,6 +441,12 @@ fn print_report(r: &Report) {
             p.fit.sign,
             p.fit.offset
         );
+        if let Some(g) = &p.fit.search {
+            println!(
+                "  global search {:?}: RMSE {:.6e} after {} evaluations ({} iterations, {:.2} s)",
+                g.optimizer, g.rmse, g.evals, g.iterations, g.seconds
+            );
+        }
         for (name, v) in &p.fit.params {
             println!("  {name:<16} {v:.6e}");
         }
