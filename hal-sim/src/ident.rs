@@ -3,4 +3,5 @@ pub mod diagnose;
 pub mod fast;
 pub mod fit;
 pub mod generate;
+pub mod multibw;
 pub mod optim;
