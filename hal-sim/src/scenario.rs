@@ -167,6 +167,9 @@ pub struct StageConfig {
     pub force: Force,
     pub delay: Delay,
     pub coupling: Coupling,
+    /// An identified model (`piezo sim --stage fit.json`) in place of hysteresis, creep
+    /// and structure.
+    pub identified: Option<crate::stage::identified::IdentifiedCfg>,
 }
 
 impl Default for StageConfig {
@@ -183,6 +186,7 @@ impl Default for StageConfig {
             force: Force::default(),
             delay: Delay::default(),
             coupling: Coupling::default(),
+            identified: None,
         }
     }
 }

@@ -14,6 +14,8 @@
 //! only from the curvature of their inputs inside a step. A delay that is not a whole
 //! number of internal steps is interpolated linearly.
 
+pub mod identified;
+
 use crate::scenario::{HysteresisModel, Scenario, StageConfig};
 use anyhow::{Context, Result};
 use piezo_core::hysteresis::{BwState, Cbw, Dahl, Gbw, Hysteresis};
@@ -354,6 +356,9 @@ pub struct Stage {
     steps: u64,
     exact_hysteresis: bool,
     zero_um: f64,
+    /// An identified model in place of hysteresis, creep and structure
+    /// (`piezo sim --stage fit.json`).
+    identified: Option<Box<identified::IdentifiedPlant>>,
 }
 
 /// Most internal steps per loop period.
@@ -498,6 +503,11 @@ impl Stage {
             steps: 0,
             exact_hysteresis: false,
             zero_um: cfg.zero_um,
+            identified: cfg
+                .identified
+                .as_ref()
+                .map(|c| identified::IdentifiedPlant::load(c, cfg.axes).map(Box::new))
+                .transpose()?,
         };
         st.drift_now_um = st.drift_calc_um();
         // Rest at the amplifier's output for 0 V in.
@@ -518,6 +528,13 @@ impl Stage {
             ax.x = ax.y_hc;
             ax.u_struct = ax.y_hc;
             ax.v = 0.0;
+        }
+        if let Some(p) = &mut self.identified {
+            let volts: Vec<f64> = self.axes.iter().map(|a| a.amp.v).collect();
+            p.settle(&volts);
+            for (i, ax) in self.axes.iter_mut().enumerate() {
+                ax.x = p.position_um(i);
+            }
         }
         let off = self.drift_um();
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
@@ -590,7 +607,9 @@ impl Stage {
     /// Advances one loop period with the DAC output voltages held.
     #[inline]
     pub fn advance(&mut self, dac_volts: &[f64]) {
-        if self.substeps == 1 && self.coupling.is_none() && !self.exact_hysteresis {
+        if self.identified.is_some() {
+            self.advance_identified(dac_volts);
+        } else if self.substeps == 1 && self.coupling.is_none() && !self.exact_hysteresis {
             self.advance_one(dac_volts);
         } else {
             self.advance_slow(dac_volts);
@@ -651,6 +670,35 @@ impl Stage {
                 *p = ax.x + drift;
             }
         }
+    }
+
+    /// [`Self::advance`] through the identified model: amplifier, model, delay, drift and
+    /// noise as for the built-in stage (no force disturbance).
+    #[inline(never)]
+    fn advance_identified(&mut self, dac_volts: &[f64]) {
+        let Some(mut plant) = self.identified.take() else {
+            return;
+        };
+        let mut volts = [0.0; 3];
+        let n = self.axes.len().min(volts.len());
+        for _ in 0..self.substeps {
+            for ((v, ax), &u) in volts.iter_mut().zip(self.axes.iter_mut()).zip(dac_volts) {
+                *v = ax.amp.step(u);
+                ax.v_end = *v;
+            }
+            plant.advance(&volts[..n], self.h);
+            self.advance_time();
+            let drift = self.drift_um();
+            for (i, (ax, line)) in self.axes.iter_mut().zip(&mut self.delay).enumerate() {
+                ax.x = plant.position_um(i);
+                ax.v = 0.0;
+                let mask = line.len() - 1; // a power of two
+                if let Some(p) = line.get_mut(self.delay_pos & mask) {
+                    *p = ax.x + drift;
+                }
+            }
+        }
+        self.identified = Some(plant);
     }
 
     /// Time, drift and the delay line's write position, one internal step on.

@@ -11,7 +11,11 @@ use nalgebra::DMatrix;
 /// the unit circle: u1 -> y1 is non-minimum phase.
 fn truth() -> Modal {
     Modal {
-        blocks: vec![Block::Pair(0.95, 0.2), Block::Pair(0.6, 0.7), Block::Real(0.5)],
+        blocks: vec![
+            Block::Pair(0.95, 0.2),
+            Block::Pair(0.6, 0.7),
+            Block::Real(0.5),
+        ],
         // States 0..4 are the pairs; they do not reach y1 from u1 (B[.., 0] = 0 there).
         b: DMatrix::from_row_slice(5, 2, &[0.0, 0.3, 0.0, -0.2, 0.0, 0.5, 0.0, 0.4, 1.0, 0.2]),
         c: DMatrix::from_row_slice(2, 5, &[0.5, 0.1, 0.3, -0.4, 1.0, 0.7, -0.2, 0.4, 0.3, 0.6]),
@@ -25,12 +29,17 @@ fn record(sys: &Modal, r: u64, noise: f64) -> Record {
     let mut rng = Pcg32::new(100 + r);
     let u: Vec<Vec<f64>> = (0..2)
         .map(|_| {
-            let ph: Vec<f64> = (1..n / 2).map(|_| 2.0 * std::f64::consts::PI * rng.uniform()).collect();
+            let ph: Vec<f64> = (1..n / 2)
+                .map(|_| 2.0 * std::f64::consts::PI * rng.uniform())
+                .collect();
             (0..3 * n)
                 .map(|i| {
                     ph.iter()
                         .enumerate()
-                        .map(|(k, p)| (2.0 * std::f64::consts::PI * (k + 1) as f64 * i as f64 / n as f64 + p).cos())
+                        .map(|(k, p)| {
+                            (2.0 * std::f64::consts::PI * (k + 1) as f64 * i as f64 / n as f64 + p)
+                                .cos()
+                        })
                         .sum::<f64>()
                         * 0.1
                 })
@@ -42,7 +51,12 @@ fn record(sys: &Modal, r: u64, noise: f64) -> Record {
     let t: Vec<f64> = (0..2 * n).map(|i| i as f64 * 1e-3).collect();
     let y: Vec<Vec<f64>> = y
         .iter()
-        .map(|c| keep(c).into_iter().map(|v| v + noise * (rng.uniform() - 0.5)).collect())
+        .map(|c| {
+            keep(c)
+                .into_iter()
+                .map(|v| v + noise * (rng.uniform() - 0.5))
+                .collect()
+        })
         .collect();
     Record::new(t, u.iter().map(keep).collect(), y).unwrap()
 }
@@ -69,18 +83,27 @@ fn subspace_and_output_error_recover_a_nonminimum_phase_mimo_system() {
     let m = &fit.model.linear;
     assert!(fit.model.fronts.is_empty());
     assert!(m.spectral_radius() < 1.0);
-    let circle: Vec<C64> = (1..64).map(|k| C64::from_polar(1.0, std::f64::consts::PI * k as f64 / 64.0)).collect();
+    let circle: Vec<C64> = (1..64)
+        .map(|k| C64::from_polar(1.0, std::f64::consts::PI * k as f64 / 64.0))
+        .collect();
     let e = max_response_error(m, &sys, &circle);
     assert!(e < 1e-3, "relative response error on the unit circle {e}");
     // The non-minimum-phase zero of u1 -> y1 at z = 2.5 is recovered.
-    let g11 = m.response(C64::new(2.5, 0.0))[(0, 0)].norm() / m.response(C64::new(1.0, 0.0))[(0, 0)].norm();
+    let g11 = m.response(C64::new(2.5, 0.0))[(0, 0)].norm()
+        / m.response(C64::new(1.0, 0.0))[(0, 0)].norm();
     assert!(g11 < 1e-3, "|G11(2.5)| / |G11(1)| = {g11}");
     // Time domain from rest on a fresh realization.
     let v = record(&sys, 9, 0.0);
     let sim = m.simulate(&v.u).unwrap();
     for (y, s) in v.y.iter().zip(&sim) {
         let rms = (y.iter().map(|a| a * a).sum::<f64>() / y.len() as f64).sqrt();
-        let err = (y[256..].iter().zip(&s[256..]).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / 256.0).sqrt();
+        let err = (y[256..]
+            .iter()
+            .zip(&s[256..])
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / 256.0)
+            .sqrt();
         assert!(err < 1e-3 * rms, "simulation error {err} of {rms}");
     }
     // Too low an order cannot reach the bound (the checks above can fail).
@@ -110,5 +133,10 @@ fn automatic_order_finds_the_true_order_or_close() {
         },
     )
     .unwrap();
-    assert!((5..=7).contains(&fit.order), "order {} chosen: {:?}", fit.order, fit.order_scan);
+    assert!(
+        (5..=7).contains(&fit.order),
+        "order {} chosen: {:?}",
+        fit.order,
+        fit.order_scan
+    );
 }

@@ -15,7 +15,10 @@ pub fn handles(model: &str) -> bool {
 }
 
 fn read_all(args: &Args) -> Result<Vec<Record>> {
-    anyhow::ensure!(!args.train.is_empty(), "--train is required (repeat it for several records)");
+    anyhow::ensure!(
+        !args.train.is_empty(),
+        "--train is required (repeat it for several records)"
+    );
     args.train.iter().map(Record::read).collect()
 }
 
@@ -65,13 +68,23 @@ pub fn run(args: &Args) -> Result<()> {
         "bla_levels": levels,
         "seconds": seconds,
     });
-    let saved = SsJson::new(&fit.model, fit.fs_hz, (&args.input_unit, &args.output_unit), serde_json::Value::Null);
+    let saved = SsJson::new(
+        &fit.model,
+        fit.fs_hz,
+        (&args.input_unit, &args.output_unit),
+        serde_json::Value::Null,
+    );
     let loaded = Loaded::Ss(saved.clone());
     if let Some(v) = &args.valid {
         let rec = Record::read(v)?;
         let sim = loaded.simulate(&rec)?;
         let (per_output, mean) = score_last_period(&rec, &sim);
-        println!("valid {}: RMSE over the last period {mean:.4e} {} (per output {})", v.display(), args.output_unit, super::predict::list(&per_output));
+        println!(
+            "valid {}: RMSE over the last period {mean:.4e} {} (per output {})",
+            v.display(),
+            args.output_unit,
+            super::predict::list(&per_output)
+        );
         report["valid"] = serde_json::json!({"record": v.display().to_string(), "rmse_last_period": per_output, "mean": mean});
     }
     println!(
@@ -86,7 +99,23 @@ pub fn run(args: &Args) -> Result<()> {
     for (f, p) in &fit.model.fronts.iter().enumerate().collect::<Vec<_>>() {
         println!("  u{} hysteresis {}: {:?}", f + 1, p.def.name, p.params);
     }
-    let saved = SsJson { report, ..saved };
+    let range = |chans: &dyn Fn(&Record) -> &Vec<Vec<f64>>| -> Vec<(f64, f64)> {
+        (0..chans(&recs[0]).len())
+            .map(|i| {
+                recs.iter()
+                    .flat_map(|r| chans(r)[i].iter())
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                        (a.min(v), b.max(v))
+                    })
+            })
+            .collect()
+    };
+    let saved = SsJson {
+        report,
+        input_range: range(&|r: &Record| &r.u),
+        output_range: range(&|r: &Record| &r.y),
+        ..saved
+    };
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let path = dir.join("fit.json");
@@ -105,7 +134,9 @@ pub fn run(args: &Args) -> Result<()> {
 /// Noise and distortion levels of the BLA of periodic records (`None` otherwise).
 pub fn bla_levels(recs: &[Record]) -> Result<Option<frf::Levels>> {
     let periods: Vec<usize> = recs.iter().map(frf::detect_period).collect();
-    if periods.iter().zip(recs).any(|(&n, r)| n == r.len()) || periods.iter().any(|&n| n != periods[0]) {
+    if periods.iter().zip(recs).any(|(&n, r)| n == r.len())
+        || periods.iter().any(|&n| n != periods[0])
+    {
         return Ok(None);
     }
     let sp = recs

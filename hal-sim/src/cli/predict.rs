@@ -26,7 +26,10 @@ pub struct Args {
 pub enum Loaded {
     Ss(SsJson),
     /// The per-channel models of the classic fits (cbw, structural-bw, ...).
-    Parts { parts: Vec<Part>, outputs: usize },
+    Parts {
+        parts: Vec<Part>,
+        outputs: usize,
+    },
 }
 
 fn field<'a>(v: &'a Value, key: &str, path: &str) -> Result<&'a Value> {
@@ -42,26 +45,46 @@ fn num(v: &Value, key: &str, path: &str) -> Result<f64> {
 /// Rebuilds a classic fit part from its JSON (`Part` as `piezo fit` writes it).
 fn part(v: &Value, path: &str) -> Result<Part> {
     let fit = field(v, "fit", path)?;
-    let name = field(fit, "model", path)?.as_str().with_context(|| format!("{path}: `model` is not a name"))?;
+    let name = field(fit, "model", path)?
+        .as_str()
+        .with_context(|| format!("{path}: `model` is not a name"))?;
     let def = models::find(name)?;
     let params: Vec<f64> = field(fit, "params", path)?
         .as_array()
         .with_context(|| format!("{path}: `params` is not a list"))?
         .iter()
-        .map(|p| p.get(1).and_then(Value::as_f64).with_context(|| format!("{path}: a parameter is not [name, value]")))
+        .map(|p| {
+            p.get(1)
+                .and_then(Value::as_f64)
+                .with_context(|| format!("{path}: a parameter is not [name, value]"))
+        })
         .collect::<Result<_>>()?;
-    let mut f = Fitted::from_params(def, &params, num(fit, "sign", path)?, num(fit, "offset", path)?, num(fit, "upsample", path)? as usize)?;
+    let mut f = Fitted::from_params(
+        def,
+        &params,
+        num(fit, "sign", path)?,
+        num(fit, "offset", path)?,
+        num(fit, "upsample", path)? as usize,
+    )?;
     if let Some(lin) = fit.get("linear").and_then(Value::as_array) {
         f.linear = lin
             .iter()
-            .map(|s| match (s.get(0).and_then(Value::as_f64), s.get(1).and_then(Value::as_f64)) {
-                (Some(a), Some(b)) => Ok((a, b)),
-                _ => anyhow::bail!("{path}: a linear section is not [f_hz, zeta]"),
+            .map(|s| {
+                match (
+                    s.get(0).and_then(Value::as_f64),
+                    s.get(1).and_then(Value::as_f64),
+                ) {
+                    (Some(a), Some(b)) => Ok((a, b)),
+                    _ => anyhow::bail!("{path}: a linear section is not [f_hz, zeta]"),
+                }
             })
             .collect::<Result<_>>()?;
     }
     let idx = |k: &str| -> Result<usize> {
-        field(v, k, path)?.as_u64().map(|x| x as usize).with_context(|| format!("{path}: `{k}` is not an index"))
+        field(v, k, path)?
+            .as_u64()
+            .map(|x| x as usize)
+            .with_context(|| format!("{path}: `{k}` is not an index"))
     };
     let kind = match field(v, "kind", path)?.as_str() {
         Some("direct") => "direct",
@@ -78,12 +101,15 @@ fn part(v: &Value, path: &str) -> Result<Part> {
 
 impl Loaded {
     pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        let v: Value = serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let v: Value =
+            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
         let p = path.display().to_string();
         let model = field(&v, "model", &p)?.as_str().unwrap_or_default();
         if crate::cli::fit_ss::handles(model) {
-            let s: SsJson = serde_json::from_value(v).with_context(|| format!("{p}: not a state-space fit.json"))?;
+            let s: SsJson = serde_json::from_value(v)
+                .with_context(|| format!("{p}: not a state-space fit.json"))?;
             s.to_model().with_context(|| p.clone())?;
             return Ok(Self::Ss(s));
         }
@@ -152,7 +178,11 @@ pub fn score_last_period(rec: &Record, sim: &[Vec<f64>]) -> (Vec<f64>, f64) {
         .iter()
         .zip(sim)
         .map(|(y, s)| {
-            let se: f64 = y[start..].iter().zip(&s[start..]).map(|(a, b)| (a - b) * (a - b)).sum();
+            let se: f64 = y[start..]
+                .iter()
+                .zip(&s[start..])
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum();
             (se / n as f64).sqrt()
         })
         .collect();
@@ -162,12 +192,50 @@ pub fn score_last_period(rec: &Record, sim: &[Vec<f64>]) -> (Vec<f64>, f64) {
 
 /// `a, b, c` with 5 significant digits.
 pub fn list(v: &[f64]) -> String {
-    v.iter().map(|x| format!("{x:.5e}")).collect::<Vec<_>>().join(", ")
+    v.iter()
+        .map(|x| format!("{x:.5e}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Reads a record that may hold inputs only (`t,u1..uk`): then `y` is empty.
+pub fn read_inputs(path: &Path) -> Result<Record> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read record {}", path.display()))?;
+    let is_y = |c: &str| {
+        c == "y"
+            || c.strip_prefix('y')
+                .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+    };
+    let header = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with('#'));
+    let has_y = header.is_some_and(|h| h.split(',').map(str::trim).any(is_y));
+    if has_y || header.is_none() {
+        return Record::read(path);
+    }
+    // A placeholder output column lets the record parser check everything else.
+    let mut seen_header = false;
+    let mut padded = String::with_capacity(text.len() + text.len() / 8);
+    for line in text.lines() {
+        let l = line.trim();
+        padded.push_str(line);
+        if !l.is_empty() && !l.starts_with('#') {
+            padded.push_str(if seen_header { ",0" } else { ",y" });
+            seen_header = true;
+        }
+        padded.push('\n');
+    }
+    let mut rec =
+        Record::parse(&padded).map_err(|e| anyhow::anyhow!("record {}: {e}", path.display()))?;
+    rec.y.clear();
+    Ok(rec)
 }
 
 pub fn run(args: Args) -> Result<()> {
     let model = Loaded::read(&args.model)?;
-    let rec = Record::read(&args.input)?;
+    let rec = read_inputs(&args.input)?;
     let sim = model.simulate(&rec)?;
     if !rec.y.is_empty() {
         anyhow::ensure!(
@@ -185,7 +253,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(out) = &args.out {
         let r = Record {
-            comments: vec![format!(" piezo predict --model {}: simulated from rest", args.model.display())],
+            comments: vec![format!(
+                " piezo predict --model {}: simulated from rest",
+                args.model.display()
+            )],
             t: rec.t.clone(),
             u: Vec::new(),
             y: sim,

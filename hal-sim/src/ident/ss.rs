@@ -71,7 +71,10 @@ fn progress(on: bool, msg: impl FnOnce() -> String) {
 }
 
 /// Frequency data of every record (BLA of the periodic ones, H1 of the others).
-fn frequency_data(recs: &[Record], opts: &SsOptions) -> anyhow::Result<(FrfData, Vec<PeriodicSpectra>)> {
+fn frequency_data(
+    recs: &[Record],
+    opts: &SsOptions,
+) -> anyhow::Result<(FrfData, Vec<PeriodicSpectra>)> {
     let periods: Vec<usize> = recs.iter().map(frf::detect_period).collect();
     let periodic = periods.iter().zip(recs).all(|(&n, r)| n < r.len());
     if periodic {
@@ -99,12 +102,20 @@ fn frequency_data(recs: &[Record], opts: &SsOptions) -> anyhow::Result<(FrfData,
                 }
             });
         }
-        Ok((all.ok_or_else(|| anyhow::anyhow!("no records"))?, Vec::new()))
+        Ok((
+            all.ok_or_else(|| anyhow::anyhow!("no records"))?,
+            Vec::new(),
+        ))
     }
 }
 
 /// Subspace estimate refined by the output-error fit on `data`.
-fn linear_model(data: &FrfData, order: usize, iterations: usize, label: Option<String>) -> anyhow::Result<(Modal, f64)> {
+fn linear_model(
+    data: &FrfData,
+    order: usize,
+    iterations: usize,
+    label: Option<String>,
+) -> anyhow::Result<(Modal, f64)> {
     let init = subspace::identify(data, order)?;
     let stats = LineStats::from_frf(data);
     let cfg = PemConfig {
@@ -155,28 +166,42 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
             // Every fourth record held back (all of them when there is one record: then
             // every fourth line); subspace + least squares per candidate order.
             anyhow::ensure!(!opts.candidates.is_empty(), "no candidate orders");
-            let (fit_d, val_d) = if spectra.len() >= 4 {
-                let (a, b): (Vec<_>, Vec<_>) = spectra.iter().cloned().enumerate().partition(|(i, _)| i % 4 != 3);
-                let strip = |v: Vec<(usize, PeriodicSpectra)>| v.into_iter().map(|x| x.1).collect::<Vec<_>>();
+            let (fit_d, val_d, val_n) = if spectra.len() >= 4 {
+                let (a, b): (Vec<_>, Vec<_>) = spectra
+                    .iter()
+                    .cloned()
+                    .enumerate()
+                    .partition(|(i, _)| i % 4 != 3);
+                let strip = |v: Vec<(usize, PeriodicSpectra)>| {
+                    v.into_iter().map(|x| x.1).collect::<Vec<_>>()
+                };
                 let (a, b) = (strip(a), strip(b));
-                (frf::bla(&a)?.data, val_stats_periodic(&b))
+                let nb = b.len();
+                (frf::bla(&a)?.data, val_stats_periodic(&b), (nb * p) as f64)
             } else {
-                (data.subset(|i| i % 4 != 3), LineStats::from_frf(&data.subset(|i| i % 4 == 3)))
+                let val = LineStats::from_frf(&data.subset(|i| i % 4 == 3));
+                (data.subset(|i| i % 4 != 3), val, (recs.len() * p) as f64)
             };
-            let mut best = (opts.candidates[0], f64::INFINITY);
             for &n in &opts.candidates {
                 let c = match subspace::identify(&fit_d, n) {
-                    Ok(mdl) => pem::cost(&mdl, &val_d),
+                    Ok(mdl) => (pem::cost(&mdl, &val_d) / val_n).sqrt(),
                     Err(_) => f64::INFINITY,
                 };
-                progress(opts.progress, || format!("order {n}: validation cost {c:.4e}"));
+                progress(opts.progress, || {
+                    format!("order {n}: validation RMS {c:.4e}")
+                });
                 order_scan.push((n, c));
-                if c < best.1 {
-                    best = (n, c);
-                }
             }
-            progress(opts.progress, || format!("order {} chosen", best.0));
-            best.0
+            // The smallest order within 2 % of the best: beyond the true order the
+            // validation error only wanders with the noise.
+            let best = order_scan.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
+            anyhow::ensure!(best.is_finite(), "no candidate order gave a model");
+            let n = order_scan
+                .iter()
+                .find(|x| x.1 <= 1.02 * best)
+                .map_or(opts.candidates[0], |x| x.0);
+            progress(opts.progress, || format!("order {n} chosen"));
+            n
         }
     };
     let (linear, lin_cost) = linear_model(
@@ -191,7 +216,9 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
     } else {
         (pem::cost(&linear, &val_stats_periodic(&spectra)) / records).sqrt()
     };
-    progress(opts.progress, || format!("linear model: RMS output error {linear_rms:.4e} on the training records"));
+    progress(opts.progress, || {
+        format!("linear model: RMS output error {linear_rms:.4e} on the training records")
+    });
     let mut fit = SsFit {
         model: Hammerstein {
             fronts: Vec::new(),
@@ -209,15 +236,23 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
             !spectra.is_empty(),
             "the Hammerstein fit needs periodic records (multisines of whole periods)"
         );
-        let per: Vec<Periodic> = spectra.iter().zip(recs).map(|(s, r)| Periodic::of(s, &r.u)).collect();
+        let per: Vec<Periodic> = spectra
+            .iter()
+            .zip(recs)
+            .map(|(s, r)| Periodic::of(s, &r.u))
+            .collect();
         let cfg = PemConfig {
             iterations: opts.joint_iterations,
-            progress: opts.progress.then(|| format!("hammerstein {} + order {order}", def.name)),
+            progress: opts
+                .progress
+                .then(|| format!("hammerstein {} + order {order}", def.name)),
             ..Default::default()
         };
         let (h, c) = hammerstein::identify(def, &per, 1.0 / fs, &linear, &cfg)?;
         let rms = (c / records).sqrt();
-        progress(opts.progress, || format!("hammerstein model: RMS output error {rms:.4e} on the training records"));
+        progress(opts.progress, || {
+            format!("hammerstein model: RMS output error {rms:.4e} on the training records")
+        });
         fit.model = h;
         fit.hammerstein_rms = Some(rms);
     }

@@ -24,7 +24,8 @@ pub fn detect_period(rec: &Record) -> usize {
         let n = len / p;
         let repeats = rec.u.iter().all(|u| {
             let ms: f64 = u.iter().map(|v| v * v).sum::<f64>() / len as f64;
-            let dms: f64 = (n..len).map(|i| (u[i] - u[i - n]).powi(2)).sum::<f64>() / (len - n) as f64;
+            let dms: f64 =
+                (n..len).map(|i| (u[i] - u[i - n]).powi(2)).sum::<f64>() / (len - n) as f64;
             ms > 0.0 && dms <= 1e-4 * ms
         });
         if repeats {
@@ -125,7 +126,10 @@ pub struct FrfData {
 
 impl FrfData {
     pub fn z(&self, line: usize) -> C64 {
-        C64::from_polar(1.0, 2.0 * std::f64::consts::PI * self.bins[line] as f64 / self.n as f64)
+        C64::from_polar(
+            1.0,
+            2.0 * std::f64::consts::PI * self.bins[line] as f64 / self.n as f64,
+        )
     }
     pub fn freq_hz(&self, line: usize) -> f64 {
         self.bins[line] as f64 * self.fs_hz / self.n as f64
@@ -181,7 +185,11 @@ pub struct Bla {
 fn excited_bins(sp: &[PeriodicSpectra]) -> Vec<usize> {
     let bins = sp[0].bins();
     let power: Vec<f64> = (0..bins)
-        .map(|k| sp.iter().flat_map(|s| s.u.iter().map(move |u| u[k].norm_sqr())).sum())
+        .map(|k| {
+            sp.iter()
+                .flat_map(|s| s.u.iter().map(move |u| u[k].norm_sqr()))
+                .sum()
+        })
         .collect();
     let max = power.iter().copied().fold(0.0, f64::max);
     (0..bins).filter(|&k| power[k] > 1e-8 * max).collect()
@@ -232,7 +240,8 @@ pub fn bla(sp: &[PeriodicSpectra]) -> anyhow::Result<Bla> {
                 .map(|o| sp.iter().map(|s| s.y_noise_var[o][k]).sum::<f64>() / r as f64)
                 .collect(),
         );
-        data.f.push(psd_factor(&(suu * C64::new(bin_weight(k, n), 0.0))));
+        data.f
+            .push(psd_factor(&(suu * C64::new(bin_weight(k, n), 0.0))));
         data.g.push(g);
         data.bins.push(k);
     }
@@ -293,13 +302,20 @@ impl Bla {
 /// input-power factor is scaled so one record's full length counts as in [`bla`].
 pub fn h1_welch(rec: &Record, seg: usize) -> anyhow::Result<FrfData> {
     let (m, p, len) = (rec.u.len(), rec.y.len(), rec.len());
-    anyhow::ensure!(seg >= 16 && seg <= len, "segment of {seg} samples does not fit a {len}-sample record");
+    anyhow::ensure!(
+        seg >= 16 && seg <= len,
+        "segment of {seg} samples does not fit a {len}-sample record"
+    );
     let hann: Vec<f64> = (0..seg)
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / seg as f64).cos())
         .collect();
     let fft = FftPlanner::<f64>::new().plan_fft_forward(seg);
     let spec = |x: &[f64]| -> Vec<C64> {
-        let mut b: Vec<C64> = x.iter().zip(&hann).map(|(v, w)| C64::new(v * w, 0.0)).collect();
+        let mut b: Vec<C64> = x
+            .iter()
+            .zip(&hann)
+            .map(|(v, w)| C64::new(v * w, 0.0))
+            .collect();
         fft.process(&mut b);
         b.truncate(seg / 2 + 1);
         b
@@ -339,7 +355,9 @@ pub fn h1_welch(rec: &Record, seg: usize) -> anyhow::Result<FrfData> {
         if sv.min() <= 1e-8 * sv.max() {
             continue;
         }
-        let Some(inv) = suu[k].clone().try_inverse() else { continue };
+        let Some(inv) = suu[k].clone().try_inverse() else {
+            continue;
+        };
         data.g.push(&syu[k] * inv);
         // Mean square per sample: the segment average of |X_w|^2 / sum(w^2), one-sided.
         let scale = bin_weight(k, seg) * seg as f64 / wsum / segs as f64;
@@ -373,7 +391,9 @@ mod tests {
         let n = 64;
         let x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.9).sin() + 0.3).collect();
         let s = &period_spectra(&x, n)[0];
-        let ms: f64 = (0..=n / 2).map(|k| bin_weight(k, n) * s[k].norm_sqr()).sum();
+        let ms: f64 = (0..=n / 2)
+            .map(|k| bin_weight(k, n) * s[k].norm_sqr())
+            .sum();
         let want = x.iter().map(|v| v * v).sum::<f64>() / n as f64;
         assert!((ms - want).abs() < 1e-12, "{ms} vs {want}");
     }

@@ -73,16 +73,19 @@ impl Coords {
         // Scaled as if the output were the input: a gain near one.
         let specs = (def.params)(&Scales::of(u, u, dt));
         let log: Vec<bool> = specs.iter().map(|s| s.log).collect();
-        let to = |s: &models::ParamSpec, v: f64| if s.log { v.max(f64::MIN_POSITIVE).log10() } else { v };
-        let lo: Vec<f64> = specs.iter().map(|s| to(s, s.lo)).collect();
-        let hi: Vec<f64> = specs.iter().map(|s| to(s, s.hi)).collect();
+        let to = |s: &models::ParamSpec, v: f64| {
+            if s.log {
+                v.max(f64::MIN_POSITIVE).log10()
+            } else {
+                v
+            }
+        };
+        // Just inside the box: some models refuse its edges (CBW: gamma = -beta).
+        let edge = |s: &models::ParamSpec| 1e-3 * (to(s, s.hi) - to(s, s.lo));
+        let lo: Vec<f64> = specs.iter().map(|s| to(s, s.lo) + edge(s)).collect();
+        let hi: Vec<f64> = specs.iter().map(|s| to(s, s.hi) - edge(s)).collect();
         let start = lo.iter().zip(&hi).map(|(a, b)| 0.5 * (a + b)).collect();
-        Self {
-            log,
-            lo,
-            hi,
-            start,
-        }
+        Self { log, lo, hi, start }
     }
     fn params(&self, z: &[f64]) -> Vec<f64> {
         z.iter()
@@ -111,12 +114,22 @@ impl Periodic {
 }
 
 /// Steady-state spectra of `H(u)` over one period (simulated over two).
-fn front_spectrum(def: &'static ModelDef, p: &[f64], u: &[f64], dt: f64) -> anyhow::Result<Vec<C64>> {
+fn front_spectrum(
+    def: &'static ModelDef,
+    p: &[f64],
+    u: &[f64],
+    dt: f64,
+) -> anyhow::Result<Vec<C64>> {
     let n = u.len();
     let twice: Vec<f64> = u.iter().chain(u).copied().collect();
     let mut v = vec![0.0; 2 * n];
-    (def.simulate)(p, &twice, dt, &mut v).map_err(|e| anyhow::anyhow!("hysteresis `{}`: {e}", def.name))?;
-    anyhow::ensure!(v.iter().all(|x| x.is_finite()), "hysteresis `{}` diverged", def.name);
+    (def.simulate)(p, &twice, dt, &mut v)
+        .map_err(|e| anyhow::anyhow!("hysteresis `{}`: {e}", def.name))?;
+    anyhow::ensure!(
+        v.iter().all(|x| x.is_finite()),
+        "hysteresis `{}` diverged",
+        def.name
+    );
     Ok(period_spectra(&v[n..], n).remove(0))
 }
 
@@ -142,8 +155,18 @@ pub fn identify(
         .collect();
     let coords: Vec<Coords> = all_u.iter().map(|u| Coords::of(def, u, dt)).collect();
     let k_per: Vec<usize> = coords.iter().map(|c| c.lo.len()).collect();
-    let offsets: Vec<usize> = k_per.iter().scan(0, |s, k| { let o = *s; *s += k; Some(o) }).collect();
-    let theta0: Vec<f64> = coords.iter().flat_map(|c| c.start.iter().copied()).collect();
+    let offsets: Vec<usize> = k_per
+        .iter()
+        .scan(0, |s, k| {
+            let o = *s;
+            *s += k;
+            Some(o)
+        })
+        .collect();
+    let theta0: Vec<f64> = coords
+        .iter()
+        .flat_map(|c| c.start.iter().copied())
+        .collect();
     let lo: Vec<f64> = coords.iter().flat_map(|c| c.lo.iter().copied()).collect();
     let hi: Vec<f64> = coords.iter().flat_map(|c| c.hi.iter().copied()).collect();
     let nt = theta0.len();
@@ -158,7 +181,11 @@ pub fn identify(
     let spectra = |theta: &[f64]| -> anyhow::Result<Vec<Vec<Vec<C64>>>> {
         let ps = fronts_at(theta);
         recs.par_iter()
-            .map(|r| (0..m).map(|j| front_spectrum(def, &ps[j], &r.u[j], dt)).collect())
+            .map(|r| {
+                (0..m)
+                    .map(|j| front_spectrum(def, &ps[j], &r.u[j], dt))
+                    .collect()
+            })
             .collect()
     };
     let stats_fn = |theta: &[f64], derivs: bool| -> anyhow::Result<Vec<LineStats>> {
@@ -203,7 +230,9 @@ pub fn identify(
                     syv += &yk * vk.adjoint();
                     syy += yk.norm_squared();
                 }
-                let col = |j: usize, x: C64| DMatrix::from_fn(m, 1, |i, _| if i == j { x } else { C64::new(0.0, 0.0) });
+                let col = |j: usize, x: C64| {
+                    DMatrix::from_fn(m, 1, |i, _| if i == j { x } else { C64::new(0.0, 0.0) })
+                };
                 let mut sdv_v = Vec::with_capacity(dv.len());
                 let mut sy_dv = Vec::with_capacity(dv.len());
                 for (j, d) in &dv {
@@ -247,7 +276,8 @@ pub fn identify(
     let ps0 = fronts_at(&theta0);
     for j in 0..m {
         let mut v = vec![0.0; all_u[j].len()];
-        (def.simulate)(&ps0[j], &all_u[j], dt, &mut v).map_err(|e| anyhow::anyhow!("hysteresis `{}`: {e}", def.name))?;
+        (def.simulate)(&ps0[j], &all_u[j], dt, &mut v)
+            .map_err(|e| anyhow::anyhow!("hysteresis `{}`: {e}", def.name))?;
         let uv: f64 = all_u[j].iter().zip(&v).map(|(a, b)| a * b).sum();
         let vv: f64 = v.iter().map(|b| b * b).sum();
         let k = if vv > 0.0 { uv / vv } else { 1.0 };

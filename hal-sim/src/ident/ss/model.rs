@@ -93,7 +93,12 @@ fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
         .collect()
 }
 
-fn from_rows(r: &[Vec<f64>], nrows: usize, ncols: usize, what: &str) -> anyhow::Result<DMatrix<f64>> {
+fn from_rows(
+    r: &[Vec<f64>],
+    nrows: usize,
+    ncols: usize,
+    what: &str,
+) -> anyhow::Result<DMatrix<f64>> {
     anyhow::ensure!(
         r.len() == nrows && r.iter().all(|row| row.len() == ncols),
         "state-space `{what}` must be {nrows} x {ncols}"
@@ -134,13 +139,19 @@ impl Modal {
         let n: usize = j.blocks.iter().map(Block::states).sum();
         let m = j.d.first().map_or(0, Vec::len);
         let p = j.d.len();
-        anyhow::ensure!(p > 0 && m > 0, "state-space `d` must have at least one row and column");
+        anyhow::ensure!(
+            p > 0 && m > 0,
+            "state-space `d` must have at least one row and column"
+        );
         for b in &j.blocks {
             let ok = match *b {
                 Block::Real(l) => l.is_finite(),
                 Block::Pair(s, w) => s.is_finite() && w.is_finite() && w > 0.0,
             };
-            anyhow::ensure!(ok, "state-space block {b:?} is not a real pole or a pair with omega > 0");
+            anyhow::ensure!(
+                ok,
+                "state-space block {b:?} is not a real pole or a pair with omega > 0"
+            );
         }
         Ok(Self {
             blocks: j.blocks.clone(),
@@ -197,7 +208,11 @@ impl Modal {
             let ns = blk.states();
             for j in 0..m {
                 let x: Vec<C64> = (0..ns)
-                    .map(|a| (0..ns).map(|bb| res[r + a * ns + bb] * self.b[(i + bb, j)]).sum())
+                    .map(|a| {
+                        (0..ns)
+                            .map(|bb| res[r + a * ns + bb] * self.b[(i + bb, j)])
+                            .sum()
+                    })
                     .collect();
                 for o in 0..p {
                     let mut acc = C64::new(0.0, 0.0);
@@ -304,7 +319,10 @@ impl Modal {
                     .solve(&v)
                     .ok_or_else(|| anyhow::anyhow!("eigenvector of pole {l} not found"))?;
                 let nv = v.norm();
-                anyhow::ensure!(nv.is_finite() && nv > 0.0, "eigenvector of pole {l} not found");
+                anyhow::ensure!(
+                    nv.is_finite() && nv > 0.0,
+                    "eigenvector of pole {l} not found"
+                );
                 v /= C64::new(nv, 0.0);
             }
             Ok(v)
@@ -332,10 +350,9 @@ impl Modal {
             blocks.push(Block::Real(*l));
             col += 1;
         }
-        let tinv = t
-            .clone()
-            .try_inverse()
-            .ok_or_else(|| anyhow::anyhow!("the modal transformation is singular (repeated poles?)"))?;
+        let tinv = t.clone().try_inverse().ok_or_else(|| {
+            anyhow::anyhow!("the modal transformation is singular (repeated poles?)")
+        })?;
         Ok(Self {
             blocks: blocks.into_iter().map(Block::reflected).collect(),
             b: &tinv * b,
@@ -355,7 +372,10 @@ impl Modal {
                 };
                 let s = z.ln() * fs_hz;
                 let wn = s.norm();
-                (wn / (2.0 * std::f64::consts::PI), if wn > 0.0 { -s.re / wn } else { 1.0 })
+                (
+                    wn / (2.0 * std::f64::consts::PI),
+                    if wn > 0.0 { -s.re / wn } else { 1.0 },
+                )
             })
             .collect()
     }
@@ -379,7 +399,9 @@ mod tests {
         let m = example();
         let z = C64::from_polar(1.0, 0.7);
         let a = m.a().map(|v| C64::new(v, 0.0));
-        let r = (DMatrix::<C64>::identity(3, 3) * z - a).try_inverse().unwrap();
+        let r = (DMatrix::<C64>::identity(3, 3) * z - a)
+            .try_inverse()
+            .unwrap();
         let g = m.c.map(|v| C64::new(v, 0.0)) * r * m.b.map(|v| C64::new(v, 0.0))
             + m.d.map(|v| C64::new(v, 0.0));
         assert!((g - m.response(z)).norm() < 1e-12);
@@ -391,7 +413,10 @@ mod tests {
         let n = 64;
         let k = 5;
         let w = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
-        let u: Vec<Vec<f64>> = vec![(0..20 * n).map(|i| (w * i as f64).cos()).collect(), vec![0.0; 20 * n]];
+        let u: Vec<Vec<f64>> = vec![
+            (0..20 * n).map(|i| (w * i as f64).cos()).collect(),
+            vec![0.0; 20 * n],
+        ];
         let y = m.simulate(&u).unwrap();
         let g = m.response(C64::from_polar(1.0, w));
         let i = 20 * n - 3;
@@ -422,6 +447,9 @@ mod tests {
         assert_eq!(Modal::from_json(&j).unwrap(), m);
         let mut bad = j.clone();
         bad.c[0].pop();
-        assert!(Modal::from_json(&bad).unwrap_err().to_string().contains("`c`"));
+        assert!(Modal::from_json(&bad)
+            .unwrap_err()
+            .to_string()
+            .contains("`c`"));
     }
 }

@@ -126,7 +126,11 @@ pub fn cost(model: &Modal, stats: &[LineStats]) -> f64 {
         .par_iter()
         .map(|s| {
             let g = model.response(s.z);
-            let cross: f64 = g.iter().zip(s.syv.iter()).map(|(a, b)| (a * b.conj()).re).sum();
+            let cross: f64 = g
+                .iter()
+                .zip(s.syv.iter())
+                .map(|(a, b)| (a * b.conj()).re)
+                .sum();
             let quad = (&g * &s.svv * g.adjoint()).trace().re;
             s.syy - 2.0 * cross + quad
         })
@@ -137,7 +141,8 @@ pub fn cost(model: &Modal, stats: &[LineStats]) -> f64 {
 /// `dG/dparam` at `z` for every model parameter, as rows `vec(dG)` (row-major `p x m`).
 fn model_jacobian(model: &Modal, z: C64) -> DMatrix<C64> {
     let (m, p, n) = (model.inputs(), model.outputs(), model.order());
-    let n_pole_params: usize = model.blocks.len() + model.blocks.iter().filter(|b| b.states() == 2).count();
+    let n_pole_params: usize =
+        model.blocks.len() + model.blocks.iter().filter(|b| b.states() == 2).count();
     let rows = n_pole_params + n * m + p * n + p * m;
     let mut jac = DMatrix::<C64>::zeros(rows, p * m);
     let res = model.resolvents(z);
@@ -223,10 +228,17 @@ fn re_dot(jac: &DMatrix<C64>, row: usize, b: &DMatrix<C64>) -> f64 {
 }
 
 /// Gauss-Newton normal equations `(J^T J, J^T e)` of all parameters at `(model, theta)`.
-fn normal_equations(model: &Modal, stats: &[LineStats], n_theta: usize) -> (DMatrix<f64>, DVector<f64>) {
+fn normal_equations(
+    model: &Modal,
+    stats: &[LineStats],
+    n_theta: usize,
+) -> (DMatrix<f64>, DVector<f64>) {
     let n_model = pack(model).len();
     let np = n_theta + n_model;
-    let chunk = stats.len().div_ceil(rayon::current_num_threads().max(1) * 4).max(1);
+    let chunk = stats
+        .len()
+        .div_ceil(rayon::current_num_threads().max(1) * 4)
+        .max(1);
     stats
         .par_chunks(chunk)
         .map(|lines| {
@@ -238,15 +250,11 @@ fn normal_equations(model: &Modal, stats: &[LineStats], n_theta: usize) -> (DMat
                 let (p, m) = gm.shape();
                 let f = psd_factor(&s.svv);
                 // Rows vec(dG_a F): H_GG += Re(X X^H).
+                // Row-major vec: the columns of output o are jac[:, o m .. o m + m] F.
                 let mut x = DMatrix::<C64>::zeros(n_model, p * m);
-                for a in 0..n_model {
-                    let da = DMatrix::from_fn(p, m, |o, j| jac[(a, o * m + j)]);
-                    let daf = da * &f;
-                    for o in 0..p {
-                        for j in 0..m {
-                            x[(a, o * m + j)] = daf[(o, j)];
-                        }
-                    }
+                for o in 0..p {
+                    let cols = jac.columns(o * m, m) * &f;
+                    x.columns_mut(o * m, m).copy_from(&cols);
                 }
                 let xr = x.map(|v| v.re);
                 let xi = x.map(|v| v.im);
@@ -305,7 +313,10 @@ pub fn refine(
 ) -> anyhow::Result<Refined> {
     let nt = theta.len();
     let (lo, hi) = bounds;
-    anyhow::ensure!(lo.len() == nt && hi.len() == nt, "theta bounds do not match theta");
+    anyhow::ensure!(
+        lo.len() == nt && hi.len() == nt,
+        "theta bounds do not match theta"
+    );
     let mut th = theta.to_vec();
     let mut mdl = model.clone();
     let mut stats = stats_fn(&th, nt > 0)?;
@@ -335,7 +346,18 @@ pub fn refine(
             let zt: Vec<f64> = z0.iter().zip(dz.iter()).map(|(z, d)| z - d).collect();
             let tht: Vec<f64> = (0..nt).map(|i| zt[i].clamp(lo[i], hi[i])).collect();
             let mt = unpack(&mdl, &zt[nt..]);
-            let st = if nt > 0 { stats_fn(&tht, false)? } else { Vec::new() };
+            // A front-end parameter set the model refuses counts as a failed step.
+            let st = if nt > 0 {
+                match stats_fn(&tht, false) {
+                    Ok(st) => st,
+                    Err(_) => {
+                        lambda *= 4.0;
+                        continue;
+                    }
+                }
+            } else {
+                Vec::new()
+            };
             let ct = cost(&mt, if nt > 0 { &st } else { &stats });
             if ct.is_finite() && ct < c {
                 improved = Some((tht, mt, ct));

@@ -32,6 +32,12 @@ pub struct SsJson {
     pub hysteresis: Vec<FrontJson>,
     /// `x[k+1] = A x + B v`, `y = C x + D v`, `A` block diagonal (see `blocks`).
     pub linear: ModalJson,
+    /// Training range `[min, max]` of each input and output (model units): what
+    /// `piezo sim --stage` scales the converters to.
+    #[serde(default)]
+    pub input_range: Vec<(f64, f64)>,
+    #[serde(default)]
+    pub output_range: Vec<(f64, f64)>,
     /// Modes of `A` as continuous-time `[f_hz, zeta]`, for reading only.
     #[serde(default)]
     pub modes_hz: Vec<(f64, f64)>,
@@ -41,10 +47,20 @@ pub struct SsJson {
 }
 
 impl SsJson {
-    pub fn new(model: &Hammerstein, fs_hz: f64, units: (&str, &str), report: serde_json::Value) -> Self {
+    pub fn new(
+        model: &Hammerstein,
+        fs_hz: f64,
+        units: (&str, &str),
+        report: serde_json::Value,
+    ) -> Self {
         Self {
             format: crate::cli::fit::FORMAT.into(),
-            model: if model.fronts.is_empty() { "ss" } else { "hammerstein-ss" }.into(),
+            model: if model.fronts.is_empty() {
+                "ss"
+            } else {
+                "hammerstein-ss"
+            }
+            .into(),
             sample_rate_hz: fs_hz,
             inputs: model.linear.inputs(),
             outputs: model.linear.outputs(),
@@ -63,6 +79,8 @@ impl SsJson {
                 })
                 .collect(),
             linear: model.linear.to_json(),
+            input_range: Vec::new(),
+            output_range: Vec::new(),
             modes_hz: model.linear.modes_hz(fs_hz),
             report,
         }

@@ -58,7 +58,9 @@ pub fn identify(data: &FrfData, n: usize) -> anyhow::Result<Modal> {
     // Lower-right block of R^T: the part of G orthogonal to the input rows.
     let r22 = r.view((q * m, q * m), (q * p, q * p)).transpose();
     let svd = r22.svd(true, false);
-    let u = svd.u.ok_or_else(|| anyhow::anyhow!("subspace SVD failed"))?;
+    let u = svd
+        .u
+        .ok_or_else(|| anyhow::anyhow!("subspace SVD failed"))?;
     // Singular values come sorted decreasing from nalgebra's SVD only after sorting.
     let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
     order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
@@ -96,7 +98,9 @@ pub fn fit_bd(model: &mut Modal, data: &FrfData) -> anyhow::Result<()> {
             let ns = blk.states();
             for o in 0..p {
                 for b in 0..ns {
-                    mk[(o, i + b)] = (0..ns).map(|a2| cc[(o, i + a2)] * res[r + a2 * ns + b]).sum();
+                    mk[(o, i + b)] = (0..ns)
+                        .map(|a2| cc[(o, i + a2)] * res[r + a2 * ns + b])
+                        .sum();
                 }
             }
             r += ns * ns;
@@ -152,6 +156,9 @@ pub fn least_squares(mut a: DMatrix<f64>, rhs: DVector<f64>) -> anyhow::Result<D
         .svd(true, true)
         .solve(&rhs, 1e-12)
         .map_err(|e| anyhow::anyhow!("least squares: {e}"))?;
-    anyhow::ensure!(x.iter().all(|v| v.is_finite()), "least squares: no finite solution");
+    anyhow::ensure!(
+        x.iter().all(|v| v.is_finite()),
+        "least squares: no finite solution"
+    );
     Ok(DVector::from_fn(x.len(), |j, _| x[j] * scale[j]))
 }
