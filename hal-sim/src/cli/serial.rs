@@ -1087,9 +1087,15 @@ pub struct RecordArgs {
     /// Frames kept before the trigger.
     #[arg(long, default_value_t = 0)]
     pub pre: usize,
-    /// Longest wait for the capture to complete, in seconds.
+    /// Longest wait for the trigger, in seconds of the firmware's own time (control periods
+    /// it reports in `stats`, so an emulator running slower than real time gets the same
+    /// budget); the capture's own length is added.
     #[arg(long, default_value_t = 10.0, value_name = "S")]
     pub wait_s: f64,
+    /// Wall-clock cap on the whole wait, in seconds: only for a firmware that stopped
+    /// running or a dead link (the firmware's time above is what bounds a normal wait).
+    #[arg(long, default_value_t = 600.0, value_name = "S")]
+    pub wall_cap_s: f64,
     /// Read the finished capture without arming a new one (--signals then only names the
     /// columns, in the order the capture was selected).
     #[arg(long)]
@@ -1777,6 +1783,9 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
     if !(a.wait_s.is_finite() && a.wait_s > 0.0) {
         bail!("--wait-s must be positive, got {}", a.wait_s);
     }
+    if !(a.wall_cap_s.is_finite() && a.wall_cap_s > 0.0) {
+        bail!("--wall-cap-s must be positive, got {}", a.wall_cap_s);
+    }
     let sample_hz = get_param(c, "sample_hz")?;
     if !(sample_hz.is_finite() && sample_hz > 0.0) {
         bail!("the firmware reports sample_hz {sample_hz}");
@@ -1821,25 +1830,8 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
     };
     // Frames per second: the control rate over the divider the capture ran with.
     let div = rec_divider(c)?;
+    let n = wait_for_capture(c, a, sample_hz)?;
     let sample_hz = sample_hz / div as f64;
-    let deadline = Instant::now() + Duration::from_secs_f64(a.wait_s);
-    let n = loop {
-        let (state, n) = rec_status(c)?;
-        if state == "done" {
-            break n;
-        }
-        if state == "idle" {
-            bail!("the recorder went idle without a capture (stopped by someone else?)");
-        }
-        if Instant::now() >= deadline {
-            bail!(
-                "the recorder is still {state} after {} s (trigger `{}` never fired?)",
-                a.wait_s,
-                a.trigger
-            );
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    };
     let mut frames = Vec::with_capacity(n);
     // Values per frame: the selected channels, or what the first frame has (--no-arm).
     let mut width = (!a.no_arm).then_some(channels.len());
@@ -1904,6 +1896,57 @@ fn rec_divider(c: &mut Client) -> Result<u32> {
             }
             .into()
         })
+}
+
+/// Waits until the recorder is done; returns its frame count. The wait is bounded by the
+/// firmware's progress, counted in the control periods it reports (`stats`, `samples`):
+/// `--wait-s` of its time may pass with the capture still armed (no trigger) or with no
+/// new frame once triggered. Under an emulator that runs slower than real time the
+/// firmware's time runs slower too, so a busy host cannot fail a healthy capture;
+/// `--wall-cap-s` only ends a wait on a firmware whose loop stopped or a dead link.
+fn wait_for_capture(c: &mut Client, a: &RecordArgs, sample_hz: f64) -> Result<usize> {
+    let budget = a.wait_s * sample_hz;
+    let wall_deadline = Instant::now() + Duration::from_secs_f64(a.wall_cap_s);
+    let mut last = read_stats(c)?.samples;
+    let mut progress = (String::new(), 0);
+    // Control periods since the last progress (a state change or a new frame).
+    let mut idle = 0.0f64;
+    loop {
+        let (state, n) = rec_status(c)?;
+        if state == "done" {
+            return Ok(n);
+        }
+        if state == "idle" {
+            bail!("the recorder went idle without a capture (stopped by someone else?)");
+        }
+        // `stats reset` (by anyone) restarts the count: periods are summed across it.
+        let now = read_stats(c)?.samples;
+        let ran = if now >= last { now - last } else { now } as f64;
+        last = now;
+        if (state.as_str(), n) != (progress.0.as_str(), progress.1) {
+            progress = (state, n);
+            idle = 0.0;
+            continue;
+        }
+        idle += ran;
+        if idle >= budget {
+            bail!(
+                "the recorder is still {state} after {} s (trigger `{}` never fired?): \
+                 {idle} control periods of the firmware's time without progress ({n} frames)",
+                a.wait_s,
+                a.trigger,
+            );
+        }
+        if Instant::now() >= wall_deadline {
+            bail!(
+                "the recorder is still {state} after {} s of wall-clock time (--wall-cap-s) \
+                 with {n} frames; the firmware ran {idle} control periods since its last \
+                 progress (is its control loop running?)",
+                a.wall_cap_s
+            );
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 fn rec_status(c: &mut Client) -> Result<(String, usize)> {

@@ -223,3 +223,34 @@ impl IdentifiedPlant {
         }
     }
 }
+
+impl super::Stage {
+    /// [`Self::advance`] through the identified model: amplifier, model, delay, drift and
+    /// noise as for the built-in stage (no force disturbance).
+    #[inline(never)]
+    pub(super) fn advance_identified(&mut self, dac_volts: &[f64]) {
+        let Some(mut plant) = self.identified.take() else {
+            return;
+        };
+        let mut volts = [0.0; 3];
+        let n = self.axes.len().min(volts.len());
+        for _ in 0..self.substeps {
+            for ((v, ax), &u) in volts.iter_mut().zip(self.axes.iter_mut()).zip(dac_volts) {
+                *v = ax.amp.step(u);
+                ax.v_end = *v;
+            }
+            plant.advance(&volts[..n], self.h);
+            self.advance_time();
+            let drift = self.drift_um();
+            for (i, (ax, line)) in self.axes.iter_mut().zip(&mut self.delay).enumerate() {
+                ax.x = plant.position_um(i);
+                ax.v = 0.0;
+                let mask = line.len() - 1; // a power of two
+                if let Some(p) = line.get_mut(self.delay_pos & mask) {
+                    *p = ax.x + drift;
+                }
+            }
+        }
+        self.identified = Some(plant);
+    }
+}
