@@ -74,7 +74,7 @@ pub fn run(args: &Args) -> Result<()> {
         (&args.input_unit, &args.output_unit),
         serde_json::Value::Null,
     );
-    let loaded = Loaded::Ss(saved.clone());
+    let loaded = Loaded::Ss(Box::new(saved.clone()));
     if let Some(v) = &args.valid {
         let rec = Record::read(v)?;
         let sim = loaded.simulate(&rec)?;

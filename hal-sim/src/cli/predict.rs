@@ -24,7 +24,7 @@ pub struct Args {
 /// A saved model of any kind `piezo fit` writes.
 #[derive(Debug)]
 pub enum Loaded {
-    Ss(SsJson),
+    Ss(Box<SsJson>),
     /// The per-channel models of the classic fits (cbw, structural-bw, ...).
     Parts {
         parts: Vec<Part>,
@@ -111,7 +111,7 @@ impl Loaded {
             let s: SsJson = serde_json::from_value(v)
                 .with_context(|| format!("{p}: not a state-space fit.json"))?;
             s.to_model().with_context(|| p.clone())?;
-            return Ok(Self::Ss(s));
+            return Ok(Self::Ss(Box::new(s)));
         }
         let parts = field(&v, "parts", &p)?
             .as_array()

@@ -18,7 +18,7 @@ use rustfft::FftPlanner;
 pub fn detect_period(rec: &Record) -> usize {
     let len = rec.len();
     for p in (2..=16).rev() {
-        if len % p != 0 || len / p < 8 {
+        if !len.is_multiple_of(p) || len / p < 8 {
             continue;
         }
         let n = len / p;
@@ -72,7 +72,7 @@ pub struct PeriodicSpectra {
 impl PeriodicSpectra {
     pub fn of(rec: &Record, period: usize) -> anyhow::Result<Self> {
         anyhow::ensure!(
-            period >= 8 && rec.len() % period == 0,
+            period >= 8 && rec.len().is_multiple_of(period),
             "record of {} samples is not a whole number of {period}-sample periods",
             rec.len()
         );
