@@ -4,11 +4,12 @@
 //! Scaling (the identified stage rarely has the converters' ranges): the amplifier range
 //! `[volts_min, volts_max]` maps linearly onto the model's training input range of each
 //! input (`input_range` in fit.json), and the model output `y` (its own unit) becomes
-//! `centre_um + um_per_unit * y` with `um_per_unit` so the largest training output reaches
-//! `half_span_um`, signed per axis so the position rises with the voltage (the sign of
-//! the linear block's static gain from input `i` to output `i`; the controllers assume a
-//! positive gain). Axis `i` drives input `i` and reads output `i`; the model's other
-//! inputs rest at the middle of their range. The model runs at its own sample rate with
+//! `centre_um + um_per_unit * y` with `um_per_unit` such that the full voltage range moves
+//! axis `i` by `2 half_span_um` at low frequency (static gain of input `i` to output `i`:
+//! the front's major-loop chord slope times the linear block's `G(1)`), signed so the
+//! position rises with the voltage (the controllers assume a positive gain). Axis `i`
+//! drives input `i` and reads output `i`; the model's other inputs rest at the middle of
+//! their range. The model runs at its own sample rate with
 //! its input held between samples (zero-order hold) and its output held between its
 //! samples.
 
@@ -109,8 +110,31 @@ impl IdentifiedPlant {
             .response(crate::ident::ss::model::C64::new(1.0, 0.0));
         let um_per_unit = (0..p)
             .map(|i| {
-                let g = if i < m { g1[(i, i)].re } else { 1.0 };
-                cfg.half_span_um / y_abs * if g < 0.0 { -1.0 } else { 1.0 }
+                if i >= m {
+                    return cfg.half_span_um / y_abs;
+                }
+                let half = 0.5 * (cfg.volts_max - cfg.volts_min) * k_in[i];
+                // Chord slope of the front's major loop over the input range (1: none).
+                let chord = match model.fronts.get(i) {
+                    Some(f) => {
+                        let tri: Vec<f64> = (0..400)
+                            .map(|k| {
+                                u_mid[i] + half * (1.0 - ((k % 200) as f64 - 100.0).abs() / 50.0)
+                            })
+                            .collect();
+                        match f.apply(&tri, 1.0) {
+                            Ok(v) => (v[300] - v[200]) / (tri[300] - tri[200]),
+                            Err(_) => 1.0,
+                        }
+                    }
+                    None => 1.0,
+                };
+                let dc = g1[(i, i)].re * chord;
+                if dc.is_finite() && dc.abs() * half > 1e-12 {
+                    cfg.half_span_um / (dc * half)
+                } else {
+                    cfg.half_span_um / y_abs
+                }
             })
             .collect();
         let n = model.linear.order();
