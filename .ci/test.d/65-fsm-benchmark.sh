@@ -10,8 +10,11 @@ if [ ! -d "$D" ]; then
     echo "skipped: $D not found"
     exit 0
 fi
-cargo build --release -p hal-sim --bin piezo
-P=target/release/piezo
+# PIEZO=path skips the build (to try the script with another build of the binary).
+if [ -z "${PIEZO:-}" ]; then
+    cargo build --release -p hal-sim --bin piezo
+fi
+P=${PIEZO:-target/release/piezo}
 OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
 T=()
