@@ -5,3 +5,4 @@ pub mod fit;
 pub mod generate;
 pub mod multibw;
 pub mod optim;
+pub mod ss;

@@ -252,5 +252,40 @@ fn cli_prints_and_saves_the_matrices() {
     for m in json["valid_metrics"].as_array().unwrap() {
         assert!(m["metrics"]["rmse"].as_f64().unwrap() < 1e-3, "{m}");
     }
+    // `piezo predict` simulates the saved model on the inputs alone (`t,u1,u2`).
+    let valid = validation();
+    let mut csv = String::from("t,u1,u2\n");
+    for k in 0..valid.len() {
+        csv += &format!("{},{},{}\n", valid.t[k], valid.u[0][k], valid.u[1][k]);
+    }
+    std::fs::write(dir.join("u.csv"), csv).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_piezo"))
+        .args(["predict", "--model"])
+        .arg(dir.join("fit.json"))
+        .arg("--input")
+        .arg(dir.join("u.csv"))
+        .arg("--out")
+        .arg(dir.join("y.csv"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // `t,y1,y2` after `#` comments and the header.
+    let text = std::fs::read_to_string(dir.join("y.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.trim().parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), valid.len());
+    for i in 0..2 {
+        let yi: Vec<f64> = rows.iter().map(|r| r[i + 1]).collect();
+        let m = metrics(&valid.y[i], &yi);
+        assert!(m.rmse < 1e-3, "y{}: {m:?}", i + 1);
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -14,9 +14,27 @@ pub struct Args {
     /// Model name (`piezo fit --list` shows them all), e.g. cbw, gbw, pi, structural-bw.
     #[arg(long, required_unless_present = "list")]
     pub model: Option<String>,
-    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yn`).
+    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yn`). The state-space models
+    /// (`ss`, `hammerstein-ss`) take several (repeat `--train`): one model for all.
     #[arg(long, required_unless_present = "list")]
-    pub train: Option<PathBuf>,
+    pub train: Vec<PathBuf>,
+    /// State-space models: order (number of states) or `auto` (chosen by validation on
+    /// every fourth training record).
+    #[arg(long, default_value = "auto")]
+    pub order: String,
+    /// `hammerstein-ss`: hysteresis model of the core ahead of each input (a
+    /// rate-independent `--list` name, e.g. cbw), or `none` (then the same as `ss`).
+    #[arg(long, default_value = "cbw")]
+    pub hysteresis: String,
+    /// State-space models: iterations of the joint (hysteresis + linear) refinement.
+    #[arg(long, default_value_t = 30)]
+    pub joint_iterations: usize,
+    /// Unit of the input columns, written to fit.json.
+    #[arg(long, default_value = "V")]
+    pub input_unit: String,
+    /// Unit of the output columns, written to fit.json.
+    #[arg(long, default_value = "um")]
+    pub output_unit: String,
     /// Validation record, simulated with the identified model (never used for fitting).
     #[arg(long)]
     pub valid: Option<PathBuf>,
@@ -66,6 +84,9 @@ pub struct Args {
     pub list: bool,
 }
 
+/// Format tag of every `fit.json`.
+pub const FORMAT: &str = "piezo-fit/1";
+
 /// One identified channel pair.
 #[derive(Debug, Serialize)]
 pub struct Part {
@@ -85,7 +106,16 @@ pub struct ChannelMetrics {
 /// What `piezo fit` reports.
 #[derive(Debug, Serialize)]
 pub struct Report {
+    /// `piezo-fit/1`: what `piezo predict` reads.
+    pub format: &'static str,
     pub model: String,
+    /// Sample rate of the training record (dynamic models are simulated at the rate of
+    /// the record they are given).
+    pub sample_rate_hz: f64,
+    pub inputs: usize,
+    pub outputs: usize,
+    pub input_unit: String,
+    pub output_unit: String,
     pub train: String,
     pub valid: Option<String>,
     /// Two-step Hammerstein: the linear part identified first.
@@ -120,20 +150,19 @@ pub struct Identified {
     pub multibw: Option<MultiBwFit>,
 }
 
-/// Simulates every output of `rec` with the identified model.
-fn simulate(id: &Identified, rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
-    if let Some(m) = &id.multibw {
-        let n = rec.len();
-        let u: Vec<Vec<f64>> = rec
-            .u
-            .iter()
-            .map(|u| u.iter().copied().cycle().take(n * (periodic + 1)).collect())
-            .collect();
-        let y = m.simulate(&u)?;
-        return Ok(y.into_iter().map(|y| y[n * periodic..].to_vec()).collect());
+/// Simulates every output of `rec` with the identified model (`periodic`: as
+/// [`simulate`]).
+fn simulate_identified(id: &Identified, rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
+    match &id.multibw {
+        Some(m) => m.simulate_periodic(&rec.u, periodic),
+        None => simulate(&id.parts, rec, periodic),
     }
+}
+
+/// Simulates every output of `rec` with the identified parts (summed per output).
+pub fn simulate(parts: &[Part], rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
     let mut out = vec![vec![0.0; rec.len()]; rec.y.len()];
-    for p in &id.parts {
+    for p in parts {
         let u = rec.u.get(p.input).with_context(|| {
             format!(
                 "the record has {} inputs; the model needs input {}",
@@ -301,8 +330,19 @@ pub fn run(args: Args) -> Result<()> {
         }
         return Ok(());
     }
-    let (Some(model), Some(train_path)) = (&args.model, &args.train) else {
+    let Some(model) = &args.model else {
         anyhow::bail!("--model and --train are required (see --help)");
+    };
+    if super::fit_ss::handles(model) {
+        return super::fit_ss::run(&args);
+    }
+    let train_path = match args.train.as_slice() {
+        [one] => one,
+        [] => anyhow::bail!("--model and --train are required (see --help)"),
+        more => anyhow::bail!(
+            "model `{model}` takes one --train record, {} given (several: --model ss or hammerstein-ss)",
+            more.len()
+        ),
     };
     let def = models::find(model)?;
     anyhow::ensure!(
@@ -362,17 +402,23 @@ pub fn run(args: Args) -> Result<()> {
         None
     };
     let id = identify(def, &train, &opts)?;
-    let train_sim = simulate(&id, &train, 0)?;
+    let train_sim = simulate_identified(&id, &train, 0)?;
     let valid_sim = valid
         .as_ref()
-        .map(|v| simulate(&id, v, args.valid_periodic))
+        .map(|v| simulate_identified(&id, v, args.valid_periodic))
         .transpose()?;
     let valid_rest_sim = match &valid {
-        Some(v) if args.valid_periodic > 0 => Some(simulate(&id, v, 0)?),
+        Some(v) if args.valid_periodic > 0 => Some(simulate_identified(&id, v, 0)?),
         _ => None,
     };
     let report = Report {
+        format: FORMAT,
         model: def.name.into(),
+        sample_rate_hz: train.sample_rate_hz(),
+        inputs: train.u.len(),
+        outputs: train.y.len(),
+        input_unit: args.input_unit.clone(),
+        output_unit: args.output_unit.clone(),
         train: train_path.display().to_string(),
         valid: args.valid.as_ref().map(|p| p.display().to_string()),
         linear_step,

@@ -35,7 +35,7 @@ use anyhow::{bail, ensure, Context, Result};
 use piezo_core::feedforward::ims::ImsLoop;
 use piezo_core::feedforward::MultiIms;
 use piezo_core::hysteresis::multi::MultiBw;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Largest number of inputs and of outputs (the core's `MultiBw` is monomorphised for
 /// each shape up to this).
@@ -44,7 +44,7 @@ pub const MAX_AXES: usize = 3;
 type Mat = Vec<Vec<f64>>;
 
 /// An identified multivariable Bouc-Wen model (003 eq. 4-7), rows = outputs.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MultiBwFit {
     pub outputs: usize,
     pub inputs: usize,
@@ -126,6 +126,18 @@ impl MultiBwFit {
     ) -> Result<MultiIms<f64, N, K>> {
         MultiIms::new(self.model()?, ImsLoop::Solved, volts_min, volts_max, dt_s)
             .map_err(|e| anyhow::anyhow!("{e}"))
+    }
+
+    /// A record that is one period of a periodic steady state: its inputs repeated
+    /// `warmup` extra periods first, the last period returned (`warmup = 0`: from rest).
+    pub fn simulate_periodic(&self, u: &[Vec<f64>], warmup: usize) -> Result<Vec<Vec<f64>>> {
+        let n = u.first().map_or(0, Vec::len);
+        let reps: Vec<Vec<f64>> = u
+            .iter()
+            .map(|u| u.iter().copied().cycle().take(n * (warmup + 1)).collect())
+            .collect();
+        let y = self.simulate(&reps)?;
+        Ok(y.into_iter().map(|y| y[n * warmup..].to_vec()).collect())
     }
 
     /// Simulates every output on the inputs `u[j]` (from the relaxed state at the first
