@@ -30,8 +30,10 @@
 use crate::ident::fit::resample::Edge;
 use crate::ident::fit::{fit_siso, metrics, models, FitOptions, Fitted};
 use crate::ident::optim::{levenberg_marquardt, LmConfig};
+use crate::numeric;
 use crate::record::Record;
 use anyhow::{bail, ensure, Context, Result};
+use nalgebra::{DMatrix, DVector};
 use piezo_core::feedforward::ims::ImsLoop;
 use piezo_core::feedforward::MultiIms;
 use piezo_core::hysteresis::multi::MultiBw;
@@ -206,33 +208,12 @@ fn coupling_regressors(direct: [f64; 3], u: &[f64]) -> Result<[Vec<f64>; 2]> {
     Ok([unit(1.0, 0.0)?, unit(0.0, 1.0)?])
 }
 
-/// Linear least squares `min |X c - y|` (columns of `X` given), by column scaling and
-/// the normal equations (a handful of well-scaled columns).
+/// Linear least squares `min |X c - y|`, the columns of `X` given.
 fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Result<Vec<f64>> {
-    let p = cols.len();
-    let scale: Vec<f64> = cols
-        .iter()
-        .map(|c| {
-            let n = c.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if n > 0.0 {
-                1.0 / n
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let mut a = nalgebra::DMatrix::<f64>::zeros(y.len(), p);
-    for (j, c) in cols.iter().enumerate() {
-        for (i, v) in c.iter().enumerate() {
-            a[(i, j)] = v * scale[j];
-        }
-    }
-    let b = nalgebra::DVector::from_column_slice(y);
-    let svd = a.svd(true, true);
-    let c = svd
-        .solve(&b, 1e-12)
-        .map_err(|e| anyhow::anyhow!("coupling least squares: {e}"))?;
-    Ok(c.iter().zip(&scale).map(|(c, s)| c * s).collect())
+    let a = DMatrix::from_fn(y.len(), cols.len(), |i, j| cols[j][i]);
+    let c = numeric::least_squares(a, DVector::from_column_slice(y))
+        .context("coupling least squares")?;
+    Ok(c.iter().copied().collect())
 }
 
 /// Identifies the multivariable Bouc-Wen of 003 on a record with several inputs and/or

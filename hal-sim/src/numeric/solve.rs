@@ -1,4 +1,5 @@
-//! The linear solve of every least-squares and Levenberg-Marquardt step on the host.
+//! The linear solves of the host: the SPD solve of every Levenberg-Marquardt and
+//! normal-equations step, and least squares by SVD.
 use nalgebra::{DMatrix, DVector};
 
 /// Solves `A x = b` for symmetric positive definite `A` (row-major `n x n`) by Cholesky
@@ -13,6 +14,33 @@ pub fn solve_spd(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
     x.iter()
         .all(|v| v.is_finite())
         .then(|| x.as_slice().to_vec())
+}
+
+/// Least squares `min |A x - rhs|` by column-scaled SVD (robust to rank deficiency).
+pub fn least_squares(mut a: DMatrix<f64>, rhs: DVector<f64>) -> anyhow::Result<DVector<f64>> {
+    let scale: Vec<f64> = a
+        .column_iter()
+        .map(|c| {
+            let n = c.norm();
+            if n > 0.0 {
+                1.0 / n
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    for (j, s) in scale.iter().enumerate() {
+        a.column_mut(j).scale_mut(*s);
+    }
+    let x = a
+        .svd(true, true)
+        .solve(&rhs, 1e-12)
+        .map_err(|e| anyhow::anyhow!("least squares: {e}"))?;
+    anyhow::ensure!(
+        x.iter().all(|v| v.is_finite()),
+        "least squares: no finite solution"
+    );
+    Ok(DVector::from_fn(x.len(), |j, _| x[j] * scale[j]))
 }
 
 #[cfg(test)]
@@ -35,5 +63,22 @@ mod tests {
         assert!(solve_spd(&[f64::NAN], &[1.0], 1).is_none());
         assert!(solve_spd(&[0.0], &[1.0], 1).is_none());
         assert!(solve_spd(&[1.0], &[1.0, 2.0], 1).is_none());
+    }
+
+    #[test]
+    fn least_squares_fits_and_survives_a_zero_column() {
+        // y = 2 x0 - 0.5 x1 exactly; the third column is zero.
+        let rows = 20;
+        let a = DMatrix::from_fn(rows, 3, |i, j| match j {
+            0 => i as f64,
+            1 => (i as f64 * 0.7).sin() * 1e3,
+            _ => 0.0,
+        });
+        let rhs = DVector::from_fn(rows, |i, _| 2.0 * a[(i, 0)] - 0.5 * a[(i, 1)]);
+        let x = least_squares(a, rhs).unwrap();
+        assert!(
+            (x[0] - 2.0).abs() < 1e-9 && (x[1] + 0.5).abs() < 1e-9 && x[2] == 0.0,
+            "{x}"
+        );
     }
 }
