@@ -18,9 +18,10 @@ use std::process::Command as Process;
 use std::thread;
 use std::time::Duration;
 
-use hal_sim::cli::serial::{
-    connect, execute, record, Action, Conn, RecordArgs, SerialError, TableArgs, WaveArgs, WaveCmd,
-};
+use hal_sim::cli::serial::record::{record, RecordArgs};
+use hal_sim::cli::serial::wave::{TableArgs, WaveArgs, WaveCmd};
+use hal_sim::cli::serial::{connect, execute, Action, Conn};
+use hal_sim::serial::SerialError;
 use piezo_core::command::{self, Command, LineBuffer, RecCmd};
 
 /// Control periods run before each command is executed (the firmware runs on while the
