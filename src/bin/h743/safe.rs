@@ -45,7 +45,9 @@ pub fn reset_cause(rsr: u32) -> &'static str {
 
 /// Boot, before anything that can fail: IWDG1 started at [`BOOT_WATCHDOG_MS`] and frozen
 /// while the core is halted by a debugger (DBGMCU_APB4FZ1.DBG_IWDG1); RCC_RSR kept and
-/// cleared (RMVF); the amplifier off; the on-chip DAC at `safe_code`.
+/// cleared (RMVF); the amplifier off; the on-chip DAC at `safe_code` (on-chip builds; the
+/// AD5791 of `spi-converters` sits clamped at 0 V from its own power-on until `init` brings
+/// it up at the safe code).
 #[allow(unsafe_code)]
 pub fn early(iwdg: &pac::IWDG, dbgmcu: &pac::DBGMCU, rcc: &pac::RCC, safe_code: u16) {
     dbgmcu.apb4fz1.modify(|_, w| w.dbg_iwdg1().set_bit());
@@ -60,7 +62,10 @@ pub fn early(iwdg: &pac::IWDG, dbgmcu: &pac::DBGMCU, rcc: &pac::RCC, safe_code: 
     RESET_FLAGS.store(rcc.rsr.read().bits(), Relaxed);
     rcc.rsr.modify(|_, w| w.rmvf().set_bit());
     amp::init(rcc);
+    #[cfg(not(feature = "spi-converters"))]
     dac1::init(rcc, safe_code);
+    #[cfg(feature = "spi-converters")]
+    let _ = safe_code;
 }
 
 /// Interrupts off, amplifier off, the safe code out; never returns (the watchdog, no
@@ -155,6 +160,7 @@ pub mod amp {
     }
 }
 
+#[cfg(not(feature = "spi-converters"))]
 /// The on-chip DAC1 (12 bit) at register level: channel 1 on PA4, channel 2 (`xy`) on PA5.
 /// The pins are analog at reset (GPIOA_MODER reset value), as the DAC needs. The HAL's DAC
 /// is not used: its constructor resets the DAC and its buffer calibration disables the

@@ -72,10 +72,10 @@ macro_rules! divider {
             #[allow(unsafe_code)]
             fn set_mbr(&mut self, mbr: u8) {
                 // SAFETY: this bus owns the peripheral and no transaction is in flight
-                // between two `SpiDevice` transactions; MBR is a 3-bit field.
+                // between two `SpiDevice` transactions.
                 let regs = unsafe { &*pac::$SPI::ptr() };
                 regs.cr1.write(|w| w.ssi().slave_not_selected().spe().disabled());
-                regs.cfg1.modify(|_, w| unsafe { w.mbr().bits(mbr & 0b111) });
+                regs.cfg1.modify(|_, w| w.mbr().bits(mbr & 0b111));
                 regs.cr1.write(|w| w.ssi().slave_not_selected().spe().enabled());
             }
         }

@@ -263,7 +263,7 @@ fn last_mosi_high(ops: &[Operation<'_, u8>], before: bool) -> bool {
             Operation::Transfer(r, w) if r.len() > w.len() => false,
             Operation::Transfer(_, w) => w.last().map_or(high, |b| b & 1 != 0),
             Operation::TransferInPlace(b) => b.last().map_or(high, |b| b & 1 != 0),
-            Operation::Read(r) if r.is_empty() => high,
+            Operation::Read([]) => high,
             Operation::Read(_) => false,
             Operation::DelayNs(_) => high,
         };
