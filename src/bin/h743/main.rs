@@ -150,8 +150,8 @@ mod board {
 mod app {
     use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, SYSCLK_HZ, WATCHDOG_MS};
     use core::sync::atomic::Ordering::Relaxed;
-    use piezo_core::firmware::Converters;
     use cortex_m::peripheral::DWT;
+    use piezo_core::firmware::Converters;
     use piezo_core::firmware::{c, control_period, CommandLine, SAMPLE_HZ};
     use stm32h7xx_hal::{
         delay::Delay, independent_watchdog::IndependentWatchdog, pac, prelude::*, serial,
@@ -183,8 +183,7 @@ mod app {
         // amplifier off, on-chip DAC at the safe code (0: SAFE_VOLTS = 0 V at the DAC
         // scale's 0 V code; the pipeline's own value is checked below).
         safe::early(&dp.IWDG, &dp.DBGMCU, &dp.RCC, 0);
-        let ctl = Ctl::new(c(SAMPLE_HZ as f64));
-        let safe_code = ctl.lp.p.codes()[0] << <Conv as Converters>::DAC_SHIFT;
+        let safe_code = safe::safe_code::<Conv>();
         safe::SAFE_CODE.store(safe_code, Relaxed);
         #[cfg(not(feature = "spi-converters"))]
         {
@@ -192,7 +191,11 @@ mod app {
             safe::dac1::set(1, safe_code as u16);
         }
         let rsr = safe::RESET_FLAGS.load(Relaxed);
-        defmt::info!("reset cause: {} (RCC_RSR {=u32:#010x})", safe::reset_cause(rsr), rsr);
+        defmt::info!(
+            "reset cause: {} (RCC_RSR {=u32:#010x})",
+            safe::reset_cause(rsr),
+            rsr
+        );
 
         let pwrcfg = dp.PWR.constrain().freeze();
         // PLL2P: ADC kernel clock; PLL1Q: SPI1 kernel clock (SPI4 runs from PCLK2).
@@ -293,8 +296,13 @@ mod app {
             let spi4_hz = spi::Spi::<pac::SPI4, spi::Enabled, u8>::kernel_clk_unwrap(&ccdr.clocks);
             // The DAC first: released from its power-on clamp only at the safe code (read
             // back); on failure it stays clamped (0 V) and the board halts in the safe state.
-            let mut dac = Dac::new(SpiDev::new(dac_bus, sync, spi4_hz.raw()), ldac, CycleDelay, DAC_CONFIG)
-                .unwrap_or_else(|_| safe::halt());
+            let mut dac = Dac::new(
+                SpiDev::new(dac_bus, sync, spi4_hz.raw()),
+                ldac,
+                CycleDelay,
+                DAC_CONFIG,
+            )
+            .unwrap_or_else(|_| safe::halt());
             if dac.init(safe_code).is_err() {
                 defmt::error!("AD5791 did not come up at the safe code: halted, output clamped");
                 safe::halt();
@@ -314,15 +322,21 @@ mod app {
             // CNV (PA0) as a GPIO while configuring: register access needs CNV frames the
             // driver times; then PA0 goes to TIM2 CH1 (AF1) for the loop.
             let cnv = Gpio(gpioa.pa0.into_push_pull_output());
-            let mut setup = AdcSetup::new(SpiDev::new(adc_bus, HardwarePin, spi1_hz.raw()), cnv, CycleDelay, ADC_CONFIG)
-                .unwrap_or_else(|_| safe::halt());
+            let mut setup = AdcSetup::new(
+                SpiDev::new(adc_bus, HardwarePin, spi1_hz.raw()),
+                cnv,
+                CycleDelay,
+                ADC_CONFIG,
+            )
+            .unwrap_or_else(|_| safe::halt());
             if setup.init().is_err() {
                 defmt::error!("AD4020 did not take its configuration: halted in the safe state");
                 safe::halt();
             }
             let (adc_bus, cnv, delay) = setup.release();
             let _cnv = cnv.0.into_alternate::<1>();
-            let adc = Adc::new(adc_bus, HardwarePin, delay, ADC_CONFIG).unwrap_or_else(|_| safe::halt());
+            let adc =
+                Adc::new(adc_bus, HardwarePin, delay, ADC_CONFIG).unwrap_or_else(|_| safe::halt());
             // TIM2: CH1 in PWM mode 1 is CNV, high for 1/20 of the period from the update
             // event on; its compare interrupt (CNV falls) runs the control task.
             let mut timer = dp
@@ -378,7 +392,9 @@ mod app {
 
         defmt::info!("firmware up: {} Hz sample rate", SAMPLE_HZ);
         (
-            Shared { ctl },
+            Shared {
+                ctl: Ctl::new(c(SAMPLE_HZ as f64)),
+            },
             Local {
                 #[cfg(not(feature = "spi-converters"))]
                 hw_adc: hw,

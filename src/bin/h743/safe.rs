@@ -24,6 +24,19 @@ pub static SAFE_CODE: AtomicI32 = AtomicI32::new(0);
 /// The independent watchdog while booting (ms), before the loop's own 10 ms.
 pub const BOOT_WATCHDOG_MS: u32 = 100;
 
+/// The DAC code of the pipeline's safe voltage at the DAC's own scale: the start-up code
+/// the pipeline itself computes (`Output::code_in_range` of the safe voltage, axis 0's
+/// converter configuration), without building the pipeline (which would put a copy of the
+/// control state on `init`'s stack). 0 if the configuration were refused.
+#[inline(never)]
+pub fn safe_code<C: piezo_core::firmware::Converters>() -> i32 {
+    use piezo_core::firmware::{c, converter_config, SAMPLE_HZ};
+    let config = converter_config::<C>(c(SAMPLE_HZ as f64));
+    let [axis, ..] = config.axes;
+    piezo_core::pipeline::Output::new(&axis.limits, &axis.dac, config.sample_hz)
+        .map_or(0, |o| o.code_in_range(axis.safe_volts) << C::DAC_SHIFT)
+}
+
 /// The reset cause from RCC_RSR flags (RM0433 "RCC reset status register"): the most
 /// specific flag wins.
 pub fn reset_cause(rsr: u32) -> &'static str {
@@ -108,9 +121,11 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 }
 
 /// A HardFault (a bus fault, a stack overflow caught by flip-link, ...): the safe state.
-#[cortex_m_rt::exception]
+/// No trampoline: the handler is this function itself (a stack record for the static
+/// stack check; it needs no exception frame).
+#[cortex_m_rt::exception(trampoline = false)]
 #[allow(unsafe_code)]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+unsafe fn HardFault() -> ! {
     halt()
 }
 
@@ -210,6 +225,10 @@ pub mod dac1 {
     /// The code channel `ch` outputs (DAC_DOR1/2), for `selftest`'s read-back.
     pub fn output(ch: usize) -> u16 {
         let d = regs();
-        (if ch == 0 { d.dor1.read().bits() } else { d.dor2.read().bits() } & 0x0FFF) as u16
+        (if ch == 0 {
+            d.dor1.read().bits()
+        } else {
+            d.dor2.read().bits()
+        } & 0x0FFF) as u16
     }
 }

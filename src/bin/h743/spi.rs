@@ -74,9 +74,11 @@ macro_rules! divider {
                 // SAFETY: this bus owns the peripheral and no transaction is in flight
                 // between two `SpiDevice` transactions.
                 let regs = unsafe { &*pac::$SPI::ptr() };
-                regs.cr1.write(|w| w.ssi().slave_not_selected().spe().disabled());
+                regs.cr1
+                    .write(|w| w.ssi().slave_not_selected().spe().disabled());
                 regs.cfg1.modify(|_, w| w.mbr().bits(mbr & 0b111));
-                regs.cr1.write(|w| w.ssi().slave_not_selected().spe().enabled());
+                regs.cr1
+                    .write(|w| w.ssi().slave_not_selected().spe().enabled());
             }
         }
     };
@@ -248,8 +250,10 @@ impl SpiDevice for PanicSpi4 {
     #[allow(unsafe_code)]
     fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), SpiError> {
         let spi = spi4();
-        spi.cr1.write(|w| w.ssi().slave_not_selected().spe().disabled());
-        spi.cr1.write(|w| w.ssi().slave_not_selected().spe().enabled());
+        spi.cr1
+            .write(|w| w.ssi().slave_not_selected().spe().disabled());
+        spi.cr1
+            .write(|w| w.ssi().slave_not_selected().spe().enabled());
         gpioe_bsrr(1 << (4 + 16)); // SYNC low
         let mut result = Ok(());
         'ops: for op in ops.iter() {

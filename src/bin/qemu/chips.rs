@@ -146,7 +146,6 @@ pub fn violations() -> (u32, &'static str) {
     (VIOLATIONS.load(Relaxed), rule)
 }
 
-
 /// The amplifier enable line (off at reset; the control period drives it from the
 /// pipeline's safe state, the panic handler turns it off).
 pub static AMP_ON: AtomicBool = AtomicBool::new(false);
@@ -351,8 +350,7 @@ impl<const A: usize> OutputPin for Ldac<A> {
         let (Some(low), Some(fall)) = (at(&LDAC_LOW, A), at(&LDAC_FALL, A)) else {
             return Ok(());
         };
-        if low.swap(false, Relaxed) && clock::elapsed_min_ns(fall.load(Relaxed)) < LDAC_LOW_MIN_NS
-        {
+        if low.swap(false, Relaxed) && clock::elapsed_min_ns(fall.load(Relaxed)) < LDAC_LOW_MIN_NS {
             return Err(violate(7));
         }
         Ok(())

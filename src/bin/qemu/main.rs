@@ -191,7 +191,11 @@ mod board {
                 " out"
             });
             r.push_str(" amp ");
-            r.push_str(if chips::AMP_ON.load(Relaxed) { "on" } else { "off" });
+            r.push_str(if chips::AMP_ON.load(Relaxed) {
+                "on"
+            } else {
+                "off"
+            });
             let (n, first) = chips::violations();
             r.push_str(" chips ");
             r.push_u32(n);
@@ -225,7 +229,11 @@ mod board {
             r.push_str(" safe ");
             r.push_i32(safe);
             r.push_str(" amp ");
-            r.push_str(if chips::AMP_ON.load(Relaxed) { "on" } else { "off" });
+            r.push_str(if chips::AMP_ON.load(Relaxed) {
+                "on"
+            } else {
+                "off"
+            });
             uart::line(r.as_str());
         }
         defmt::error!("panic: {}", defmt::Display2Format(info));
@@ -255,10 +263,10 @@ mod app {
         SYSTICK_HZ,
     };
     use core::sync::atomic::Ordering::Relaxed;
-    use piezo_core::firmware::{Converters, SpiPair};
     use cortex_m::peripheral::syst::SystClkSource;
     use piezo_core::command::Reply;
     use piezo_core::firmware::{c, control_period, CommandLine, AXES, SAMPLE_HZ};
+    use piezo_core::firmware::{Converters, SpiPair};
     use piezo_core::pipeline::Wave;
 
     #[shared]
