@@ -151,7 +151,6 @@ mod app {
     use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, SYSCLK_HZ, WATCHDOG_MS};
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::DWT;
-    use piezo_core::firmware::Converters;
     use piezo_core::firmware::{c, control_period, CommandLine, SAMPLE_HZ};
     use stm32h7xx_hal::{
         delay::Delay, independent_watchdog::IndependentWatchdog, pac, prelude::*, serial,
