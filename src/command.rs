@@ -10,7 +10,7 @@
 //! | command | effect | reply |
 //! |---|---|---|
 //! | `ping` | liveness | `ok pong` |
-//! | `help` | list of commands and parameters | `ok ping help get set cbw mode ff wave axis table stats rec fault bench; params: ...` |
+//! | `help` | list of commands and parameters | `ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest; params: ...` |
 //! | `get <param>` | read a parameter | `ok <param> <value>` |
 //! | `set <param> <value>` | write a parameter (range-checked) | `ok <param> <value>` |
 //! | `cbw <d> <alpha> <beta> <gamma>` | the CBW model (um/V, um/V, 1/V, 1/V) at once, as `piezo fit --model cbw` reports it | `ok cbw <d> <alpha> <beta> <gamma>` |
@@ -37,6 +37,7 @@
 //! | `fault` | latched fault (`none`, `sensor-range`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
+//! | `selftest` | converters and safe-state hardware: DAC read-back, ADC code and sensor window, amplifier enable, reset cause, mock-chip rule violations (QEMU) | `ok selftest reset <cause> dac <read>/<wrote> ok adc <code> in ...` |
 //!
 //! Parameters (the firmware's `help` lists them): `u_min`, `u_max` (V), `slew` (V/s);
 //! read-only `um_per_code`, `volts_per_code`, `sample_hz`; the hysteresis model and gains

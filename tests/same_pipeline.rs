@@ -5,7 +5,7 @@
 //! machine-code side (the ELF holds the pipeline step and the driver code in the control
 //! interrupt) is checked by `.ci/test.d/20-firmware.sh`.
 
-use hal_sim::mock::{MockAdcSpi, MockCnv, MockDacSpi, MockLdac};
+use hal_sim::mock::{MockAdcSpi, MockCnv, MockDacSpi, MockDelay, MockLdac};
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::controllers::open_loop;
 use hal_sim::sim::{adc_config, calibrate, Bench, StageInfo};
@@ -82,8 +82,8 @@ fn firmware_and_hal_sim_run_the_same_converter_drivers() {
     let (sc, bench) = bench();
     // The firmware's driver aliases, on hal-sim's mock buses and pins, are the types of the
     // bench's drivers: the same generic driver code runs on the board's buses.
-    let adc = TypeId::of::<control::PositionAdc<MockAdcSpi, MockCnv>>();
-    let dac = TypeId::of::<control::ActuatorDac<MockDacSpi, MockLdac>>();
+    let adc = TypeId::of::<control::PositionAdc<MockAdcSpi, MockCnv, MockDelay>>();
+    let dac = TypeId::of::<control::ActuatorDac<MockDacSpi, MockLdac, MockDelay>>();
     assert_eq!(
         adc,
         type_of(&bench.adcs[0].driver),
@@ -94,8 +94,8 @@ fn firmware_and_hal_sim_run_the_same_converter_drivers() {
         type_of(&bench.dacs[0].driver),
         "DAC driver types differ"
     );
-    assert_eq!(adc, TypeId::of::<Ad4000<MockAdcSpi, MockCnv>>());
-    assert_eq!(dac, TypeId::of::<Ad5791<MockDacSpi, MockLdac>>());
+    assert_eq!(adc, TypeId::of::<Ad4000<MockAdcSpi, MockCnv, MockDelay>>());
+    assert_eq!(dac, TypeId::of::<Ad5791<MockDacSpi, MockLdac, MockDelay>>());
     assert_ne!(adc, dac);
     // ... configured as the mock chips are: the AD4020 of the default scenario, the AD5791
     // in the configuration the bench initialises.

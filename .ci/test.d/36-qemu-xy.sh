@@ -77,7 +77,7 @@ session() {
   # The control interrupt runs the pipeline and both drivers.
   python3 .ci/firmware-code.py "$elf" SysTick \
     "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
-    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
+    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::Ad4000::convert|piezo_core::drivers::ad4000::decode" \
     piezo_core::drivers::ad5791::Ad5791::set_code
   qemu_boot "$elf" "$machine" "$cpu"
   run() {

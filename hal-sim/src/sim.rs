@@ -105,6 +105,7 @@ pub fn adc_config(sc: &Scenario) -> Ad4000Config {
         format: CodeFormat::TwosComplement,
         turbo: true,
         high_z: false,
+        ..Ad4000Config::AD4020
     }
 }
 
@@ -190,9 +191,9 @@ pub fn waves<const N: usize>(sc: &Scenario) -> [Wave<R>; N] {
 }
 
 /// The firmware's ADC driver on the mock SPI bus.
-pub type SimAdc = FirmwareAdc<MockAdcSpi, MockCnv>;
+pub type SimAdc = FirmwareAdc<MockAdcSpi, MockCnv, MockDelay>;
 /// The firmware's DAC driver on the mock SPI bus.
-pub type SimDac = FirmwareDac<MockDacSpi, MockLdac>;
+pub type SimDac = FirmwareDac<MockDacSpi, MockLdac, MockDelay>;
 
 /// One position channel: mock chip + the firmware's driver.
 pub struct AdcChannel {
@@ -227,20 +228,27 @@ pub fn converters(
                 noise_lsb: cv.adc_noise_lsb,
                 t_conv_ns: 290,
                 seed: sc.run.seed.wrapping_add(100 + i as u64),
+                ..AdcSpec::default()
             },
             clock.clone(),
         );
-        let mut driver =
-            SimAdc::new(chip.spi(), chip.cnv(), acfg).map_err(|e| anyhow!("ADC {i}: {e}"))?;
+        let delay = MockDelay(clock.clone());
+        let mut driver = SimAdc::new(chip.spi(), chip.cnv(), delay, acfg)
+            .map_err(|e| anyhow!("ADC {i}: {e}"))?;
         driver.init().map_err(|e| anyhow!("ADC {i} init: {e}"))?;
         adcs.push(AdcChannel { chip, driver });
-        let chip = MockDac::new(DacSpec {
-            vrefp: cv.dac_vrefp,
-            vrefn: cv.dac_vrefn,
-            offset_lsb: cv.dac_offset_lsb,
-            gain_error: cv.dac_gain_error,
-        });
-        let mut driver = SimDac::new(chip.spi(), chip.ldac(), Ad5791Config::DEFAULT)
+        let chip = MockDac::new(
+            DacSpec {
+                vrefp: cv.dac_vrefp,
+                vrefn: cv.dac_vrefn,
+                offset_lsb: cv.dac_offset_lsb,
+                gain_error: cv.dac_gain_error,
+                ..DacSpec::default()
+            },
+            clock.clone(),
+        );
+        let delay = MockDelay(clock.clone());
+        let mut driver = SimDac::new(chip.spi(), chip.ldac(), delay, Ad5791Config::DEFAULT)
             .map_err(|e| anyhow!("DAC {i}: {e}"))?;
         driver
             .init(initial_codes.get(i).copied().unwrap_or(0))
@@ -257,7 +265,6 @@ pub struct Bench<const N: usize> {
     pub dacs: Vec<DacChannel>,
     pub stage: Stage,
     pub clock: MockClock,
-    delay: MockDelay,
     sensor_volts_per_um: f64,
     sensor_center_um: f64,
     period_ns: f64,
@@ -309,7 +316,6 @@ impl<const N: usize> Bench<N> {
             adcs,
             dacs,
             stage,
-            delay: MockDelay(clock.clone()),
             clock,
             sensor_volts_per_um: sc.converters.sensor_volts_per_um,
             sensor_center_um: sc.converters.sensor_center_um,
@@ -321,6 +327,14 @@ impl<const N: usize> Bench<N> {
             dac_codes: pipeline_codes,
             bus_errors: 0,
         })
+    }
+
+    /// Data-sheet rules the converter drivers broke on the mock chips (all channels; 0 in
+    /// every scenario the tests run).
+    pub fn chip_violations(&self) -> u64 {
+        let adc: u64 = self.adcs.iter().map(|a| a.chip.violations().count).sum();
+        let dac: u64 = self.dacs.iter().map(|d| d.chip.violations().count).sum();
+        adc + dac
     }
 
     /// The code each DAC holds now (the last successful write).
@@ -348,7 +362,7 @@ impl<const N: usize> Bench<N> {
             let y = self.stage.sensor_um(i);
             adc.chip
                 .set_input_volts((y - self.sensor_center_um) * self.sensor_volts_per_um);
-            match adc.driver.convert(&mut self.delay) {
+            match adc.driver.convert() {
                 Ok(c) => *code = c,
                 Err(_) => self.bus_errors += 1, // i32::MIN: out of range, pipeline faults
             }
@@ -366,10 +380,12 @@ impl<const N: usize> Bench<N> {
             {
                 if inject.dac_write_fails(k, i) {
                     self.pipeline.dac_write_failed(i, *held);
-                } else {
-                    // The DAC mock is infallible.
-                    let _ = dac.driver.set_code(code);
+                } else if dac.driver.set_code(code).is_ok() {
                     *held = code;
+                } else {
+                    // A broken data-sheet rule (the mock records it): the held code stays.
+                    self.bus_errors += 1;
+                    self.pipeline.dac_write_failed(i, *held);
                 }
             }
         }
@@ -533,6 +549,16 @@ fn run_bench<const N: usize>(
             eprintln!("  {} / {controller}: {} %", sc.name, 100 * k / n);
         }
     }
+    // Every run doubles as a check of the drivers against the data sheets' rules.
+    anyhow::ensure!(
+        bench.chip_violations() == 0,
+        "{controller} on {}: the converter drivers broke {} data-sheet rule(s) on the mock \
+         chips (ADC {:?}, DAC {:?})",
+        sc.name,
+        bench.chip_violations(),
+        bench.adcs.first().map(|a| a.chip.violations().first),
+        bench.dacs.first().map(|d| d.chip.violations().first),
+    );
     let stroke = (0..N).map(|i| rmax[i] - rmin[i]).fold(0.0, f64::max);
     let rmse = (se / cnt.max(1) as f64).sqrt();
     // A hold reference has no stroke: report against the stage's 100 um nominal range.

@@ -160,6 +160,8 @@ pub enum Command<'a> {
     /// Leave the safe state a fault latched.
     FaultClear,
     Bench,
+    /// Exercise the converters and the safe-state hardware and report (board-specific).
+    Selftest,
 }
 
 /// Up to [`MAX_WORDS`] words of a line, without allocation.
@@ -275,6 +277,10 @@ fn parse_words<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
         "bench" => {
             w.at_most(1)?;
             Command::Bench
+        }
+        "selftest" => {
+            w.at_most(1)?;
+            Command::Selftest
         }
         "get" => {
             w.at_most(2)?;
@@ -536,6 +542,8 @@ mod tests {
     #[test]
     fn parses_every_command() {
         assert_eq!(p("ping"), Ok(Command::Ping));
+        assert_eq!(p("selftest"), Ok(Command::Selftest));
+        assert!(p("selftest now").is_err());
         assert_eq!(p("  ping \r"), Ok(Command::Ping));
         assert_eq!(p(""), Ok(Command::Empty));
         assert_eq!(p("get kp"), Ok(Command::Get("kp")));

@@ -17,6 +17,12 @@ pub trait Port {
     fn bench(&mut self) -> Result<usize, Error> {
         Err(Error::Unsupported)
     }
+    /// `selftest`: exercises the board's converters and safe-state hardware and appends
+    /// what it found to `reply` (after `ok selftest`). Boards without one answer
+    /// [`Error::Unsupported`].
+    fn selftest(&mut self, _reply: &mut command::Reply<REPLY_LEN>) -> Result<(), Error> {
+        Err(Error::Unsupported)
+    }
     /// A line of the board's own, outside the protocol (the QEMU test harness' `exit`):
     /// true when the board took it (no reply is sent).
     fn harness(&mut self, _line: &[u8]) -> bool {
@@ -63,6 +69,13 @@ impl CommandLine {
                 }
                 Err(e) => reply.push_error(e),
             },
+            Ok(Command::Selftest) => {
+                reply.push_str("ok selftest");
+                if let Err(e) = port.selftest(&mut reply) {
+                    reply.clear();
+                    reply.push_error(e);
+                }
+            }
             Ok(Command::Rec(RecCmd::Read { start, count })) => {
                 stream_frames(
                     start,

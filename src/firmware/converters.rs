@@ -17,9 +17,9 @@ pub const ADC_CONFIG: Ad4000Config = Ad4000Config::AD4020;
 pub const DAC_CONFIG: Ad5791Config = Ad5791Config::DEFAULT;
 /// The firmware's position ADC driver on a board's SPI device and CNV pin: the type
 /// hal-sim runs on its mock chip (`hal_sim::sim::SimAdc`).
-pub type PositionAdc<SPI, CNV> = crate::drivers::FirmwareAdc<SPI, CNV>;
+pub type PositionAdc<SPI, CNV, D> = crate::drivers::FirmwareAdc<SPI, CNV, D>;
 /// The firmware's DAC driver on a board's SPI device and LDAC pin (`hal_sim::sim::SimDac`).
-pub type ActuatorDac<SPI, LDAC> = crate::drivers::FirmwareDac<SPI, LDAC>;
+pub type ActuatorDac<SPI, LDAC, D> = crate::drivers::FirmwareDac<SPI, LDAC, D>;
 
 /// Bits of a code the pipeline keeps: all of them in f32, at most 15 in Q16.16 (3 nm over
 /// 100 um at 15 bits).

@@ -35,7 +35,7 @@ impl<C: Converters> Ctl<C> {
             Command::Ping => out.push_str("ok pong"),
             Command::Help => {
                 out.push_str(
-                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench; params:",
+                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest; params:",
                 );
                 for p in PARAMS {
                     out.push_str(" ");
@@ -270,7 +270,7 @@ impl<C: Converters> Ctl<C> {
                 lp.p.clear_fault();
                 push_fault(out, &lp.p);
             }
-            Command::Bench => return Err(Error::Unsupported),
+            Command::Bench | Command::Selftest => return Err(Error::Unsupported),
         }
         Ok(())
     }

@@ -15,6 +15,9 @@ pub trait Io {
     /// Writes and loads the DAC codes; per axis, the code a DAC still holds after a failed
     /// write.
     fn write(&mut self, codes: [i32; AXES]) -> [Option<i32>; AXES];
+    /// Drives the amplifier enable line: on while no fault is latched (the pipeline is not
+    /// in its safe state), off otherwise. Called every period after the DAC write.
+    fn amplifier(&mut self, _on: bool) {}
 }
 
 /// A board's cycle counter.
@@ -54,6 +57,7 @@ where
                 ctl.lp.dac_write_failed(axis, held);
             }
         }
+        io.amplifier(ctl.lp.p.state().fault.is_none());
         ctl.record(code, dac_code);
         let late = lost || clock.next_due();
         let isr = clock.elapsed(t0, clock.now());

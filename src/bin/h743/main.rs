@@ -53,6 +53,10 @@ compile_error!(
 
 #[cfg(all(target_os = "none", not(feature = "spi-converters")))]
 mod onchip;
+#[cfg(target_os = "none")]
+mod safe;
+#[cfg(target_os = "none")]
+mod selftest;
 #[cfg(all(target_os = "none", feature = "spi-converters"))]
 mod spi;
 #[cfg(all(target_os = "none", feature = "spi-converters"))]
@@ -69,9 +73,11 @@ use board::*;
 #[cfg(target_os = "none")]
 mod board {
     use cortex_m::peripheral::DWT;
-    use piezo_core::firmware::{self, Clock, Port};
+    use piezo_core::command::{Error, Reply};
+    use piezo_core::firmware::{self, Clock, Port, REPLY_LEN};
     use stm32h7xx_hal::{independent_watchdog::IndependentWatchdog, pac, serial};
-    use {defmt_rtt as _, panic_probe as _};
+    // The panic handler is the board's own (`safe`): the safe state first.
+    use defmt_rtt as _;
 
     /// Core clock (Hz): DWT cycle counts are in these cycles.
     pub const SYSCLK_HZ: u32 = 400_000_000;
@@ -82,11 +88,12 @@ mod board {
     #[cfg(not(feature = "spi-converters"))]
     pub use super::onchip::Io;
     #[cfg(not(feature = "spi-converters"))]
-    pub type Ctl = firmware::Ctl<firmware::OnChip>;
+    pub type Conv = firmware::OnChip;
     #[cfg(feature = "spi-converters")]
     pub use super::spi_pair::Io;
     #[cfg(feature = "spi-converters")]
-    pub type Ctl = firmware::Ctl<firmware::SpiPair>;
+    pub type Conv = firmware::SpiPair;
+    pub type Ctl = firmware::Ctl<Conv>;
 
     /// What the control task owns besides the control state.
     pub struct Hw {
@@ -131,13 +138,18 @@ mod board {
                 while let Err(stm32h7xx_hal::nb::Error::WouldBlock) = self.tx.write(b) {}
             }
         }
+        fn selftest(&mut self, r: &mut Reply<REPLY_LEN>) -> Result<(), Error> {
+            super::selftest::run::<Conv>(r);
+            Ok(())
+        }
     }
 }
 
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32h7xx_hal::pac, peripherals = true)]
 mod app {
-    use super::{Ctl, Dwt, Hw, Io, Usart3, SYSCLK_HZ, WATCHDOG_MS};
+    use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, SYSCLK_HZ, WATCHDOG_MS};
+    use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::DWT;
     use piezo_core::firmware::{c, control_period, CommandLine, SAMPLE_HZ};
     use stm32h7xx_hal::{
@@ -166,6 +178,23 @@ mod app {
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut cp = cx.core;
         let dp = cx.device;
+        // Before anything that can fail: watchdog (frozen under the debugger), reset cause,
+        // amplifier off, on-chip DAC at the safe code (0: SAFE_VOLTS = 0 V at the DAC
+        // scale's 0 V code; the pipeline's own value is checked below).
+        safe::early(&dp.IWDG, &dp.DBGMCU, &dp.RCC, 0);
+        let safe_code = safe::safe_code::<Conv>();
+        safe::SAFE_CODE.store(safe_code, Relaxed);
+        #[cfg(not(feature = "spi-converters"))]
+        {
+            safe::dac1::set(0, safe_code as u16);
+            safe::dac1::set(1, safe_code as u16);
+        }
+        let rsr = safe::RESET_FLAGS.load(Relaxed);
+        defmt::info!(
+            "reset cause: {} (RCC_RSR {=u32:#010x})",
+            safe::reset_cause(rsr),
+            rsr
+        );
 
         let pwrcfg = dp.PWR.constrain().freeze();
         // PLL2P: ADC kernel clock; PLL1Q: SPI1 kernel clock (SPI4 runs from PCLK2).
@@ -191,21 +220,7 @@ mod app {
         #[cfg(not(feature = "spi-converters"))]
         let io = {
             use stm32h7xx_hal::adc;
-            // DAC1 channel 1 on PA4 (xy: channel 2 on PA5).
-            #[cfg(not(feature = "xy"))]
-            let dac = dp
-                .DAC
-                .dac(gpioa.pa4, ccdr.peripheral.DAC12)
-                .calibrate_buffer(&mut delay)
-                .enable();
-            #[cfg(feature = "xy")]
-            let (dac, dac2) = {
-                let (c1, c2) = dp.DAC.dac((gpioa.pa4, gpioa.pa5), ccdr.peripheral.DAC12);
-                (
-                    c1.calibrate_buffer(&mut delay).enable(),
-                    c2.calibrate_buffer(&mut delay).enable(),
-                )
-            };
+            // DAC1 channel 1 on PA4 (xy: channel 2 on PA5) runs since `safe::early`.
             // ADC1 (xy: and ADC2), 16 bit, triggered by TIM2 TRGO.
             #[cfg(not(feature = "xy"))]
             let mut adc = adc::Adc::adc1(
@@ -250,33 +265,22 @@ mod app {
             timer.inner_mut().cr2.modify(|_, w| w.mms().update());
             Io {
                 adc,
-                dac,
                 #[cfg(feature = "xy")]
                 adc2,
-                #[cfg(feature = "xy")]
-                dac2,
                 timer,
             }
         };
         #[cfg(feature = "spi-converters")]
         let io = {
-            use crate::spi::{Gpio, HardwarePin, SpiDev};
-            use crate::spi_pair::{Adc, Dac};
+            use crate::spi::{CycleDelay, Gpio, HardwarePin, SpiDev};
+            use crate::spi_pair::{Adc, AdcSetup, Dac};
             use piezo_core::firmware::{ADC_CONFIG, DAC_CONFIG};
             use stm32h7xx_hal::spi;
             let gpiob = dp.GPIOB.split(ccdr.peripheral.GPIOB);
             let gpioe = dp.GPIOE.split(ccdr.peripheral.GPIOE);
-            let adc_bus: spi::Spi<_, _, u8> = dp.SPI1.spi(
-                (
-                    gpioa.pa5.into_alternate::<5>(),
-                    gpioa.pa6.into_alternate::<5>(),
-                    gpiob.pb5.into_alternate::<5>(),
-                ),
-                spi::MODE_0,
-                25.MHz(),
-                ccdr.peripheral.SPI1,
-                &ccdr.clocks,
-            );
+            // SYNC and LDAC high (idle) before SPI4 clocks anything.
+            let sync = Gpio(gpioe.pe4.into_push_pull_output());
+            let ldac = Gpio(gpioe.pe3.into_push_pull_output());
             let dac_bus: spi::Spi<_, _, u8> = dp.SPI4.spi(
                 (
                     gpioe.pe2.into_alternate::<5>(),
@@ -288,18 +292,50 @@ mod app {
                 ccdr.peripheral.SPI4,
                 &ccdr.clocks,
             );
-            // CNV stays low (TIM2 CH1 output disabled) while the registers are set up.
-            let _cnv = gpioa.pa0.into_alternate::<1>();
-            let mut adc = Adc::new(SpiDev::new(adc_bus, HardwarePin), HardwarePin, ADC_CONFIG)
-                .unwrap_or_else(|_| panic!("AD4020 driver"));
-            adc.init()
-                .unwrap_or_else(|_| panic!("AD4020 does not answer"));
-            let sync = Gpio(gpioe.pe4.into_push_pull_output());
-            let ldac = Gpio(gpioe.pe3.into_push_pull_output());
-            let mut dac = Dac::new(SpiDev::new(dac_bus, sync), ldac, DAC_CONFIG)
-                .unwrap_or_else(|_| panic!("AD5791 driver"));
-            dac.init(0)
-                .unwrap_or_else(|_| panic!("AD5791 does not answer"));
+            let spi4_hz = spi::Spi::<pac::SPI4, spi::Enabled, u8>::kernel_clk_unwrap(&ccdr.clocks);
+            // The DAC first: released from its power-on clamp only at the safe code (read
+            // back); on failure it stays clamped (0 V) and the board halts in the safe state.
+            let mut dac = Dac::new(
+                SpiDev::new(dac_bus, sync, spi4_hz.raw()),
+                ldac,
+                CycleDelay,
+                DAC_CONFIG,
+            )
+            .unwrap_or_else(|_| safe::halt());
+            if dac.init(safe_code).is_err() {
+                defmt::error!("AD5791 did not come up at the safe code: halted, output clamped");
+                safe::halt();
+            }
+            let adc_bus: spi::Spi<_, _, u8> = dp.SPI1.spi(
+                (
+                    gpioa.pa5.into_alternate::<5>(),
+                    gpioa.pa6.into_alternate::<5>(),
+                    gpiob.pb5.into_alternate::<5>(),
+                ),
+                spi::MODE_0,
+                25.MHz(),
+                ccdr.peripheral.SPI1,
+                &ccdr.clocks,
+            );
+            let spi1_hz = spi::Spi::<pac::SPI1, spi::Enabled, u8>::kernel_clk_unwrap(&ccdr.clocks);
+            // CNV (PA0) as a GPIO while configuring: register access needs CNV frames the
+            // driver times; then PA0 goes to TIM2 CH1 (AF1) for the loop.
+            let cnv = Gpio(gpioa.pa0.into_push_pull_output());
+            let mut setup = AdcSetup::new(
+                SpiDev::new(adc_bus, HardwarePin, spi1_hz.raw()),
+                cnv,
+                CycleDelay,
+                ADC_CONFIG,
+            )
+            .unwrap_or_else(|_| safe::halt());
+            if setup.init().is_err() {
+                defmt::error!("AD4020 did not take its configuration: halted in the safe state");
+                safe::halt();
+            }
+            let (adc_bus, cnv, delay) = setup.release();
+            let _cnv = cnv.0.into_alternate::<1>();
+            let adc =
+                Adc::new(adc_bus, HardwarePin, delay, ADC_CONFIG).unwrap_or_else(|_| safe::halt());
             // TIM2: CH1 in PWM mode 1 is CNV, high for 1/20 of the period from the update
             // event on; its compare interrupt (CNV falls) runs the control task.
             let mut timer = dp
@@ -317,7 +353,7 @@ mod app {
                 adc,
                 dac,
                 timer,
-                held: 0,
+                held: safe_code,
             }
         };
 
@@ -344,6 +380,7 @@ mod app {
         // TIM2 last: from here on samples arrive.
         let mut io = io;
         io.timer.resume();
+        safe::amp::set(false); // on from the first period without a fault
         let hw = Hw {
             io,
             watchdog,

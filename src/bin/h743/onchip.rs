@@ -1,27 +1,24 @@
 //! The on-chip converters: ADC1 (16 bit, started by TIM2 TRGO) and DAC1 channel 1
 //! (12 bit); with `xy` also ADC2 (same trigger) and DAC1 channel 2.
 
+use crate::safe::{amp, dac1};
+use crate::selftest;
+use core::sync::atomic::Ordering::Relaxed;
 use piezo_core::firmware::{self, AXES};
-use stm32h7xx_hal::{adc, pac, timer::Timer, traits::DacOut};
-
-pub type DacChannel = stm32h7xx_hal::dac::C1<pac::DAC, stm32h7xx_hal::dac::Enabled>;
-#[cfg(feature = "xy")]
-pub type DacChannel2 = stm32h7xx_hal::dac::C2<pac::DAC, stm32h7xx_hal::dac::Enabled>;
+use stm32h7xx_hal::{adc, pac, timer::Timer};
 
 /// Polls of ADC2's end of conversion after ADC1's (same trigger, same timing: it is
 /// normally done already).
 #[cfg(feature = "xy")]
 const ADC2_POLLS: u32 = 64;
 
-/// On-chip ADC1 (16 bit, started by TIM2 TRGO) and DAC1 channel 1 (12 bit); with `xy`
-/// also ADC2 (same trigger) and DAC1 channel 2.
+/// On-chip ADC1 (16 bit, started by TIM2 TRGO) and DAC1 channel 1 (12 bit, register level:
+/// [`dac1`], set up at the safe code first thing at boot); with `xy` also ADC2 (same
+/// trigger) and DAC1 channel 2.
 pub struct Io {
     pub adc: adc::Adc<pac::ADC1, adc::Enabled>,
-    pub dac: DacChannel,
     #[cfg(feature = "xy")]
     pub adc2: adc::Adc<pac::ADC2, adc::Enabled>,
-    #[cfg(feature = "xy")]
-    pub dac2: DacChannel2,
     pub timer: Timer<pac::TIM2>,
 }
 
@@ -41,6 +38,7 @@ impl firmware::Io for Io {
     #[inline(always)]
     fn sample(&mut self) -> ([i32; AXES], bool) {
         let (x, overrun) = take(self.adc.inner());
+        selftest::ADC.store(x, Relaxed);
         #[cfg(not(feature = "xy"))]
         return ([x], overrun);
         #[cfg(feature = "xy")]
@@ -68,9 +66,22 @@ impl firmware::Io for Io {
         let [x] = codes;
         #[cfg(feature = "xy")]
         let [x, y] = codes;
-        self.dac.set_value(x as u16);
+        dac1::set(0, x as u16);
         #[cfg(feature = "xy")]
-        self.dac2.set_value(y as u16);
+        dac1::set(1, y as u16);
+        if selftest::STATE.load(Relaxed) == selftest::REQUESTED {
+            // DOR takes DHR one APB clock after the write (no trigger): read it back.
+            cortex_m::asm::delay(8);
+            selftest::WROTE.store(x & 0x0FFF, Relaxed);
+            selftest::READ.store(dac1::output(0) as i32, Relaxed);
+            selftest::STATE.store(selftest::DONE, Relaxed);
+        }
         [None; AXES]
+    }
+
+    /// The amplifier enable line (PG12).
+    #[inline(always)]
+    fn amplifier(&mut self, on: bool) {
+        amp::set(on);
     }
 }

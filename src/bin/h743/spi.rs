@@ -1,10 +1,19 @@
-//! embedded-hal 1.0 devices over stm32h7xx-hal's embedded-hal 0.2 SPI and GPIO.
+//! embedded-hal 1.0 devices over stm32h7xx-hal's embedded-hal 0.2 SPI and GPIO, with the
+//! SCLK divider the drivers set ([`SpiClock`]: RM0433 `SPI_CFG1.MBR`), a delay by core
+//! cycles, and the register-level AD5791 bus of the panic path ([`PanicSpi4`]).
 
 use core::convert::Infallible;
 use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{ErrorKind, ErrorType, Operation, SpiDevice};
+use piezo_core::drivers::SpiClock;
 use stm32h7xx_hal::hal as hal02;
 use stm32h7xx_hal::nb;
+use stm32h7xx_hal::pac;
+use stm32h7xx_hal::spi::{Enabled, Spi};
+
+/// Chip select high between two frames, at least (ns): the AD5791's minimum SYNC high time
+/// `t6` = 48 ns (data sheet Rev. D, Table 3, IOVCC 1.71 V to 3.3 V).
+const CS_HIGH_NS: u32 = 48;
 
 /// Polls of a status flag before a byte exchange is given up (a byte takes ~130 polls
 /// at 25 MHz SCK and 400 MHz core clock).
@@ -30,12 +39,76 @@ impl embedded_hal::spi::Error for SpiError {
 pub struct SpiDev<BUS, CS> {
     bus: BUS,
     cs: CS,
+    /// The peripheral's kernel clock (Hz) and the divider it runs at (`MBR`, if set here).
+    kernel_hz: u32,
+    mbr: Option<u8>,
 }
 
 impl<BUS, CS: OutputPin> SpiDev<BUS, CS> {
-    pub fn new(bus: BUS, mut cs: CS) -> Self {
+    /// `kernel_hz`: the SPI kernel clock (SPI1: PLL1Q, SPI4: PCLK2), for [`SpiClock`].
+    pub fn new(bus: BUS, mut cs: CS, kernel_hz: u32) -> Self {
         cs.set_high().ok();
-        Self { bus, cs }
+        Self {
+            bus,
+            cs,
+            kernel_hz,
+            mbr: None,
+        }
+    }
+}
+
+/// An SPI peripheral whose SCLK divider can change between transactions: RM0433
+/// `SPI_CFG1.MBR` (bits 30:28, kernel clock / 2^(MBR+1)) is writable only with
+/// `SPI_CR1.SPE` = 0.
+pub trait Divider {
+    /// Sets MBR (0 ..= 7): SPE cleared, CFG1 written, SPE set again (SSI stays 1: master
+    /// with software slave management, as the HAL sets it up).
+    fn set_mbr(&mut self, mbr: u8);
+}
+
+macro_rules! divider {
+    ($SPI:ident) => {
+        impl Divider for Spi<pac::$SPI, Enabled, u8> {
+            #[allow(unsafe_code)]
+            fn set_mbr(&mut self, mbr: u8) {
+                // SAFETY: this bus owns the peripheral and no transaction is in flight
+                // between two `SpiDevice` transactions.
+                let regs = unsafe { &*pac::$SPI::ptr() };
+                regs.cr1
+                    .write(|w| w.ssi().slave_not_selected().spe().disabled());
+                regs.cfg1.modify(|_, w| w.mbr().bits(mbr & 0b111));
+                regs.cr1
+                    .write(|w| w.ssi().slave_not_selected().spe().enabled());
+            }
+        }
+    };
+}
+divider!(SPI1);
+divider!(SPI4);
+
+impl<BUS: Divider, CS> SpiClock for SpiDev<BUS, CS> {
+    /// The fastest divider (2 ..= 256) at most `max_hz`; 0 if even /256 is faster.
+    fn set_sclk_max_hz(&mut self, max_hz: u32) -> u32 {
+        let Some(mbr) = (0..8u8).find(|m| self.kernel_hz >> (m + 1) <= max_hz) else {
+            return 0;
+        };
+        if self.mbr != Some(mbr) {
+            self.bus.set_mbr(mbr);
+            self.mbr = Some(mbr);
+        }
+        self.kernel_hz >> (mbr + 1)
+    }
+}
+
+/// `DelayNs` by core cycles at [`crate::SYSCLK_HZ`] (rounded up).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CycleDelay;
+
+impl embedded_hal::delay::DelayNs for CycleDelay {
+    #[inline]
+    fn delay_ns(&mut self, ns: u32) {
+        let cycles = (ns as u64 * (crate::SYSCLK_HZ / 1_000_000) as u64).div_ceil(1000);
+        cortex_m::asm::delay(cycles.clamp(1, u32::MAX as u64) as u32);
     }
 }
 
@@ -135,6 +208,96 @@ impl OutputPin for HardwarePin {
         Ok(())
     }
     fn set_high(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
+/// The AD5791's bus at register level, for the panic and HardFault handlers (the HAL's
+/// SPI4 belongs to the control task, out of their reach): SPI4 disabled and enabled again
+/// (whatever was in flight is dropped), SYNC (PE4) low around the frame, each byte through
+/// `SPI_TXDR`/`SPI_RXDR` after `SPI_SR.TXP`/`RXP` with bounded waits, `SPI_CR1.CSTART`
+/// (RM0433 SPI registers; `GPIOE_BSRR` for SYNC). It keeps the divider the bus had: 25 MHz,
+/// or 6.25 MHz if a read-back was under way, both within the AD5791's write limit.
+pub struct PanicSpi4;
+/// The AD5791's LDAC (PE3) at register level (`GPIOE_BSRR`).
+pub struct PanicLdac;
+
+#[allow(unsafe_code)]
+fn spi4() -> &'static pac::spi1::RegisterBlock {
+    // SAFETY: used only on the halt path, with interrupts masked and the control task
+    // stopped; the peripheral is re-enabled before use.
+    unsafe { &*pac::SPI4::ptr() }
+}
+
+#[allow(unsafe_code)]
+fn gpioe_bsrr(bits: u32) {
+    // SAFETY: a BSRR write sets or resets only the named pins (PE3, PE4).
+    unsafe { (*pac::GPIOE::ptr()).bsrr.write(|w| w.bits(bits)) }
+}
+
+impl ErrorType for PanicSpi4 {
+    type Error = SpiError;
+}
+
+impl SpiClock for PanicSpi4 {
+    /// The divider stays (see above); reported as at most the AD5791's write limit.
+    fn set_sclk_max_hz(&mut self, max_hz: u32) -> u32 {
+        max_hz.min(25_000_000)
+    }
+}
+
+impl SpiDevice for PanicSpi4 {
+    #[allow(unsafe_code)]
+    fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), SpiError> {
+        let spi = spi4();
+        spi.cr1
+            .write(|w| w.ssi().slave_not_selected().spe().disabled());
+        spi.cr1
+            .write(|w| w.ssi().slave_not_selected().spe().enabled());
+        gpioe_bsrr(1 << (4 + 16)); // SYNC low
+        let mut result = Ok(());
+        'ops: for op in ops.iter() {
+            let Operation::Write(bytes) = op else {
+                continue;
+            };
+            for &b in bytes.iter() {
+                if !wait(|| spi.sr.read().txp().bit_is_set()) {
+                    result = Err(SpiError::Timeout);
+                    break 'ops;
+                }
+                // SAFETY: an 8-bit access to TXDR pushes one 8-bit frame (DSIZE = 8).
+                unsafe { core::ptr::write_volatile(spi.txdr.as_ptr() as *mut u8, b) };
+                spi.cr1.modify(|_, w| w.cstart().started());
+                if !wait(|| spi.sr.read().rxp().bit_is_set()) {
+                    result = Err(SpiError::Timeout);
+                    break 'ops;
+                }
+                // SAFETY: an 8-bit read of RXDR pops one frame.
+                let _ = unsafe { core::ptr::read_volatile(spi.rxdr.as_ptr() as *const u8) };
+            }
+        }
+        gpioe_bsrr(1 << 4); // SYNC high
+        embedded_hal::delay::DelayNs::delay_ns(&mut CycleDelay, CS_HIGH_NS);
+        result
+    }
+}
+
+/// Polls `ready` at most [`MAX_POLLS`] times.
+fn wait(mut ready: impl FnMut() -> bool) -> bool {
+    (0..MAX_POLLS).any(|_| ready())
+}
+
+impl PinErrorType for PanicLdac {
+    type Error = Infallible;
+}
+
+impl OutputPin for PanicLdac {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        gpioe_bsrr(1 << (3 + 16));
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        gpioe_bsrr(1 << 3);
         Ok(())
     }
 }

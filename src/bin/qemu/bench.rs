@@ -49,7 +49,7 @@ pub struct Table {
     pub instr_per_tick_x1000: u32,
     /// Loop overhead subtracted (ticks over BENCH_STEPS).
     pub overhead_ticks: u32,
-    /// The driver path per sample x 100: `Ad4000::start_conversion` + `Ad4000::read` +
+    /// The driver path per sample x 100: `Ad4000::convert` (with its `t_CONV` wait) +
     /// `Ad5791::set_code`, mock chips included (not part of the rows).
     pub drivers_x100: u32,
 }
@@ -166,14 +166,21 @@ pub fn run(syst: &mut SYST) -> Table {
             row.max_instr = ((worst as u64 * instr_per_tick_x1000 as u64) / 1000) as u32;
         }
     }
-    // The driver path alone, on the codes of the last row.
-    let (mut adc, mut dac) = chips::drivers();
+    // The driver path alone, on the codes of the last row: conversion (CNV high for
+    // t_CONV, waited on the chips' timer), read, DAC write and LDAC pulse.
+    let Ok((mut adc, mut dac)) = chips::drivers_of::<0>(0) else {
+        return Table {
+            rows,
+            instr_per_tick_x1000,
+            overhead_ticks,
+            drivers_x100: 0,
+        };
+    };
     let (adc, dac) = (black_box(&mut adc), black_box(&mut dac));
     let t0 = SYST::get_current();
     for c in codes.iter() {
-        chips::INPUT_CODE.store(*c, core::sync::atomic::Ordering::Relaxed);
-        adc.start_conversion().ok();
-        let code = adc.read().unwrap_or(i32::MIN);
+        chips::set_input(0, *c);
+        let code = adc.convert().unwrap_or(i32::MIN);
         dac.set_code(black_box(code.max(0))).ok();
     }
     let dt = ticks(t0, SYST::get_current()).saturating_sub(overhead_ticks);
@@ -200,7 +207,7 @@ pub fn print(t: &Table, log: bool) {
     r.push_str(" ticks");
     uart::line(r.as_str());
     r.clear();
-    r.push_str("bench: the rows count the pipeline step only; SPI driver path per sample (Ad4000 start+read, Ad5791 set_code, mock chips included): ");
+    r.push_str("bench: rows = pipeline step only; SPI driver path per sample (Ad4000 convert incl. t_CONV wait, Ad5791 set_code incl. LDAC pulse, mock chips): ");
     r.push_fixed(t.drivers_x100, 2);
     r.push_str(" instr");
     uart::line(r.as_str());

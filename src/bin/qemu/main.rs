@@ -56,10 +56,11 @@ use board::*;
 
 #[cfg(target_os = "none")]
 mod board {
-    use super::{bench, uart};
+    use super::{bench, chips, io, uart};
+    use core::sync::atomic::{AtomicI32, Ordering::Relaxed};
     use cortex_m::peripheral::{SCB, SYST};
-    use piezo_core::command::Error;
-    use piezo_core::firmware::{self, Clock, Port, SpiPair, SAMPLE_HZ};
+    use piezo_core::command::{Error, Reply};
+    use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
     use {cortex_m_rt as _, defmt_semihosting as _};
 
     /// The control state over this board's converters (the SPI pair, on mock chips).
@@ -73,6 +74,12 @@ mod board {
     pub const PERIODS_MAX: u32 = 300_000;
     /// The harness line that ends the run (after [`PERIODS_MIN`] periods).
     const EXIT_LINE: &[u8] = b"exit";
+    /// The harness line that forces a panic (after [`PERIODS_MIN`] periods, so the DAC has
+    /// left its safe code): the panic handler must put the safe code back (CI checks it).
+    const PANIC_LINE: &[u8] = b"panic";
+    /// The DAC's safe code (the pipeline's safe voltage at the DAC's own scale), set in
+    /// `init` before anything else, read by the panic handler.
+    pub static SAFE_CODE: AtomicI32 = AtomicI32::new(0);
     /// SysTick ticks per control period.
     const PERIOD: u32 = SYSTICK_HZ / SAMPLE_HZ;
 
@@ -126,11 +133,13 @@ mod board {
         }
     }
 
-    /// UART0 as the command port, plus this board's `bench` table and the harness' `exit`.
+    /// UART0 as the command port, plus this board's `bench` table, `selftest` and the
+    /// harness' `exit` and `panic`.
     pub struct Uart {
         pub table: bench::Table,
-        /// The harness asked to end the run.
+        /// The harness asked to end the run, or to panic.
         pub exit: bool,
+        pub panic: bool,
     }
 
     impl Port for Uart {
@@ -143,16 +152,105 @@ mod board {
         }
         fn harness(&mut self, line: &[u8]) -> bool {
             self.exit |= line == EXIT_LINE;
-            line == EXIT_LINE
+            self.panic |= line == PANIC_LINE;
+            line == EXIT_LINE || line == PANIC_LINE
+        }
+        /// The next control period reads axis 0's DAC register back after its write (at
+        /// the read-back SCLK); plus the last ADC code against the sensor window, the
+        /// amplifier enable line and the mock chips' rule violations. The wait for the
+        /// period is bounded (idle runs below it, so it comes within one period).
+        fn selftest(&mut self, r: &mut Reply<REPLY_LEN>) -> Result<(), Error> {
+            use io::selftest::{DONE, IDLE, READ, REQUESTED, STATE, WROTE};
+            STATE.store(REQUESTED, Relaxed);
+            let mut done = false;
+            for _ in 0..10 * SYSTICK_HZ / SAMPLE_HZ * 40 {
+                if STATE.load(Relaxed) == DONE {
+                    done = true;
+                    break;
+                }
+            }
+            STATE.store(IDLE, Relaxed);
+            r.push_str(" reset n/a dac ");
+            if done {
+                let (read, wrote) = (READ.load(Relaxed), WROTE.load(Relaxed));
+                r.push_i32(read);
+                r.push_str("/");
+                r.push_i32(wrote);
+                r.push_str(if read == wrote { " ok" } else { " BAD" });
+            } else {
+                r.push_str("no-period BAD");
+            }
+            let adc = io::selftest::ADC.load(Relaxed);
+            let s = <SpiPair as Converters>::sensor();
+            let seen = adc >> <SpiPair as Converters>::ADC_SHIFT;
+            r.push_str(" adc ");
+            r.push_i32(adc);
+            r.push_str(if (s.code_min..=s.code_max).contains(&seen) {
+                " in"
+            } else {
+                " out"
+            });
+            r.push_str(" amp ");
+            r.push_str(if chips::AMP_ON.load(Relaxed) {
+                "on"
+            } else {
+                "off"
+            });
+            let (n, first) = chips::violations();
+            r.push_str(" chips ");
+            r.push_u32(n);
+            r.push_str(" ");
+            r.push_str(first);
+            Ok(())
         }
     }
 
-    /// A panic ends the QEMU run with a failure status.
+    /// A panic: interrupts off (the control period stops), amplifier off, the safe code
+    /// written to every axis' DAC through the same driver (a new instance on the same mock
+    /// chip), then the DAC model's output before and after is printed from the mock itself
+    /// (CI checks it is the safe code) and the run ends with status 101.
     #[panic_handler]
     fn panic(info: &core::panic::PanicInfo) -> ! {
+        cortex_m::interrupt::disable();
+        chips::AMP_ON.store(false, Relaxed);
+        let safe = SAFE_CODE.load(Relaxed);
+        let before = [chips::dac_out(0), chips::dac_out(1)];
+        safe_dac::<0>(safe);
+        #[cfg(feature = "xy")]
+        safe_dac::<1>(safe);
+        for (axis, before) in before.iter().enumerate().take(firmware::AXES) {
+            let mut r = Reply::<120>::new();
+            r.push_str("panic: dac ");
+            r.push_usize(axis);
+            r.push_str(" out ");
+            r.push_i32(*before);
+            r.push_str(" -> ");
+            r.push_i32(chips::dac_out(axis));
+            r.push_str(" safe ");
+            r.push_i32(safe);
+            r.push_str(" amp ");
+            r.push_str(if chips::AMP_ON.load(Relaxed) {
+                "on"
+            } else {
+                "off"
+            });
+            uart::line(r.as_str());
+        }
         defmt::error!("panic: {}", defmt::Display2Format(info));
         uart::line("panic");
         semihosting::process::exit(101)
+    }
+
+    /// Axis `A`'s DAC to `code` through the firmware's driver.
+    fn safe_dac<const A: usize>(code: i32) {
+        if let Ok(mut dac) = chips::Dac::<A>::new(
+            chips::DacSpi,
+            chips::Ldac,
+            chips::TimerDelay,
+            firmware::DAC_CONFIG,
+        ) {
+            dac.set_code(code).ok();
+        }
     }
 }
 
@@ -160,10 +258,15 @@ mod board {
 #[rtic::app(device = crate::board::pac, peripherals = false)]
 mod app {
     use super::io::SimIo;
-    use super::{bench, uart, Ctl, SysTickClock, Uart, PERIODS_MAX, PERIODS_MIN, SYSTICK_HZ};
+    use super::{
+        bench, chips, uart, Ctl, SysTickClock, Uart, PERIODS_MAX, PERIODS_MIN, SAFE_CODE,
+        SYSTICK_HZ,
+    };
+    use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
     use piezo_core::command::Reply;
     use piezo_core::firmware::{c, control_period, CommandLine, AXES, SAMPLE_HZ};
+    use piezo_core::firmware::{Converters, SpiPair};
     use piezo_core::pipeline::Wave;
 
     #[shared]
@@ -181,7 +284,22 @@ mod app {
     #[init]
     fn init(cx: init::Context) -> (Shared, Local) {
         let mut syst = cx.core.SYST;
+        // First: the chips' time base, then the DAC at the safe code (the pipeline's safe
+        // voltage at the DAC's scale) before anything that can fail; the amplifier stays
+        // off until the loop runs without a fault.
+        chips::clock::start();
+        let ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        let safe = ctl.lp.p.codes()[0] << <SpiPair as Converters>::DAC_SHIFT;
+        SAFE_CODE.store(safe, Relaxed);
         uart::init();
+        let io = match SimIo::new(safe) {
+            Ok(io) => io,
+            Err(rule) => {
+                uart::line("error: converters did not come up:");
+                uart::line(rule);
+                semihosting::process::exit(1)
+            }
+        };
         defmt::info!("qemu board: bench");
         let table = bench::run(&mut syst);
         bench::print(&table, true);
@@ -196,16 +314,20 @@ mod app {
         syst.enable_counter();
         defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
         uart::line("ready");
-        let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        let mut ctl = ctl;
         for axis in 0..AXES {
             ctl.lp.p.set_wave(axis, Wave::Hold { y_um: c(10.0) }).ok();
         }
         (
             Shared { ctl },
             Local {
-                io: SimIo::new(),
+                io,
                 cli: CommandLine::new(),
-                port: Uart { table, exit: false },
+                port: Uart {
+                    table,
+                    exit: false,
+                    panic: false,
+                },
             },
         )
     }
@@ -228,6 +350,9 @@ mod app {
                 }
             }
             let periods = cx.shared.ctl.lock(|c| c.periods);
+            if cx.local.port.panic && periods >= PERIODS_MIN {
+                panic!("forced by the harness");
+            }
             if cx.local.port.exit && periods >= PERIODS_MIN {
                 finish(&mut cx.shared.ctl, periods, answered, 0);
             }
@@ -255,6 +380,13 @@ mod app {
         r.push_u32(t.isr.max);
         r.push_str(" overruns ");
         r.push_u32(t.overruns);
+        uart::line(r.as_str());
+        let (n, first) = chips::violations();
+        r.clear();
+        r.push_str("chips: ");
+        r.push_u32(n);
+        r.push_str(" data-sheet rule violations, first: ");
+        r.push_str(first);
         uart::line(r.as_str());
         defmt::info!(
             "done: {=u32} periods, {=u32} commands, step ticks min {=u32} max {=u32}, overruns {=u32}",
