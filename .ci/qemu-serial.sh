@@ -17,7 +17,11 @@ piezo_cli() {
   fi
 }
 
-s() { timeout 60 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 10 "$@"; }
+# Waits inside `piezo serial` are bounded by the firmware's progress (`record` counts the
+# control periods it reports); --timeout-s (each reply line) and the outer `timeout` are
+# wall-clock caps for a dead link only, generous for a busy machine where QEMU runs far
+# slower than real time.
+s() { timeout 900 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 60 "$@"; }
 
 qemu_boot() {
   local elf=$1 machine=$2 cpu=$3
@@ -26,9 +30,13 @@ qemu_boot() {
     -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$elf.defmt" &
   qemu=$!
-  # QEMU listens at once; the firmware answers after its boot-time bench table.
-  for _ in $(seq 100); do
-    if s ping >"$work/ping.txt" 2>&1; then break; fi
+  # QEMU listens at once; the firmware answers after its boot-time bench table, which takes
+  # as long as the emulator needs: keep asking while QEMU runs (a wall-clock cap of 30 min
+  # only catches a hung emulator).
+  local start=$SECONDS
+  until s ping >"$work/ping.txt" 2>&1; do
+    kill -0 "$qemu" 2>/dev/null || break
+    [ $((SECONDS - start)) -lt 1800 ] || break
     sleep 0.2
   done
   cat "$work/ping.txt"

@@ -32,7 +32,7 @@
 //! | `rec trig rise\|fall\|level <channel> <level> [<pre>]` | trigger on a channel | `ok` |
 //! | `rec arm` / `rec stop` | start / abort a capture | `ok` |
 //! | `rec div [<n>]` | record every `n`-th period, 1..=1000 (the buffer spans `n` times longer, e.g. a whole XY scan); without `n`: report it | `ok rec div <n>` |
-//! | `rec status` | `idle`, `armed`, `triggered` or `done` and frame count | `ok rec <state> <n>` |
+//! | `rec status` | `idle`, `armed`, `triggered` or `done` and the frames of the capture in place (all N when done) | `ok rec <state> <n>` |
 //! | `rec read <start> <count>` | frames as `<i> <v0> <v1> ...` lines | `ok rec read <n>` |
 //! | `fault` | latched fault (`none`, `sensor-range`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |

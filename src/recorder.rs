@@ -244,6 +244,17 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
         }
     }
 
+    /// Frames of the capture in place so far, for progress reports: those held while
+    /// armed (at most N), N less the frames still due once triggered, N when done.
+    pub fn progress(&self) -> usize {
+        match self.state {
+            State::Idle => 0,
+            State::Armed => self.filled,
+            State::Triggered => N - self.post_left.min(N),
+            State::Done => N,
+        }
+    }
+
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -418,6 +429,37 @@ mod tests {
         assert_eq!(got, vec![7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0]);
         assert_eq!(r.frame(r.trigger_index()).unwrap(), &[10.0, -10.0]);
         assert!(r.frame(8).is_none());
+    }
+
+    #[test]
+    fn progress_grows_until_done() {
+        let mut r = Recorder::<f32, 2, 8>::new();
+        r.select(&[Signal::RefUm, Signal::YUm]).unwrap();
+        r.set_trigger(
+            Trigger::Rising {
+                channel: 0,
+                level: 10.0,
+            },
+            3,
+        )
+        .unwrap();
+        assert_eq!(r.progress(), 0);
+        r.arm();
+        let mut seen = vec![];
+        for k in 0..40 {
+            r.push(&signals(k as f32));
+            seen.push((r.state(), r.progress()));
+        }
+        // Armed: the ring fills (saturating at 8) before the crossing at sample 10; then
+        // the frames still due count down to done.
+        assert_eq!(seen[0], (State::Armed, 1));
+        assert_eq!(seen[9], (State::Armed, 8));
+        assert_eq!(seen[10], (State::Triggered, 4));
+        assert_eq!(seen[13], (State::Triggered, 7));
+        assert_eq!(seen[14], (State::Done, 8));
+        assert!(seen
+            .windows(2)
+            .all(|w| w[0].0 != w[1].0 || w[0].1 <= w[1].1));
     }
 
     #[test]

@@ -26,11 +26,13 @@ run() {
   cat "$dir/uart.out" >"$dir/uart.txt" &
   local reader=$!
   set +e
-  timeout 300 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
+  # The firmware exits on the harness line `exit` (after >= 10 000 periods); the wall-clock
+  # cap only catches a hung emulator and is generous for a busy machine.
+  timeout 1800 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
     -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$dir/defmt.bin" &
   local qemu=$!
-  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\n' \
+  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nexit\n' \
     >"$dir/uart.in"
   wait $qemu
   status=$?

@@ -12,5 +12,6 @@ pub mod object;
 pub mod plot;
 pub mod record;
 pub mod scenario;
+pub mod serial;
 pub mod sim;
 pub mod stage;

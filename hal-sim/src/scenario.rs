@@ -9,6 +9,9 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+mod effects;
+pub use effects::{AmplitudeDynamics, Backlash, RateHysteresis, SensorNonlinearity, StartupCreep};
+
 /// A documented example scenario (parsed by a test).
 pub const EXAMPLE: &str = r#"
 name = "sine-50hz-creep"
@@ -167,6 +170,12 @@ pub struct StageConfig {
     pub force: Force,
     pub delay: Delay,
     pub coupling: Coupling,
+    /// What real stages do besides (all off by default; [`effects`]).
+    pub rate_hysteresis: RateHysteresis,
+    pub backlash: Backlash,
+    pub startup_creep: StartupCreep,
+    pub amplitude_dynamics: AmplitudeDynamics,
+    pub sensor_nonlinearity: SensorNonlinearity,
 }
 
 impl Default for StageConfig {
@@ -183,6 +192,11 @@ impl Default for StageConfig {
             force: Force::default(),
             delay: Delay::default(),
             coupling: Coupling::default(),
+            rate_hysteresis: RateHysteresis::default(),
+            backlash: Backlash::default(),
+            startup_creep: StartupCreep::default(),
+            amplitude_dynamics: AmplitudeDynamics::default(),
+            sensor_nonlinearity: SensorNonlinearity::default(),
         }
     }
 }
@@ -629,6 +643,7 @@ impl Scenario {
                 bail!("stage.coupling.matrix: every entry must be finite");
             }
         }
+        st.validate_effects()?;
         let cv = &self.converters;
         finite(cv.sensor_volts_per_um, "converters.sensor_volts_per_um")?;
         if cv.sensor_volts_per_um == 0.0 {

@@ -13,11 +13,20 @@
 //! linearly over one internal step (first-order hold, ramp-invariant), so the error comes
 //! only from the curvature of their inputs inside a step. A delay that is not a whole
 //! number of internal steps is interpolated linearly.
+//!
+//! What real stages show besides this chain (rate-dependent hysteresis, start-up creep after
+//! a long rest, backlash, amplitude-dependent resonance, a nonlinear sensor) is in
+//! [`effects`], each switched and parameterised by its scenario section
+//! (`[stage.rate_hysteresis]`, ...; [`crate::scenario::RateHysteresis`] and its siblings
+//! give the equations). All are off by default and cost nothing then.
 
 use crate::scenario::{HysteresisModel, Scenario, StageConfig};
 use anyhow::{Context, Result};
 use piezo_core::hysteresis::{AbwAbs, BwState, Cbw, Dahl, Gbw, Hysteresis, Mbw002, MbwState};
 use std::f64::consts::PI;
+
+mod effects;
+use effects::{resonance_ad, AxisFx, Effects};
 
 /// Small, fast, seedable generator (xorshift64*) with a cheap near-Gaussian sample.
 #[derive(Debug, Clone)]
@@ -290,16 +299,28 @@ struct Axis {
     /// Structural state: position, velocity.
     x: f64,
     v: f64,
+    /// State of the effects beyond the Hammerstein chain ([`effects`]).
+    fx: AxisFx,
 }
 
 impl Axis {
-    /// Static output `ys` at amplifier voltage `v` -> quadratic term -> creep; sets `y_hc`.
+    /// Static output `ys` at amplifier voltage `v` -> (rate dependence) -> quadratic term ->
+    /// (start-up creep) -> creep -> (backlash); sets `y_hc`.
     #[inline(always)]
-    fn hammerstein(&mut self, v: f64, ys: f64) {
-        let y = ys + self.asym * v * v;
+    fn hammerstein(&mut self, v: f64, ys: f64, fx: Option<&Effects>) {
+        let y = match fx {
+            None => ys + self.asym * v * v,
+            Some(fx) => {
+                let ys = fx.rate(&mut self.fx, v, ys);
+                fx.startup(&mut self.fx, v, ys + self.asym * v * v)
+            }
+        };
         let y0 = self.y_in;
         self.y_in = y;
         self.y_hc = self.creep.step(y0, y);
+        if let Some(fx) = fx {
+            self.y_hc = fx.backlash(&mut self.fx, self.y_hc);
+        }
     }
 
     /// One internal step of the structure to the new input. Exact for an input moving
@@ -357,6 +378,12 @@ pub struct Stage {
     steps: u64,
     exact_hysteresis: bool,
     zero_um: f64,
+    /// The effects beyond the Hammerstein chain that are on; `None` (all off) keeps the
+    /// one-step fast path.
+    fx: Option<Box<Effects>>,
+    /// [`Self::advance_one`] applies: one internal step, no coupling, no exact hysteresis,
+    /// no effects (one test per sample).
+    one_step: bool,
 }
 
 /// Most internal steps per loop period.
@@ -442,23 +469,13 @@ impl Stage {
                 u_struct: 0.0,
                 x: 0.0,
                 v: 0.0,
+                fx: AxisFx::default(),
             });
         }
-        let ad = cfg.resonance.enabled.then(|| {
-            let w = 2.0 * PI * cfg.resonance.freq_hz;
-            let z = cfg.resonance.zeta;
-            let s = z * w;
-            let wd = w * (1.0 - z * z).sqrt();
-            let e = (-s * h).exp();
-            let (sn, cs) = (wd * h).sin_cos();
-            (
-                [
-                    [e * (cs + s / wd * sn), e * sn / wd],
-                    [-e * w * w / wd * sn, e * (cs - s / wd * sn)],
-                ],
-                2.0 * z / w,
-            )
-        });
+        let ad = cfg
+            .resonance
+            .enabled
+            .then(|| resonance_ad(cfg.resonance.freq_hz, cfg.resonance.zeta, h));
         let f = &cfg.force;
         let delay = if cfg.delay.enabled {
             cfg.delay.seconds / h
@@ -508,7 +525,10 @@ impl Stage {
             steps: 0,
             exact_hysteresis: false,
             zero_um: cfg.zero_um,
+            fx: Effects::new(cfg, h).map(Box::new),
+            one_step: false,
         };
+        st.set_exact_hysteresis(false);
         st.drift_now_um = st.drift_calc_um();
         // Rest at the amplifier's output for 0 V in.
         let zero = vec![0.0; st.axes.len()];
@@ -525,13 +545,19 @@ impl Stage {
             let y = ax.y_stat + ax.asym * ax.amp.v * ax.amp.v;
             ax.y_in = y;
             ax.y_hc = ax.creep.settle(&ax.creep_gain, y);
+            if let Some(fx) = &self.fx {
+                fx.settle(&mut ax.fx, ax.amp.v, y);
+                fx.settle_play(&mut ax.fx, ax.y_hc);
+            }
             ax.x = ax.y_hc;
             ax.u_struct = ax.y_hc;
             ax.v = 0.0;
         }
         let off = self.drift_um();
+        let fx = self.fx.as_deref();
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
-            line.iter_mut().for_each(|p| *p = ax.x + off);
+            let read = fx.map_or(ax.x + off, |f| f.sensor(ax.x + off));
+            line.iter_mut().for_each(|p| *p = read);
         }
     }
 
@@ -600,7 +626,7 @@ impl Stage {
     /// Advances one loop period with the DAC output voltages held.
     #[inline]
     pub fn advance(&mut self, dac_volts: &[f64]) {
-        if self.substeps == 1 && self.coupling.is_none() && !self.exact_hysteresis {
+        if self.one_step {
             self.advance_one(dac_volts);
         } else {
             self.advance_slow(dac_volts);
@@ -699,6 +725,10 @@ impl Stage {
     /// (reference runs; slower).
     pub fn set_exact_hysteresis(&mut self, exact: bool) {
         self.exact_hysteresis = exact;
+        self.one_step = self.substeps == 1
+            && self.coupling.is_none()
+            && !self.exact_hysteresis
+            && self.fx.is_none();
     }
 
     fn force_um(&self) -> f64 {
@@ -719,6 +749,7 @@ impl Stage {
     /// period) and the hysteresis is interpolated.
     fn step_internal(&mut self, dac_volts: &[f64], j: Option<usize>) {
         let h = self.h;
+        let fx = self.fx.as_deref();
         for (ax, &u) in self.axes.iter_mut().zip(dac_volts) {
             let (v, ys) = match j {
                 None => {
@@ -740,7 +771,7 @@ impl Stage {
                 // The last step of the period ends at the model's own end point.
                 Some(_) => (ax.v_end, ax.y_end),
             };
-            ax.hammerstein(v, ys);
+            ax.hammerstein(v, ys, fx);
         }
         let f_um = self.force_um();
         let n = self.axes.len();
@@ -753,180 +784,29 @@ impl Stage {
                     }
                 }
             }
+            let amp = fx.and_then(|f| f.amp.as_ref());
             if let Some(ax) = self.axes.get_mut(i) {
-                ax.structure(input, &self.ad, self.inv_h);
+                match amp {
+                    Some(amp) => {
+                        let slope = (input - ax.u_struct) * self.inv_h;
+                        let ad = amp.select(&mut ax.fx, ax.x, ax.v, ax.u_struct, slope);
+                        ax.structure(input, &Some(ad), self.inv_h);
+                    }
+                    None => ax.structure(input, &self.ad, self.inv_h),
+                }
             }
         }
         self.advance_time();
         let drift = self.drift_um();
+        let fx = self.fx.as_deref();
         for (line, ax) in self.delay.iter_mut().zip(&self.axes) {
             let mask = line.len() - 1; // a power of two
             if let Some(p) = line.get_mut(self.delay_pos & mask) {
-                *p = ax.x + drift;
+                *p = fx.map_or(ax.x + drift, |f| f.sensor(ax.x + drift));
             }
         }
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn quasi_static() -> Scenario {
-        let mut s = Scenario::default();
-        s.stage.creep.enabled = false;
-        s.stage.drift.enabled = false;
-        s.stage.noise.enabled = false;
-        s.stage.delay.enabled = false;
-        s.stage.zero_um = 0.0;
-        s.run.loop_hz = 10_000.0;
-        s
-    }
-
-    /// Drives the DAC with a slow full-range sine and returns (piezo volts, position).
-    fn sweep(s: &Scenario, freq_hz: f64, periods: f64) -> (Vec<f64>, Vec<f64>) {
-        let mut st = Stage::new(s).unwrap();
-        let n = (periods * s.run.loop_hz / freq_hz) as usize;
-        let full = s.converters.dac_vrefp * 150.0 / 150.0;
-        let (mut u, mut y) = (vec![], vec![]);
-        for k in 0..n {
-            let t = k as f64 / s.run.loop_hz;
-            let dac = full * 0.5 * (1.0 - (2.0 * PI * freq_hz * t).cos());
-            st.advance(&[dac]);
-            u.push(st.piezo_volts(0));
-            y.push(st.position_um(0));
-        }
-        (u, y)
-    }
-
-    /// Loop width: largest gap between ascending and descending branch at equal voltage.
-    pub(crate) fn loop_width(u: &[f64], y: &[f64]) -> f64 {
-        let bins = 200;
-        let (lo, hi) = (
-            u.iter().cloned().fold(f64::INFINITY, f64::min),
-            u.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
-        );
-        let mut up = vec![f64::NAN; bins];
-        let mut dn = vec![f64::NAN; bins];
-        for k in 1..u.len() {
-            let b = (((u[k] - lo) / (hi - lo)) * (bins as f64 - 1.0)) as usize;
-            if u[k] > u[k - 1] {
-                up[b] = y[k];
-            } else if u[k] < u[k - 1] {
-                dn[b] = y[k];
-            }
-        }
-        up.iter()
-            .zip(&dn)
-            .filter(|(a, b)| a.is_finite() && b.is_finite())
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max)
-    }
-
-    #[test]
-    fn default_stage_has_100um_stroke_and_15pct_hysteresis() {
-        let s = quasi_static();
-        let (u, y) = sweep(&s, 1.0, 3.0);
-        let tail = u.len() / 3;
-        let (u, y) = (&u[u.len() - tail..], &y[y.len() - tail..]);
-        let stroke = y.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
-            - y.iter().cloned().fold(f64::INFINITY, f64::min);
-        let width = loop_width(u, y) / stroke;
-        eprintln!("stroke {stroke:.2} um, hysteresis {:.1} %", 100.0 * width);
-        assert!((90.0..110.0).contains(&stroke), "stroke {stroke}");
-        assert!((0.12..0.18).contains(&width), "hysteresis {width}");
-    }
-
-    #[test]
-    fn slew_limited_amplifier_is_exact() {
-        let s = quasi_static();
-        let mut st = Stage::new(&s).unwrap();
-        // A 150 V step: the amplifier ramps at I/C = 40 kV/s.
-        st.advance(&[10.0]);
-        let rate = st.piezo_volts(0) / 1e-4;
-        assert!((rate - 40_000.0).abs() < 1.0, "{rate}");
-    }
-
-    #[test]
-    fn resonance_rings_at_its_frequency() {
-        let mut s = quasi_static();
-        s.stage.hysteresis.model = HysteresisModel::None;
-        s.stage.hysteresis.asym_um_per_v2 = 0.0;
-        s.stage.amplifier.current_limit_a = 100.0;
-        s.stage.amplifier.bandwidth_hz = 1e6;
-        s.run.loop_hz = 100_000.0;
-        let mut st = Stage::new(&s).unwrap();
-        let mut y = vec![];
-        for _ in 0..2000 {
-            st.advance(&[0.1]);
-            y.push(st.position_um(0));
-        }
-        // Upward zero crossings of (y - final) give the damped frequency.
-        let fin = 0.1 * 15.0 * s.stage.hysteresis.d;
-        let ups: Vec<usize> = (1..y.len())
-            .filter(|&k| y[k - 1] < fin && y[k] >= fin)
-            .collect();
-        let period = (ups[ups.len() - 1] - ups[0]) as f64 / (ups.len() - 1) as f64 / 1e5;
-        let fd = 1500.0 * (1.0f64 - 0.03 * 0.03).sqrt();
-        assert!((1.0 / period - fd).abs() < 10.0, "{}", 1.0 / period);
-        let overshoot = y.iter().cloned().fold(0.0, f64::max) / fin - 1.0;
-        assert!(overshoot > 0.8, "lightly damped: overshoot {overshoot}");
-    }
-
-    #[test]
-    fn one_step_fast_path_equals_the_general_path() {
-        let mut s = Scenario::default();
-        s.stage.force.enabled = true;
-        s.stage.force.at_s = 1e-3;
-        s.stage.force.freq_hz = 50.0;
-        let mut fast = Stage::new(&s).unwrap();
-        let mut general = fast.clone();
-        for k in 0..5_000 {
-            let dac = 5.0 - 4.9 * (k as f64 * 2e-3).cos() + if k % 700 < 5 { 3.0 } else { 0.0 };
-            fast.advance(&[dac]);
-            general.advance_general(&[dac]);
-            // The same discretisation, summed in another order: equal to rounding.
-            let (a, b) = (fast.position_um(0), general.position_um(0));
-            assert!((a - b).abs() < 1e-9, "step {k}: {a} vs {b}");
-            let (a, b) = (fast.sensor_um(0), general.sensor_um(0));
-            assert!((a - b).abs() < 1e-9, "step {k}: {a} vs {b}");
-        }
-    }
-
-    #[test]
-    fn fractional_delay_interpolates() {
-        let mut s = quasi_static();
-        s.stage.hysteresis.model = HysteresisModel::None;
-        s.stage.hysteresis.asym_um_per_v2 = 0.0;
-        s.stage.resonance.enabled = false;
-        s.stage.amplifier.bandwidth_hz = 1e7;
-        s.stage.amplifier.current_limit_a = 1e3;
-        s.stage.delay.enabled = true;
-        s.stage.delay.seconds = 2.5e-4; // 2.5 loop periods at 10 kHz, one step each
-        let mut st = Stage::new(&s).unwrap();
-        let mut pos = vec![];
-        for k in 0..20 {
-            st.advance(&[0.01 * k as f64]);
-            pos.push(st.position_um(0));
-            if k >= 3 {
-                let want = 0.5 * (pos[k - 2] + pos[k - 3]);
-                assert!((st.sensor_um(0) - want).abs() < 1e-12, "{k}");
-            }
-        }
-    }
-
-    #[test]
-    fn rng_gauss_has_unit_variance() {
-        let mut r = Rng::new(3);
-        let n = 200_000;
-        let (mut m, mut v) = (0.0, 0.0);
-        for _ in 0..n {
-            let g = r.gauss();
-            m += g;
-            v += g * g;
-        }
-        m /= n as f64;
-        v = v / n as f64 - m * m;
-        assert!(m.abs() < 0.01 && (v - 1.0).abs() < 0.02, "{m} {v}");
-    }
-}
+mod tests;

@@ -18,9 +18,10 @@ use std::process::Command as Process;
 use std::thread;
 use std::time::Duration;
 
-use hal_sim::cli::serial::{
-    connect, execute, record, Action, Conn, RecordArgs, SerialError, TableArgs, WaveArgs, WaveCmd,
-};
+use hal_sim::cli::serial::record::{record, RecordArgs};
+use hal_sim::cli::serial::wave::{TableArgs, WaveArgs, WaveCmd};
+use hal_sim::cli::serial::{connect, execute, Action, Conn};
+use hal_sim::serial::SerialError;
 use piezo_core::command::{self, Command, LineBuffer, RecCmd};
 
 /// Control periods run before each command is executed (the firmware runs on while the
@@ -155,6 +156,7 @@ fn ref_capture(out: &str, every: u32) -> RecordArgs {
         trigger: "now".into(),
         pre: 0,
         wait_s: 10.0,
+        wall_cap_s: 600.0,
         no_arm: false,
         xy: false,
         every,
@@ -315,6 +317,7 @@ fn the_recorder_comes_back_as_csv_with_units() {
             trigger: "rise:ref_um:10".into(),
             pre: 64,
             wait_s: 10.0,
+            wall_cap_s: 600.0,
             no_arm: false,
             xy: false,
             every: 1,
@@ -360,6 +363,7 @@ fn the_recorder_comes_back_as_csv_with_units() {
             trigger: "now".into(),
             pre: 64,
             wait_s: 1.0,
+            wall_cap_s: 600.0,
             no_arm: true,
             xy: false,
             every: 1,

@@ -18,10 +18,12 @@
 //!   calibrates ticks to instructions). The `bench` command prints that table. The table
 //!   counts the pipeline step (ADC code in, DAC code out) without the driver calls; one
 //!   extra line counts the driver path per sample (both drivers and the mock chips).
-//! * After at least [`PERIODS_MIN`] periods, one answered command and [`QUIET_PERIODS`]
-//!   without a received byte the app exits through semihosting with status 0 (1 if no
-//!   command arrived within [`PERIODS_MAX`] periods), so a host (`piezo serial`) can hold a
-//!   session of several commands.
+//! * The host ends the run: the line `exit` (this board's test-harness command, not part of
+//!   the protocol) makes the app exit through semihosting with status 0 once at least
+//!   [`PERIODS_MIN`] periods have run; a host that kills QEMU ends it too. If no command
+//!   arrives within [`PERIODS_MAX`] periods it exits with status 1. Nothing depends on how
+//!   long the host is silent: a busy host may pause between `piezo serial` calls for any
+//!   time without ending the session.
 
 use crate::control::AXES;
 /// Sample rate of the control loop (Hz of virtual time): 100 kHz in f32, 16 384 Hz in Q16.16.
@@ -32,8 +34,8 @@ pub const SYSTICK_HZ: u32 = 25_000_000;
 pub const PERIODS_MIN: u32 = 10_000;
 /// Give up (exit 1) when no command was answered after this many periods.
 pub const PERIODS_MAX: u32 = 300_000;
-/// Keep serving this many periods after the last received byte.
-pub const QUIET_PERIODS: u32 = PERIODS_MIN;
+/// The harness line that ends the run (after [`PERIODS_MIN`] periods).
+const EXIT_LINE: &[u8] = b"exit";
 /// Steps per benchmark row.
 pub const BENCH_STEPS: usize = 2_000;
 
@@ -633,7 +635,7 @@ pub mod bench {
 
 #[rtic::app(device = crate::board_qemu::pac, peripherals = false)]
 mod app {
-    use super::{bench, uart, Io, PERIODS_MAX, PERIODS_MIN, QUIET_PERIODS, SAMPLE_HZ, SYSTICK_HZ};
+    use super::{bench, uart, Io, EXIT_LINE, PERIODS_MAX, PERIODS_MIN, SAMPLE_HZ, SYSTICK_HZ};
     use crate::control::{c, stream_frames, Ctl};
     use cortex_m::peripheral::{syst::SystClkSource, SCB, SYST};
     use piezo_core::command::{self as cmd, Command, LineBuffer, RecCmd};
@@ -731,14 +733,16 @@ mod app {
     #[idle(shared = [ctl, periods], local = [line, table])]
     fn idle(mut cx: idle::Context) -> ! {
         let mut answered = 0u32;
-        let mut last_rx = 0u32;
+        let mut exit = false;
         loop {
-            let mut received = false;
             while let Some(byte) = uart::try_read() {
-                received = true;
                 let Some(line) = cx.local.line.push(byte) else {
                     continue;
                 };
+                if line == Ok(EXIT_LINE) {
+                    exit = true;
+                    continue;
+                }
                 let mut reply = cmd::Reply::<{ crate::control::REPLY_LEN }>::new();
                 match line.and_then(cmd::parse) {
                     Ok(Command::Empty) => continue,
@@ -765,11 +769,7 @@ mod app {
                 answered += 1;
             }
             let periods = cx.shared.periods.lock(|p| *p);
-            if received {
-                last_rx = periods;
-            }
-            let quiet = periods.wrapping_sub(last_rx) >= QUIET_PERIODS;
-            if periods >= PERIODS_MIN && answered > 0 && quiet {
+            if exit && periods >= PERIODS_MIN {
                 finish(&mut cx.shared.ctl, periods, answered, 0);
             }
             if periods >= PERIODS_MAX && answered == 0 {

@@ -1082,7 +1082,7 @@ impl Ctl {
                 out.push_str("ok rec ");
                 out.push_str(self.rec.state().name());
                 out.push_str(" ");
-                out.push_usize(self.rec.len());
+                out.push_usize(self.rec.progress());
             }
             RecCmd::Divider(n) => {
                 if let Some(n) = n {

@@ -1,0 +1,72 @@
+//! `piezo serial status` and `stats`: link, parameters, timing and recorder state.
+use std::io::Write;
+use std::time::Instant;
+
+use anyhow::Result;
+use piezo_core::command::Command;
+
+use crate::serial::replies::Stats;
+use crate::serial::Client;
+
+use super::params::print_params;
+
+/// The timing counts, with microseconds when the counts' clock is known.
+pub fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Result<()> {
+    let us = |n: u32| match clock_hz {
+        Some(f) if f > 0.0 => format!(" ({:.3} us)", n as f64 / f * 1e6),
+        _ => String::new(),
+    };
+    writeln!(
+        out,
+        "control step    min {}{} max {}{} last {}{}",
+        s.step_min,
+        us(s.step_min),
+        s.step_max,
+        us(s.step_max),
+        s.step_last,
+        us(s.step_last)
+    )?;
+    writeln!(
+        out,
+        "interrupt       min {}{} max {}{} last {}{}",
+        s.isr_min,
+        us(s.isr_min),
+        s.isr_max,
+        us(s.isr_max),
+        s.isr_last,
+        us(s.isr_last)
+    )?;
+    writeln!(out, "samples {}  overruns {}", s.samples, s.overruns)?;
+    Ok(())
+}
+
+/// Link, parameters, timing and recorder state.
+pub fn status(c: &mut Client, out: &mut impl Write) -> Result<()> {
+    let t = Instant::now();
+    c.send(&Command::Ping)?;
+    writeln!(
+        out,
+        "link            ok ({:.1} ms round trip)",
+        t.elapsed().as_secs_f64() * 1e3
+    )?;
+    print_params(c, out)?;
+    print_stats(out, &c.stats()?, None)?;
+    let (state, n) = c.rec_status()?;
+    writeln!(out, "recorder        {state}, {n} frames")?;
+    Ok(())
+}
+
+/// `stats [--clock] [--reset]`.
+pub fn stats(
+    c: &mut Client,
+    reset: bool,
+    clock_hz: Option<f64>,
+    out: &mut impl Write,
+) -> Result<()> {
+    print_stats(out, &c.stats()?, clock_hz)?;
+    if reset {
+        c.send(&Command::StatsReset)?;
+        writeln!(out, "counters reset")?;
+    }
+    Ok(())
+}
