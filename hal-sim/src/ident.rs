@@ -4,3 +4,4 @@ pub mod fast;
 pub mod fit;
 pub mod generate;
 pub mod optim;
+pub mod ss;

@@ -176,6 +176,9 @@ pub struct StageConfig {
     pub startup_creep: StartupCreep,
     pub amplitude_dynamics: AmplitudeDynamics,
     pub sensor_nonlinearity: SensorNonlinearity,
+    /// An identified model (`piezo sim --stage fit.json`) in place of hysteresis, creep
+    /// and structure.
+    pub identified: Option<crate::stage::identified::IdentifiedCfg>,
 }
 
 impl Default for StageConfig {
@@ -197,6 +200,7 @@ impl Default for StageConfig {
             startup_creep: StartupCreep::default(),
             amplitude_dynamics: AmplitudeDynamics::default(),
             sensor_nonlinearity: SensorNonlinearity::default(),
+            identified: None,
         }
     }
 }

@@ -20,6 +20,8 @@
 //! (`[stage.rate_hysteresis]`, ...; [`crate::scenario::RateHysteresis`] and its siblings
 //! give the equations). All are off by default and cost nothing then.
 
+pub mod identified;
+
 use crate::scenario::{HysteresisModel, Scenario, StageConfig};
 use anyhow::{Context, Result};
 use piezo_core::hysteresis::{AbwAbs, BwState, Cbw, Dahl, Gbw, Hysteresis, Mbw002, MbwState};
@@ -384,6 +386,9 @@ pub struct Stage {
     /// [`Self::advance_one`] applies: one internal step, no coupling, no exact hysteresis,
     /// no effects (one test per sample).
     one_step: bool,
+    /// An identified model in place of hysteresis, creep and structure
+    /// (`piezo sim --stage fit.json`).
+    identified: Option<Box<identified::IdentifiedPlant>>,
 }
 
 /// Most internal steps per loop period.
@@ -527,6 +532,11 @@ impl Stage {
             zero_um: cfg.zero_um,
             fx: Effects::new(cfg, h).map(Box::new),
             one_step: false,
+            identified: cfg
+                .identified
+                .as_ref()
+                .map(|c| identified::IdentifiedPlant::load(c, cfg.axes).map(Box::new))
+                .transpose()?,
         };
         st.set_exact_hysteresis(false);
         st.drift_now_um = st.drift_calc_um();
@@ -552,6 +562,13 @@ impl Stage {
             ax.x = ax.y_hc;
             ax.u_struct = ax.y_hc;
             ax.v = 0.0;
+        }
+        if let Some(p) = &mut self.identified {
+            let volts: Vec<f64> = self.axes.iter().map(|a| a.amp.v).collect();
+            p.settle(&volts);
+            for (i, ax) in self.axes.iter_mut().enumerate() {
+                ax.x = p.position_um(i);
+            }
         }
         let off = self.drift_um();
         let fx = self.fx.as_deref();
@@ -626,7 +643,9 @@ impl Stage {
     /// Advances one loop period with the DAC output voltages held.
     #[inline]
     pub fn advance(&mut self, dac_volts: &[f64]) {
-        if self.one_step {
+        if self.identified.is_some() {
+            self.advance_identified(dac_volts);
+        } else if self.one_step {
             self.advance_one(dac_volts);
         } else {
             self.advance_slow(dac_volts);

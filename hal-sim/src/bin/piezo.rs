@@ -20,6 +20,8 @@ enum Cmd {
     Sim(hal_sim::cli::sim::Args),
     /// Identify a model from a measured CSV record.
     Fit(hal_sim::cli::fit::Args),
+    /// Simulate a saved model (`fit.json`) from rest on an input record.
+    Predict(hal_sim::cli::predict::Args),
     /// Find what the base model gets wrong, name the cause, extend the model, measure the gain.
     Diagnose(hal_sim::cli::diagnose::Args),
     /// Fault campaign over every controller mode.
@@ -34,6 +36,7 @@ fn main() {
         Cmd::Demo(a) => hal_sim::cli::demo::run(a),
         Cmd::Sim(a) => hal_sim::cli::sim::run(a),
         Cmd::Fit(a) => hal_sim::cli::fit::run(a),
+        Cmd::Predict(a) => hal_sim::cli::predict::run(a),
         Cmd::Diagnose(a) => hal_sim::cli::diagnose::run(a),
         Cmd::Faults(a) => hal_sim::cli::faults::run(a),
         Cmd::Serial(a) => hal_sim::cli::serial::run(a),

@@ -12,9 +12,27 @@ pub struct Args {
     /// Model name (`piezo fit --list` shows them all), e.g. cbw, gbw, pi, structural-bw.
     #[arg(long, required_unless_present = "list")]
     pub model: Option<String>,
-    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yn`).
+    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yn`). The state-space models
+    /// (`ss`, `hammerstein-ss`) take several (repeat `--train`): one model for all.
     #[arg(long, required_unless_present = "list")]
-    pub train: Option<PathBuf>,
+    pub train: Vec<PathBuf>,
+    /// State-space models: order (number of states) or `auto` (chosen by validation on
+    /// every fourth training record).
+    #[arg(long, default_value = "auto")]
+    pub order: String,
+    /// `hammerstein-ss`: hysteresis model of the core ahead of each input (a
+    /// rate-independent `--list` name, e.g. cbw), or `none` (then the same as `ss`).
+    #[arg(long, default_value = "cbw")]
+    pub hysteresis: String,
+    /// State-space models: iterations of the joint (hysteresis + linear) refinement.
+    #[arg(long, default_value_t = 30)]
+    pub joint_iterations: usize,
+    /// Unit of the input columns, written to fit.json.
+    #[arg(long, default_value = "V")]
+    pub input_unit: String,
+    /// Unit of the output columns, written to fit.json.
+    #[arg(long, default_value = "um")]
+    pub output_unit: String,
     /// Validation record, simulated with the identified model (never used for fitting).
     #[arg(long)]
     pub valid: Option<PathBuf>,
@@ -61,6 +79,9 @@ pub struct Args {
     pub list: bool,
 }
 
+/// Format tag of every `fit.json`.
+pub const FORMAT: &str = "piezo-fit/1";
+
 /// One identified channel pair.
 #[derive(Debug, Serialize)]
 pub struct Part {
@@ -80,7 +101,16 @@ pub struct ChannelMetrics {
 /// What `piezo fit` reports.
 #[derive(Debug, Serialize)]
 pub struct Report {
+    /// `piezo-fit/1`: what `piezo predict` reads.
+    pub format: &'static str,
     pub model: String,
+    /// Sample rate of the training record (dynamic models are simulated at the rate of
+    /// the record they are given).
+    pub sample_rate_hz: f64,
+    pub inputs: usize,
+    pub outputs: usize,
+    pub input_unit: String,
+    pub output_unit: String,
     pub train: String,
     pub valid: Option<String>,
     /// Two-step Hammerstein: the linear part identified first.
@@ -103,7 +133,7 @@ fn name_channel(base: char, i: usize, n: usize) -> String {
 }
 
 /// Simulates every output of `rec` with the identified parts.
-fn simulate(parts: &[Part], rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
+pub fn simulate(parts: &[Part], rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
     let mut out = vec![vec![0.0; rec.len()]; rec.y.len()];
     for p in parts {
         let u = rec.u.get(p.input).with_context(|| {
@@ -239,8 +269,19 @@ pub fn run(args: Args) -> Result<()> {
         }
         return Ok(());
     }
-    let (Some(model), Some(train_path)) = (&args.model, &args.train) else {
+    let Some(model) = &args.model else {
         anyhow::bail!("--model and --train are required (see --help)");
+    };
+    if super::fit_ss::handles(model) {
+        return super::fit_ss::run(&args);
+    }
+    let train_path = match args.train.as_slice() {
+        [one] => one,
+        [] => anyhow::bail!("--model and --train are required (see --help)"),
+        more => anyhow::bail!(
+            "model `{model}` takes one --train record, {} given (several: --model ss or hammerstein-ss)",
+            more.len()
+        ),
     };
     let def = models::find(model)?;
     anyhow::ensure!(
@@ -309,7 +350,13 @@ pub fn run(args: Args) -> Result<()> {
         _ => None,
     };
     let report = Report {
+        format: FORMAT,
         model: def.name.into(),
+        sample_rate_hz: train.sample_rate_hz(),
+        inputs: train.u.len(),
+        outputs: train.y.len(),
+        input_unit: args.input_unit.clone(),
+        output_unit: args.output_unit.clone(),
         train: train_path.display().to_string(),
         valid: args.valid.as_ref().map(|p| p.display().to_string()),
         linear_step,

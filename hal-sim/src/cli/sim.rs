@@ -39,6 +39,12 @@ pub struct Args {
     /// List scenarios and controllers, then exit.
     #[arg(long)]
     pub list: bool,
+    /// Simulate an identified stage instead of the scenario's: the fit.json of
+    /// `piezo fit --model ss | hammerstein-ss --out DIR`. The pipeline's voltage range maps
+    /// onto the model's training input range; the model's largest training output onto
+    /// 1.25 x the reference amplitude around the reference offset (um).
+    #[arg(long, value_name = "FIT_JSON")]
+    pub stage: Option<PathBuf>,
 }
 
 /// Resolves the scenario arguments: names select built-ins, files add scenarios.
@@ -76,6 +82,17 @@ pub fn select_scenarios(args: &Args) -> Result<Vec<Scenario>> {
         for s in &mut out {
             s.run.duration_s = d;
             s.run.settle_s = s.run.settle_s.map(|x| x.min(0.5 * d));
+        }
+    }
+    if let Some(path) = &args.stage {
+        for s in &mut out {
+            s.stage.identified = Some(crate::stage::identified::IdentifiedCfg {
+                fit_json: path.clone(),
+                volts_min: s.pipeline.volts_min,
+                volts_max: s.pipeline.volts_max,
+                centre_um: s.reference.offset_um,
+                half_span_um: 1.25 * s.reference.amplitude_um,
+            });
         }
     }
     for s in &out {

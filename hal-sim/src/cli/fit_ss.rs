@@ -1,0 +1,147 @@
+//! `piezo fit --model ss | hammerstein-ss`: one multivariable state-space model (with a
+//! hysteresis per actuator) for several training records.
+use super::fit::Args;
+use super::predict::{score_last_period, Loaded};
+use crate::ident::fit::models;
+use crate::ident::ss::frf::{self, PeriodicSpectra};
+use crate::ident::ss::saved::SsJson;
+use crate::ident::ss::{identify, SsOptions};
+use crate::record::Record;
+use anyhow::{Context, Result};
+
+/// True for the model names this module fits.
+pub fn handles(model: &str) -> bool {
+    matches!(model, "ss" | "hammerstein-ss")
+}
+
+fn read_all(args: &Args) -> Result<Vec<Record>> {
+    anyhow::ensure!(
+        !args.train.is_empty(),
+        "--train is required (repeat it for several records)"
+    );
+    args.train.iter().map(Record::read).collect()
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    let model = args.model.as_deref().unwrap_or("ss");
+    let t0 = std::time::Instant::now();
+    let recs = read_all(args)?;
+    let order = match args.order.as_str() {
+        "auto" => None,
+        s => Some(
+            s.parse::<usize>()
+                .ok()
+                .filter(|n| (1..=200).contains(n))
+                .with_context(|| format!("--order `{s}`: expected a number 1..200 or `auto`"))?,
+        ),
+    };
+    let hysteresis = match (model, args.hysteresis.as_str()) {
+        ("ss", _) | (_, "none") => None,
+        (_, name) => Some(models::find(name)?),
+    };
+    let opts = SsOptions {
+        order,
+        hysteresis,
+        iterations: args.lm_iterations,
+        joint_iterations: args.joint_iterations,
+        progress: !args.quiet,
+        ..Default::default()
+    };
+    // Nonparametric levels of the training set (periodic records only).
+    let levels = bla_levels(&recs)?;
+    if let (Some(l), false) = (&levels, args.quiet) {
+        eprintln!(
+            "BLA over the training records: noise {:.4e}, nonlinear distortion {} {} RMS per period",
+            l.noise_rms,
+            l.distortion_rms.map_or("n/a".into(), |d| format!("{d:.4e}")),
+            args.output_unit
+        );
+    }
+    let fit = identify(&recs, &opts)?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let mut report = serde_json::json!({
+        "train": args.train.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "period_samples": fit.period,
+        "order_scan": fit.order_scan,
+        "train_rms_linear": fit.linear_rms,
+        "train_rms_hammerstein": fit.hammerstein_rms,
+        "bla_levels": levels,
+        "seconds": seconds,
+    });
+    let saved = SsJson::new(
+        &fit.model,
+        fit.fs_hz,
+        (&args.input_unit, &args.output_unit),
+        serde_json::Value::Null,
+    );
+    let loaded = Loaded::Ss(Box::new(saved.clone()));
+    if let Some(v) = &args.valid {
+        let rec = Record::read(v)?;
+        let sim = loaded.simulate(&rec)?;
+        let (per_output, mean) = score_last_period(&rec, &sim);
+        println!(
+            "valid {}: RMSE over the last period {mean:.4e} {} (per output {})",
+            v.display(),
+            args.output_unit,
+            super::predict::list(&per_output)
+        );
+        report["valid"] = serde_json::json!({"record": v.display().to_string(), "rmse_last_period": per_output, "mean": mean});
+    }
+    println!(
+        "{} order {} fitted on {} records in {seconds:.1} s: training RMS output error linear {:.4e}{} {}",
+        saved.model,
+        fit.order,
+        recs.len(),
+        fit.linear_rms,
+        fit.hammerstein_rms.map_or(String::new(), |h| format!(", hammerstein {h:.4e}")),
+        args.output_unit
+    );
+    for (f, p) in &fit.model.fronts.iter().enumerate().collect::<Vec<_>>() {
+        println!("  u{} hysteresis {}: {:?}", f + 1, p.def.name, p.params);
+    }
+    let range = |chans: &dyn Fn(&Record) -> &Vec<Vec<f64>>| -> Vec<(f64, f64)> {
+        (0..chans(&recs[0]).len())
+            .map(|i| {
+                recs.iter()
+                    .flat_map(|r| chans(r)[i].iter())
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                        (a.min(v), b.max(v))
+                    })
+            })
+            .collect()
+    };
+    let saved = SsJson {
+        report,
+        input_range: range(&|r: &Record| &r.u),
+        output_range: range(&|r: &Record| &r.y),
+        ..saved
+    };
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let path = dir.join("fit.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&saved)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        if !args.quiet {
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&saved)?);
+    }
+    Ok(())
+}
+
+/// Noise and distortion levels of the BLA of periodic records (`None` otherwise).
+pub fn bla_levels(recs: &[Record]) -> Result<Option<frf::Levels>> {
+    let periods: Vec<usize> = recs.iter().map(frf::detect_period).collect();
+    if periods.iter().zip(recs).any(|(&n, r)| n == r.len())
+        || periods.iter().any(|&n| n != periods[0])
+    {
+        return Ok(None);
+    }
+    let sp = recs
+        .iter()
+        .map(|r| PeriodicSpectra::of(r, periods[0]))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Some(frf::bla(&sp)?.levels()))
+}

@@ -1,0 +1,268 @@
+//! `piezo predict`: simulate a saved `fit.json` from rest on an input record.
+use super::fit::{simulate, Part};
+use crate::ident::fit::{models, Fitted};
+use crate::ident::ss::frf::detect_period;
+use crate::ident::ss::saved::SsJson;
+use crate::record::Record;
+use anyhow::{Context, Result};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// A `fit.json` written by `piezo fit --out DIR`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Input record: `t,u1..uk` (output columns, if present, are scored).
+    #[arg(long)]
+    pub input: PathBuf,
+    /// Where to write the simulated output `t,y1..yn`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// A saved model of any kind `piezo fit` writes.
+#[derive(Debug)]
+pub enum Loaded {
+    Ss(Box<SsJson>),
+    /// The per-channel models of the classic fits (cbw, structural-bw, ...).
+    Parts {
+        parts: Vec<Part>,
+        outputs: usize,
+    },
+}
+
+fn field<'a>(v: &'a Value, key: &str, path: &str) -> Result<&'a Value> {
+    v.get(key).with_context(|| format!("{path}: no `{key}`"))
+}
+
+fn num(v: &Value, key: &str, path: &str) -> Result<f64> {
+    field(v, key, path)?
+        .as_f64()
+        .with_context(|| format!("{path}: `{key}` is not a number"))
+}
+
+/// Rebuilds a classic fit part from its JSON (`Part` as `piezo fit` writes it).
+fn part(v: &Value, path: &str) -> Result<Part> {
+    let fit = field(v, "fit", path)?;
+    let name = field(fit, "model", path)?
+        .as_str()
+        .with_context(|| format!("{path}: `model` is not a name"))?;
+    let def = models::find(name)?;
+    let params: Vec<f64> = field(fit, "params", path)?
+        .as_array()
+        .with_context(|| format!("{path}: `params` is not a list"))?
+        .iter()
+        .map(|p| {
+            p.get(1)
+                .and_then(Value::as_f64)
+                .with_context(|| format!("{path}: a parameter is not [name, value]"))
+        })
+        .collect::<Result<_>>()?;
+    let mut f = Fitted::from_params(
+        def,
+        &params,
+        num(fit, "sign", path)?,
+        num(fit, "offset", path)?,
+        num(fit, "upsample", path)? as usize,
+    )?;
+    if let Some(lin) = fit.get("linear").and_then(Value::as_array) {
+        f.linear = lin
+            .iter()
+            .map(|s| {
+                match (
+                    s.get(0).and_then(Value::as_f64),
+                    s.get(1).and_then(Value::as_f64),
+                ) {
+                    (Some(a), Some(b)) => Ok((a, b)),
+                    _ => anyhow::bail!("{path}: a linear section is not [f_hz, zeta]"),
+                }
+            })
+            .collect::<Result<_>>()?;
+    }
+    let idx = |k: &str| -> Result<usize> {
+        field(v, k, path)?
+            .as_u64()
+            .map(|x| x as usize)
+            .with_context(|| format!("{path}: `{k}` is not an index"))
+    };
+    let kind = match field(v, "kind", path)?.as_str() {
+        Some("direct") => "direct",
+        Some("coupling") => "coupling",
+        _ => "siso",
+    };
+    Ok(Part {
+        kind,
+        input: idx("input")?,
+        output: idx("output")?,
+        fit: f,
+    })
+}
+
+impl Loaded {
+    pub fn read(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let v: Value =
+            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+        let p = path.display().to_string();
+        let model = field(&v, "model", &p)?.as_str().unwrap_or_default();
+        if crate::cli::fit_ss::handles(model) {
+            let s: SsJson = serde_json::from_value(v)
+                .with_context(|| format!("{p}: not a state-space fit.json"))?;
+            s.to_model().with_context(|| p.clone())?;
+            return Ok(Self::Ss(Box::new(s)));
+        }
+        let parts = field(&v, "parts", &p)?
+            .as_array()
+            .with_context(|| format!("{p}: `parts` is not a list"))?
+            .iter()
+            .map(|x| part(x, &p))
+            .collect::<Result<Vec<_>>>()?;
+        anyhow::ensure!(!parts.is_empty(), "{p}: no model parts");
+        let outputs = parts.iter().map(|x| x.output + 1).max().unwrap_or(1);
+        Ok(Self::Parts { parts, outputs })
+    }
+
+    pub fn inputs(&self) -> usize {
+        match self {
+            Self::Ss(s) => s.inputs,
+            Self::Parts { parts, .. } => parts.iter().map(|x| x.input + 1).max().unwrap_or(1),
+        }
+    }
+
+    pub fn outputs(&self) -> usize {
+        match self {
+            Self::Ss(s) => s.outputs,
+            Self::Parts { outputs, .. } => *outputs,
+        }
+    }
+
+    /// Simulated outputs of `rec`'s inputs from rest.
+    pub fn simulate(&self, rec: &Record) -> Result<Vec<Vec<f64>>> {
+        anyhow::ensure!(
+            rec.u.len() == self.inputs(),
+            "the model has {} inputs, the record {} (columns u1..u{})",
+            self.inputs(),
+            rec.u.len(),
+            self.inputs()
+        );
+        match self {
+            Self::Ss(s) => {
+                let fs = rec.sample_rate_hz();
+                anyhow::ensure!(
+                    (fs / s.sample_rate_hz - 1.0).abs() < 1e-3,
+                    "the record is sampled at {fs:.6} Hz, the model at {:.6} Hz",
+                    s.sample_rate_hz
+                );
+                s.to_model()?.simulate(&rec.u, rec.dt())
+            }
+            Self::Parts { parts, outputs } => {
+                let shaped = Record {
+                    y: vec![vec![0.0; rec.len()]; *outputs],
+                    ..rec.clone()
+                };
+                simulate(parts, &shaped, 0)
+            }
+        }
+    }
+}
+
+/// RMSE of each output over the last period (the whole record when not periodic) and
+/// their mean: the benchmark's score of one record.
+pub fn score_last_period(rec: &Record, sim: &[Vec<f64>]) -> (Vec<f64>, f64) {
+    let n = detect_period(rec);
+    let start = rec.len() - n;
+    let per: Vec<f64> = rec
+        .y
+        .iter()
+        .zip(sim)
+        .map(|(y, s)| {
+            let se: f64 = y[start..]
+                .iter()
+                .zip(&s[start..])
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum();
+            (se / n as f64).sqrt()
+        })
+        .collect();
+    let mean = per.iter().sum::<f64>() / per.len().max(1) as f64;
+    (per, mean)
+}
+
+/// `a, b, c` with 5 significant digits.
+pub fn list(v: &[f64]) -> String {
+    v.iter()
+        .map(|x| format!("{x:.5e}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Reads a record that may hold inputs only (`t,u1..uk`): then `y` is empty.
+pub fn read_inputs(path: &Path) -> Result<Record> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read record {}", path.display()))?;
+    let is_y = |c: &str| {
+        c == "y"
+            || c.strip_prefix('y')
+                .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+    };
+    let header = text
+        .lines()
+        .map(str::trim)
+        .find(|l| !l.is_empty() && !l.starts_with('#'));
+    let has_y = header.is_some_and(|h| h.split(',').map(str::trim).any(is_y));
+    if has_y || header.is_none() {
+        return Record::read(path);
+    }
+    // A placeholder output column lets the record parser check everything else.
+    let mut seen_header = false;
+    let mut padded = String::with_capacity(text.len() + text.len() / 8);
+    for line in text.lines() {
+        let l = line.trim();
+        padded.push_str(line);
+        if !l.is_empty() && !l.starts_with('#') {
+            padded.push_str(if seen_header { ",0" } else { ",y" });
+            seen_header = true;
+        }
+        padded.push('\n');
+    }
+    let mut rec =
+        Record::parse(&padded).map_err(|e| anyhow::anyhow!("record {}: {e}", path.display()))?;
+    rec.y.clear();
+    Ok(rec)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let model = Loaded::read(&args.model)?;
+    let rec = read_inputs(&args.input)?;
+    let sim = model.simulate(&rec)?;
+    if !rec.y.is_empty() {
+        anyhow::ensure!(
+            rec.y.len() == sim.len(),
+            "the record has {} outputs, the model {}",
+            rec.y.len(),
+            sim.len()
+        );
+        let (per, mean) = score_last_period(&rec, &sim);
+        println!(
+            "RMSE over the last period of {} samples: mean {mean:.5e}, per output {}",
+            detect_period(&rec),
+            list(&per)
+        );
+    }
+    if let Some(out) = &args.out {
+        let r = Record {
+            comments: vec![format!(
+                " piezo predict --model {}: simulated from rest",
+                args.model.display()
+            )],
+            t: rec.t.clone(),
+            u: Vec::new(),
+            y: sim,
+            extra: Vec::new(),
+        };
+        r.write(out)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,144 @@
+//! `fit.json` of the state-space models: everything needed to simulate them.
+
+use super::hammerstein::{Front, Hammerstein};
+use super::model::{Modal, ModalJson};
+use crate::ident::fit::models::{self, Scales};
+use serde::{Deserialize, Serialize};
+
+/// One actuator's hysteresis in `fit.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FrontJson {
+    /// Registry name (`piezo fit --list`).
+    pub model: String,
+    /// Parameter names and values, in the units of the model (input unit in, input unit out).
+    pub params: Vec<(String, f64)>,
+}
+
+/// The saved model.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SsJson {
+    /// `piezo-fit/1`.
+    pub format: String,
+    /// `ss` or `hammerstein-ss`.
+    pub model: String,
+    /// The linear block is discrete time at this rate; inputs must be sampled at it.
+    pub sample_rate_hz: f64,
+    pub inputs: usize,
+    pub outputs: usize,
+    pub input_unit: String,
+    pub output_unit: String,
+    pub order: usize,
+    /// `v_j = H_j(u_j)` ahead of the linear block (empty: `v = u`).
+    pub hysteresis: Vec<FrontJson>,
+    /// `x[k+1] = A x + B v`, `y = C x + D v`, `A` block diagonal (see `blocks`).
+    pub linear: ModalJson,
+    /// Training range `[min, max]` of each input and output (model units): what
+    /// `piezo sim --stage` scales the converters to.
+    #[serde(default)]
+    pub input_range: Vec<(f64, f64)>,
+    #[serde(default)]
+    pub output_range: Vec<(f64, f64)>,
+    /// Modes of `A` as continuous-time `[f_hz, zeta]`, for reading only.
+    #[serde(default)]
+    pub modes_hz: Vec<(f64, f64)>,
+    /// How the model was identified (report; not needed to simulate).
+    #[serde(default)]
+    pub report: serde_json::Value,
+}
+
+impl SsJson {
+    pub fn new(
+        model: &Hammerstein,
+        fs_hz: f64,
+        units: (&str, &str),
+        report: serde_json::Value,
+    ) -> Self {
+        Self {
+            format: crate::cli::fit::FORMAT.into(),
+            model: if model.fronts.is_empty() {
+                "ss"
+            } else {
+                "hammerstein-ss"
+            }
+            .into(),
+            sample_rate_hz: fs_hz,
+            inputs: model.linear.inputs(),
+            outputs: model.linear.outputs(),
+            input_unit: units.0.into(),
+            output_unit: units.1.into(),
+            order: model.linear.order(),
+            hysteresis: model
+                .fronts
+                .iter()
+                .map(|f| FrontJson {
+                    model: f.def.name.into(),
+                    params: param_names(f.def)
+                        .into_iter()
+                        .zip(f.params.iter().copied())
+                        .collect(),
+                })
+                .collect(),
+            linear: model.linear.to_json(),
+            input_range: Vec::new(),
+            output_range: Vec::new(),
+            modes_hz: model.linear.modes_hz(fs_hz),
+            report,
+        }
+    }
+
+    /// The model, checked.
+    pub fn to_model(&self) -> anyhow::Result<Hammerstein> {
+        anyhow::ensure!(
+            self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0,
+            "fit.json: sample_rate_hz {} is not positive",
+            self.sample_rate_hz
+        );
+        let linear = Modal::from_json(&self.linear)?;
+        anyhow::ensure!(
+            linear.inputs() == self.inputs && linear.outputs() == self.outputs,
+            "fit.json: the linear block is {} x {}, `inputs`/`outputs` say {} x {}",
+            linear.outputs(),
+            linear.inputs(),
+            self.outputs,
+            self.inputs
+        );
+        anyhow::ensure!(
+            self.hysteresis.is_empty() || self.hysteresis.len() == self.inputs,
+            "fit.json: {} hysteresis models for {} inputs",
+            self.hysteresis.len(),
+            self.inputs
+        );
+        let fronts = self
+            .hysteresis
+            .iter()
+            .map(|f| {
+                let def = models::find(&f.model)?;
+                let names = param_names(def);
+                anyhow::ensure!(
+                    names.len() == f.params.len(),
+                    "fit.json: `{}` has {} parameters, {} given",
+                    f.model,
+                    names.len(),
+                    f.params.len()
+                );
+                anyhow::ensure!(
+                    f.params.iter().all(|p| p.1.is_finite()),
+                    "fit.json: `{}` has a non-finite parameter",
+                    f.model
+                );
+                Ok(Front {
+                    def,
+                    params: f.params.iter().map(|p| p.1).collect(),
+                })
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        Ok(Hammerstein { fronts, linear })
+    }
+}
+
+fn param_names(def: &models::ModelDef) -> Vec<String> {
+    (def.params)(&Scales::of(&[0.0, 1.0], &[0.0, 1.0], 1.0))
+        .into_iter()
+        .map(|s| s.name)
+        .collect()
+}

@@ -1,0 +1,280 @@
+//! A stage from an identified model (`piezo sim --stage DIR/fit.json`): the `ss` /
+//! `hammerstein-ss` model of `piezo fit` behind the simulator's amplifier and converters.
+//!
+//! Scaling (the identified stage rarely has the converters' ranges): the amplifier range
+//! `[volts_min, volts_max]` maps linearly onto the model's training input range of each
+//! input (`input_range` in fit.json), and the model output `y` (its own unit) becomes
+//! `centre_um + um_per_unit * y` with `um_per_unit` such that the full voltage range moves
+//! axis `i` by `2 half_span_um` at low frequency (static gain of input `i` to output `i`:
+//! the front's major-loop chord slope times the linear block's `G(1)`), signed so the
+//! position rises with the voltage (the controllers assume a positive gain). Axis `i`
+//! drives input `i` and reads output `i`; the model's other inputs rest at the middle of
+//! their range. The model runs at its own sample rate with
+//! its input held between samples (zero-order hold) and its output held between its
+//! samples.
+
+use crate::ident::ss::model::Modal;
+use crate::ident::ss::saved::SsJson;
+use anyhow::{Context, Result};
+use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// `[stage.identified]` of a scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IdentifiedCfg {
+    /// `fit.json` of `piezo fit --model ss | hammerstein-ss`.
+    pub fit_json: PathBuf,
+    /// Amplifier voltage range mapped onto the model's training input range (V).
+    pub volts_min: f64,
+    pub volts_max: f64,
+    /// Position at the model's zero output (um).
+    pub centre_um: f64,
+    /// The largest training output maps to this distance from `centre_um` (um).
+    pub half_span_um: f64,
+}
+
+/// The running model.
+#[derive(Debug, Clone)]
+pub struct IdentifiedPlant {
+    fronts: Vec<Option<(Cbw<f64>, BwState<f64>)>>,
+    modal: Modal,
+    x: Vec<f64>,
+    xn: Vec<f64>,
+    /// Model inputs now (model units) and outputs at the last model sample.
+    u: Vec<f64>,
+    y: Vec<f64>,
+    ts: f64,
+    /// Time since the last model sample (s).
+    since: f64,
+    /// Per input: `u = (v - v_mid) * k_in + u_mid`.
+    v_mid: f64,
+    k_in: Vec<f64>,
+    u_mid: Vec<f64>,
+    um_per_unit: Vec<f64>,
+    centre_um: f64,
+}
+
+impl IdentifiedPlant {
+    pub fn load(cfg: &IdentifiedCfg, axes: usize) -> Result<Self> {
+        let path = &cfg.fit_json;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("stage.identified: cannot read {}", path.display()))?;
+        let saved: SsJson = serde_json::from_str(&text)
+            .with_context(|| format!("stage.identified: {} is not a state-space fit.json (piezo fit --model ss | hammerstein-ss)", path.display()))?;
+        let model = saved
+            .to_model()
+            .with_context(|| path.display().to_string())?;
+        let (m, p) = (model.linear.inputs(), model.linear.outputs());
+        anyhow::ensure!(
+            axes <= m.min(p),
+            "stage.identified: {axes} axes, but the model has {m} inputs and {p} outputs"
+        );
+        anyhow::ensure!(
+            cfg.volts_max > cfg.volts_min && cfg.half_span_um > 0.0 && cfg.centre_um.is_finite(),
+            "stage.identified: needs volts_max > volts_min and half_span_um > 0"
+        );
+        let fronts = model
+            .fronts
+            .iter()
+            .map(|f| match f.def.name {
+                "cbw" => {
+                    let p = &f.params;
+                    let c = Cbw::with_n1(p[0], p[1], p[2], p[3] * p[2])
+                        .map_err(|e| anyhow::anyhow!("stage.identified cbw: {e}"))?;
+                    let s = c.init(0.0);
+                    Ok(Some((c, s)))
+                }
+                other => anyhow::bail!(
+                    "stage.identified: the simulator runs cbw fronts (or none), not `{other}`"
+                ),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let range = |r: &[(f64, f64)], i: usize| r.get(i).copied().filter(|(a, b)| b > a);
+        let mut k_in = Vec::new();
+        let mut u_mid = Vec::new();
+        for i in 0..m {
+            let (a, b) = range(&saved.input_range, i).unwrap_or((-1.0, 1.0));
+            k_in.push((b - a) / (cfg.volts_max - cfg.volts_min));
+            u_mid.push(0.5 * (a + b));
+        }
+        let y_abs = saved
+            .output_range
+            .iter()
+            .map(|(a, b)| a.abs().max(b.abs()))
+            .fold(0.0, f64::max);
+        let y_abs = if y_abs > 0.0 { y_abs } else { 1.0 };
+        let g1 = model
+            .linear
+            .response(crate::ident::ss::model::C64::new(1.0, 0.0));
+        let um_per_unit = (0..p)
+            .map(|i| {
+                if i >= m {
+                    return cfg.half_span_um / y_abs;
+                }
+                let half = 0.5 * (cfg.volts_max - cfg.volts_min) * k_in[i];
+                // Chord slope of the front's major loop over the input range (1: none).
+                let chord = match model.fronts.get(i) {
+                    Some(f) => {
+                        let tri: Vec<f64> = (0..400)
+                            .map(|k| {
+                                u_mid[i] + half * (1.0 - ((k % 200) as f64 - 100.0).abs() / 50.0)
+                            })
+                            .collect();
+                        match f.apply(&tri, 1.0) {
+                            Ok(v) => (v[300] - v[200]) / (tri[300] - tri[200]),
+                            Err(_) => 1.0,
+                        }
+                    }
+                    None => 1.0,
+                };
+                let dc = g1[(i, i)].re * chord;
+                if dc.is_finite() && dc.abs() * half > 1e-12 {
+                    cfg.half_span_um / (dc * half)
+                } else {
+                    cfg.half_span_um / y_abs
+                }
+            })
+            .collect();
+        let n = model.linear.order();
+        let mut plant = Self {
+            fronts,
+            x: vec![0.0; n],
+            xn: vec![0.0; n],
+            u: u_mid.clone(),
+            y: vec![0.0; p],
+            ts: 1.0 / saved.sample_rate_hz,
+            since: 0.0,
+            v_mid: 0.5 * (cfg.volts_min + cfg.volts_max),
+            k_in,
+            u_mid,
+            um_per_unit,
+            centre_um: cfg.centre_um,
+            modal: model.linear,
+        };
+        let v0 = vec![cfg.volts_min; axes];
+        plant.settle(&v0);
+        Ok(plant)
+    }
+
+    fn set_inputs(&mut self, volts: &[f64]) {
+        for (i, u) in self.u.iter_mut().enumerate() {
+            *u = match volts.get(i) {
+                Some(v) if v.is_finite() => (v - self.v_mid) * self.k_in[i] + self.u_mid[i],
+                _ => self.u_mid[i],
+            };
+        }
+    }
+
+    /// The linear block's input now (after the fronts).
+    fn front_out(&mut self, dt: f64) -> Vec<f64> {
+        let mut v = self.u.clone();
+        for (vi, f) in v.iter_mut().zip(self.fronts.iter_mut()) {
+            if let Some((m, s)) = f {
+                *vi = m.step(s, *vi, dt);
+            }
+        }
+        v
+    }
+
+    /// Rest for constant amplifier voltages: fronts relaxed there, `x = (I - A)^-1 B v`.
+    pub fn settle(&mut self, volts: &[f64]) {
+        self.set_inputs(volts);
+        for (f, &u) in self.fronts.iter_mut().zip(&self.u) {
+            if let Some((m, s)) = f {
+                *s = m.init(u);
+            }
+        }
+        let v = self.front_out(self.ts);
+        let a = self.modal.a();
+        let n = a.nrows();
+        let ia = nalgebra::DMatrix::<f64>::identity(n, n) - a;
+        let bv = &self.modal.b * nalgebra::DVector::from_column_slice(&v);
+        if let Some(x) = ia.lu().solve(&bv) {
+            self.x = x.iter().copied().collect();
+        }
+        self.output(&v);
+        self.since = 0.0;
+    }
+
+    fn output(&mut self, v: &[f64]) {
+        for (o, y) in self.y.iter_mut().enumerate() {
+            let mut s = 0.0;
+            for (i, x) in self.x.iter().enumerate() {
+                s += self.modal.c[(o, i)] * x;
+            }
+            for (j, vj) in v.iter().enumerate() {
+                s += self.modal.d[(o, j)] * vj;
+            }
+            *y = s;
+        }
+    }
+
+    /// Advances `h` seconds with the amplifier outputs `volts` (one per axis).
+    pub fn advance(&mut self, volts: &[f64], h: f64) {
+        self.set_inputs(volts);
+        self.since += h;
+        while self.since >= self.ts {
+            self.since -= self.ts;
+            let v = self.front_out(self.ts);
+            self.output(&v);
+            let mut i = 0;
+            for blk in &self.modal.blocks {
+                match *blk {
+                    crate::ident::ss::model::Block::Real(l) => self.xn[i] = l * self.x[i],
+                    crate::ident::ss::model::Block::Pair(s, w) => {
+                        self.xn[i] = s * self.x[i] + w * self.x[i + 1];
+                        self.xn[i + 1] = -w * self.x[i] + s * self.x[i + 1];
+                    }
+                }
+                i += blk.states();
+            }
+            for (r, xn) in self.xn.iter_mut().enumerate() {
+                for (j, vj) in v.iter().enumerate() {
+                    *xn += self.modal.b[(r, j)] * vj;
+                }
+            }
+            std::mem::swap(&mut self.x, &mut self.xn);
+        }
+    }
+
+    /// Position of `axis` (um).
+    pub fn position_um(&self, axis: usize) -> f64 {
+        match (self.y.get(axis), self.um_per_unit.get(axis)) {
+            (Some(y), Some(k)) => self.centre_um + k * y,
+            _ => f64::NAN,
+        }
+    }
+}
+
+impl super::Stage {
+    /// [`Self::advance`] through the identified model: amplifier, model, delay, drift and
+    /// noise as for the built-in stage (no force disturbance).
+    #[inline(never)]
+    pub(super) fn advance_identified(&mut self, dac_volts: &[f64]) {
+        let Some(mut plant) = self.identified.take() else {
+            return;
+        };
+        let mut volts = [0.0; 3];
+        let n = self.axes.len().min(volts.len());
+        for _ in 0..self.substeps {
+            for ((v, ax), &u) in volts.iter_mut().zip(self.axes.iter_mut()).zip(dac_volts) {
+                *v = ax.amp.step(u);
+                ax.v_end = *v;
+            }
+            plant.advance(&volts[..n], self.h);
+            self.advance_time();
+            let drift = self.drift_um();
+            for (i, (ax, line)) in self.axes.iter_mut().zip(&mut self.delay).enumerate() {
+                ax.x = plant.position_um(i);
+                ax.v = 0.0;
+                let mask = line.len() - 1; // a power of two
+                if let Some(p) = line.get_mut(self.delay_pos & mask) {
+                    *p = ax.x + drift;
+                }
+            }
+        }
+        self.identified = Some(plant);
+    }
+}
