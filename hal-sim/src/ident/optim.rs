@@ -1,8 +1,9 @@
-//! Global (differential evolution) and local (Levenberg-Marquardt) optimisers for identification.
+//! Global (differential evolution, particle swarm) and local (Levenberg-Marquardt) optimisers
+//! for identification.
 //!
-//! Both work inside a box `lo <= x <= hi`. DE is the global search (002 uses PSO with an
-//! RMSE fitness, 002 eq. (6)-(7); DE plays the same role and needs fewer settings); LM then
-//! polishes on the residual vector (the RMSE of 004 eq. (23) is its norm). Costs and
+//! All work inside a box `lo <= x <= hi`. DE or PSO ([`Optimizer`]) is the global search
+//! (002 uses PSO with an RMSE fitness, 002 eq. (6)-(7); [`pso`]); LM then polishes on the
+//! residual vector (the RMSE of 004 eq. (23) is its norm). Costs and
 //! residuals are plain closures; the population and the Jacobian columns are evaluated in
 //! parallel with rayon. Runs are reproducible for a given seed (the random numbers are drawn
 //! serially, only the evaluations are parallel).
@@ -11,6 +12,69 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use rayon::prelude::*;
+
+pub mod pso;
+pub use pso::{particle_swarm, PsoConfig};
+
+/// The global search of a fit (`piezo fit --optimizer`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// Differential evolution ([`differential_evolution`]).
+    #[default]
+    De,
+    /// Particle swarm, the method of 002 sec. 3 ([`particle_swarm`]).
+    Pso,
+}
+
+/// Settings of a global search, shared by DE and PSO.
+#[derive(Debug, Clone, Default)]
+pub struct SearchConfig {
+    pub optimizer: Optimizer,
+    /// DE population / PSO swarm size (0: `max(15, 10 * dim)` for both).
+    pub population: usize,
+    /// DE generations / PSO iterations: with equal sizes, the same evaluation budget.
+    pub generations: usize,
+    pub seed: u64,
+    /// Label for progress lines on stderr (None: silent).
+    pub progress: Option<String>,
+}
+
+/// Runs the chosen global search over the box (see [`differential_evolution`] and
+/// [`particle_swarm`]; each keeps its other settings at their defaults).
+pub fn global_search<F>(
+    cost: F,
+    lo: &[f64],
+    hi: &[f64],
+    seeds: &[Vec<f64>],
+    cfg: &SearchConfig,
+) -> anyhow::Result<Optimum>
+where
+    F: Fn(&[f64]) -> f64 + Sync,
+{
+    match cfg.optimizer {
+        Optimizer::De => {
+            let de = DeConfig {
+                population: cfg.population,
+                generations: cfg.generations,
+                seed: cfg.seed,
+                progress: cfg.progress.clone(),
+                ..Default::default()
+            };
+            differential_evolution(cost, lo, hi, seeds, &de)
+        }
+        Optimizer::Pso => {
+            let pso = PsoConfig {
+                particles: cfg.population,
+                iterations: cfg.generations,
+                seed: cfg.seed,
+                progress: cfg.progress.clone(),
+                ..Default::default()
+            };
+            particle_swarm(cost, lo, hi, seeds, &pso)
+        }
+    }
+}
 
 /// Small, fast, seeded PRNG (PCG-XSH-RR 64/32, O'Neill 2014).
 #[derive(Debug, Clone)]
