@@ -16,12 +16,11 @@ trap 'rm -rf "$work"' EXIT
 # run <name> <target> <qemu machine> <qemu cpu>
 run() {
   local name=$1 target=$2 machine=$3 cpu=$4 status periods
-  cargo build --release --target "$target" -p piezo-core --bin firmware \
-    --no-default-features --features board-qemu
+  cargo build --release --target "$target" -p piezo-core --bin qemu
   local dir="$work/$name" elf
   mkdir -p "$dir"
   elf="$dir/firmware.elf"
-  cp "target/$target/release/firmware" "$elf"
+  cp "target/$target/release/qemu" "$elf"
   mkfifo "$dir/uart.in" "$dir/uart.out"
   cat "$dir/uart.out" >"$dir/uart.txt" &
   local reader=$!
