@@ -463,6 +463,24 @@ pub struct Record {
 /// Rows kept in a [`Record`].
 pub const MAX_ROWS: usize = 50_000;
 
+impl Record {
+    /// The run as a `piezo fit` record: `t`, the applied piezo voltage in (V), the measured
+    /// position out (um); axis `Some(i)` only, or every axis (`u1.., y1..`).
+    pub fn fit_record(&self, axis: Option<usize>) -> Result<crate::record::Record> {
+        let axes: Vec<usize> = match axis {
+            Some(i) => vec![i],
+            None => (0..self.volts.len()).collect(),
+        };
+        let pick = |v: &Vec<Vec<f64>>| -> Result<Vec<Vec<f64>>> {
+            axes.iter()
+                .map(|&i| v.get(i).cloned().ok_or_else(|| anyhow!("no axis {i}")))
+                .collect()
+        };
+        crate::record::Record::new(self.t.clone(), pick(&self.volts)?, pick(&self.measured)?)
+            .map_err(|e| anyhow!("{e}"))
+    }
+}
+
 /// Runs `sc` with the controller `entry`; records the time series if `record`.
 pub fn run(sc: &Scenario, entry: &Entry, record: bool) -> Result<(RunResult, Option<Record>)> {
     let linear = calibrate(sc).with_context(|| format!("calibrating {}", sc.name))?;
@@ -669,6 +687,26 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
         s.stage.hysteresis.model_error = -0.2
     });
     add("sine-10hz-noise10x", &|s| s.stage.noise.sigma_um *= 10.0);
+    // 000 Part IV: an asymmetric stage, GBW (eq. 3 with its CBW term, `Gbw::with_beta_h`)
+    // in place of the CBW and its quadratic term (the asymmetry is the GBW's alone). The
+    // CBW part is the default stage's, so the loop is as wide (14 um), but B = 0.006 puts h
+    // in -20.9..11.5 um instead of +-15.4 on a full sweep: the ascent saturates earlier than
+    // the descent.
+    add("gbw-asymmetric-10hz", &|s| {
+        let h = &mut s.stage.hysteresis;
+        h.model = HysteresisModel::Gbw;
+        (h.alpha, h.a, h.beta_h, h.beta, h.gamma) = (1.0, 0.3, 0.012, 0.006, 0.004);
+        h.asym_um_per_v2 = 0.0;
+    });
+    // 000 eq. (4) and its backup slide (Dahl + ADRC): the stage's hysteresis replaced by a
+    // Dahl model, sigma0 0.2 um/V, h_c 12 um, i = 1.5 (an 11.6 um loop; i = 1 would be the
+    // CBW with gamma = 0). After a reversal at saturation dh/du = sigma0 2^i = 0.57 um/V,
+    // below d: the position still rises with the voltage (a model-based IMS inverts it).
+    add("dahl-10hz", &|s| {
+        let h = &mut s.stage.hysteresis;
+        h.model = HysteresisModel::Dahl;
+        (h.alpha, h.hc, h.n) = (0.2, 12.0, 1.5);
+    });
     add("raster-xy", &|s| {
         s.stage.axes = 2;
         s.stage.coupling.enabled = true;
@@ -687,5 +725,6 @@ pub fn model_name(sc: &Scenario) -> &'static str {
         HysteresisModel::Cbw => "cbw",
         HysteresisModel::Gbw => "gbw",
         HysteresisModel::Dahl => "dahl",
+        HysteresisModel::Mbw002 => "mbw002",
     }
 }
