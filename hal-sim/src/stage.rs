@@ -28,43 +28,8 @@ use piezo_core::hysteresis::{AbwAbs, BwState, Cbw, Dahl, Gbw, Hysteresis, Mbw002
 use std::f64::consts::PI;
 
 mod effects;
+use crate::numeric::Rng;
 use effects::{resonance_ad, AxisFx, Effects};
-
-/// Small, fast, seedable generator (xorshift64*) with a cheap near-Gaussian sample.
-#[derive(Debug, Clone)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-    }
-
-    #[inline]
-    pub fn next_u64(&mut self) -> u64 {
-        let mut x = self.0;
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        self.0 = x;
-        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    /// Uniform in `[0, 1)`.
-    #[inline]
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-
-    /// Zero-mean, unit-variance noise: the sum of four 16-bit uniforms (Irwin-Hall), which
-    /// is Gaussian to within a few percent out to 3 sigma and bounded at +-3.46.
-    #[inline]
-    pub fn gauss(&mut self) -> f64 {
-        let r = self.next_u64();
-        let s = (r & 0xFFFF) + ((r >> 16) & 0xFFFF) + ((r >> 32) & 0xFFFF) + (r >> 48);
-        // mean 4 * 32767.5, variance 4 * (65536^2 - 1) / 12
-        (s as f64 - 131_070.0) * (3.0f64.sqrt() / 65_536.0)
-    }
-}
 
 /// The static (rate-independent) part of one axis.
 #[derive(Debug, Clone)]

@@ -4,6 +4,7 @@ use crate::ident::fit::{models, Fitted};
 use crate::ident::multibw::MultiBwFit;
 use crate::ident::ss::frf::detect_period;
 use crate::ident::ss::saved::SsJson;
+use crate::numeric::rmse;
 use crate::record::Record;
 use anyhow::{Context, Result};
 use serde_json::Value;
@@ -190,14 +191,7 @@ pub fn score_last_period(rec: &Record, sim: &[Vec<f64>]) -> (Vec<f64>, f64) {
         .y
         .iter()
         .zip(sim)
-        .map(|(y, s)| {
-            let se: f64 = y[start..]
-                .iter()
-                .zip(&s[start..])
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum();
-            (se / n as f64).sqrt()
-        })
+        .map(|(y, s)| rmse(&y[start..], &s[start..]))
         .collect();
     let mean = per.iter().sum::<f64>() / per.len().max(1) as f64;
     (per, mean)

@@ -126,7 +126,7 @@ pub fn run(args: Args) -> Result<()> {
         .scenarios
         .iter()
         .cloned()
-        .partition(|s| crate::object::SCENARIOS.contains(&s.as_str()));
+        .partition(|s| crate::manipulation::SCENARIOS.contains(&s.as_str()));
     let only_manip = !manip.is_empty() && rest.is_empty();
     let run_manip = !manip.is_empty() || (args.scenarios.is_empty() && args.controllers.is_empty());
     let args = Args {
@@ -152,7 +152,7 @@ pub fn run(args: Args) -> Result<()> {
             println!("  {:<16} {}", c.name, c.about);
         }
         println!("manipulation scenarios (own observers and laws):");
-        for s in crate::object::SCENARIOS {
+        for s in crate::manipulation::SCENARIOS {
             println!("  {s}");
         }
         return Ok(());
@@ -198,7 +198,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let runs: Vec<&RunResult> = results.iter().map(|(r, _)| r).collect();
     let manip_rows = if run_manip {
-        crate::object::run_manipulation(&manip, args.out.as_deref())?
+        crate::manipulation::run_manipulation(&manip, args.out.as_deref())?
     } else {
         Vec::new()
     };
@@ -253,7 +253,7 @@ struct Runs<'a> {
 #[serde(untagged)]
 enum Row<'a> {
     Tracking(&'a RunResult),
-    Manipulation(&'a crate::object::ManipRow),
+    Manipulation(&'a crate::manipulation::ManipRow),
 }
 
 fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {

@@ -12,7 +12,7 @@
 //! * SCK period `t_SCK` >= 9.8 ns (Table 3, VIO above 2.7 V).
 
 use super::{last_mosi_high, BusClock, MockClock, MockPinError, MockSpiError, Violations};
-use crate::stage::Rng;
+use crate::numeric::Rng;
 use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use piezo_core::drivers::ad4000::{self, Ad4000Config, CodeFormat};

@@ -10,7 +10,8 @@
 //! `tol * |best| + abs_tol` for `stall` iterations (004 sec. 4.2 stopped its PSO the same
 //! way, after 250 epochs without a change above 1e-25).
 
-use super::{check_bounds, clamp, sane, Optimum, Pcg32};
+use super::{check_bounds, clamp, sane, Optimum};
+use crate::numeric::Rng;
 use rayon::prelude::*;
 
 /// Particle swarm settings.
@@ -80,7 +81,7 @@ where
         cfg.particles.max(2)
     };
     let width: Vec<f64> = lo.iter().zip(hi).map(|(l, h)| h - l).collect();
-    let mut rng = Pcg32::new(cfg.seed);
+    let mut rng = Rng::new(cfg.seed);
     let mut x: Vec<Vec<f64>> = (0..np)
         .map(|i| match seeds.get(i) {
             Some(s) if s.len() == dim => clamp(s, lo, hi),
