@@ -24,7 +24,7 @@ pub mod identified;
 
 use crate::scenario::{HysteresisModel, Scenario, StageConfig};
 use anyhow::{Context, Result};
-use piezo_core::hysteresis::{BwState, Cbw, Dahl, Gbw, Hysteresis};
+use piezo_core::hysteresis::{AbwAbs, BwState, Cbw, Dahl, Gbw, Hysteresis, Mbw002, MbwState};
 use std::f64::consts::PI;
 
 mod effects;
@@ -43,6 +43,8 @@ enum Static {
     Cbw(Cbw<f64>, BwState<f64>),
     Gbw(Gbw<f64>, BwState<f64>),
     Dahl(Dahl<f64>, BwState<f64>),
+    /// Rate dependent: `dt` is the loop period (the model's `u'` over one model step).
+    Mbw(Mbw002<f64>, MbwState<f64>),
 }
 
 impl Static {
@@ -57,6 +59,7 @@ impl Static {
             Static::Cbw(m, s) => m.step(s, u, dt),
             Static::Gbw(m, s) => m.step(s, u, dt),
             Static::Dahl(m, s) => m.step(s, u, dt),
+            Static::Mbw(m, s) => m.step(s, u, dt),
         }
     }
 }
@@ -386,14 +389,21 @@ impl Stage {
                     }
                 }
                 HysteresisModel::Gbw => {
-                    let m = Gbw::new(hy.d, hy.alpha, hy.a, hy.beta, hy.gamma, hy.n)
-                        .context("stage.hysteresis (gbw)")?;
+                    let m =
+                        Gbw::with_beta_h(hy.d, hy.alpha, hy.a, hy.beta_h, hy.beta, hy.gamma, hy.n)
+                            .context("stage.hysteresis (gbw)")?;
                     Static::Gbw(m, m.init(0.0))
                 }
                 HysteresisModel::Dahl => {
                     let m = Dahl::new(hy.d, hy.alpha, hy.hc, hy.n)
                         .context("stage.hysteresis (dahl)")?;
                     Static::Dahl(m, m.init(0.0))
+                }
+                HysteresisModel::Mbw002 => {
+                    let abw = AbwAbs::new(hy.d, hy.alpha, hy.beta, hy.gamma, hy.n, hy.delta);
+                    let m = Mbw002::new(abw.context("stage.hysteresis (mbw002)")?, hy.p, hy.q)
+                        .context("stage.hysteresis (mbw002)")?;
+                    Static::Mbw(m, m.init(0.0))
                 }
             };
             let (gains, taus) = if cfg.creep.enabled {

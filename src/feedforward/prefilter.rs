@@ -90,7 +90,7 @@ impl<T: Real> FullPass<T> {
     pub fn apply(&mut self, sp: &Setpoint<T>) -> (T, T, T) {
         let fin = |x: T| if x.is_finite() { x } else { T::ZERO };
         let (y_r, dy_r, ddy_r) = (sp.y_um, fin(sp.dy), fin(sp.ddy));
-        let q = self.order;
+        let q = self.order.min(MAX_PREFILTER_ORDER);
         if !self.armed {
             // e, e', e'' at the start (004 eq. 28: e' = -y_r'; order >= 3 also e'' = -y_r'').
             let e = [
@@ -103,7 +103,8 @@ impl<T: Real> FullPass<T> {
                 },
             ];
             // s_i = sum_j C(i, j) e^(j) / wn^j (derivatives beyond the second are zero).
-            for i in 0..q {
+            // Iterators, not indices: the control path has no bounds-check panic.
+            for (i, s) in self.s.iter_mut().enumerate().take(q) {
                 let mut acc = e[0];
                 if i >= 1 {
                     acc += T::from_usize(i) * e[1];
@@ -111,16 +112,21 @@ impl<T: Real> FullPass<T> {
                 if i >= 2 {
                     acc += T::from_usize(i * (i - 1) / 2) * e[2];
                 }
-                self.s[i] = acc;
+                *s = acc;
             }
             self.armed = true;
         } else {
+            // In place: s_i reads s_i.. s_q-1, none of them written yet.
             for i in 0..q {
-                let mut acc = T::ZERO;
-                for k in 0..q - i {
-                    acc += self.c[k] * self.s[i + k];
+                let acc = self
+                    .c
+                    .iter()
+                    .zip(self.s.iter().skip(i))
+                    .take(q - i)
+                    .fold(T::ZERO, |acc, (&c, &s)| acc + c * s);
+                if let Some(s) = self.s.get_mut(i) {
+                    *s = acc;
                 }
-                self.s[i] = acc;
             }
         }
         let (s0, s1, s2) = (self.s[0], self.s[1], self.s[2]);

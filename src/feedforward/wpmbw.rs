@@ -168,8 +168,9 @@ impl<T: Real> WpmbwInverse<T> {
     /// `v = sum c_i w^i` (004 eq. 7).
     #[inline]
     fn poly(&self, w: T) -> T {
-        self.c[..self.order]
+        self.c
             .iter()
+            .take(self.order)
             .rev()
             .fold(T::ZERO, |acc, &c| (acc + c) * w)
     }
@@ -217,8 +218,10 @@ impl<T: Real> WpmbwInverse<T> {
             } else {
                 lo = w;
             }
-            let slope = self.c[..self.order]
+            let slope = self
+                .c
                 .iter()
+                .take(self.order)
                 .enumerate()
                 .rev()
                 .fold(T::ZERO, |acc, (i, &c)| acc * w + T::from_usize(i + 1) * c);

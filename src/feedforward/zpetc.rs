@@ -444,8 +444,9 @@ impl<T: Real> Zpetc<T> {
     pub fn reset(&mut self, y0: T) {
         let y0 = if y0.is_finite() { y0 } else { T::ZERO };
         self.v = y0 * self.v_per_y;
-        for i in 0..self.n {
-            self.x[i] = self.x_dc[i] * self.v;
+        // Iterators, not indices: the control path has no bounds-check panic.
+        for (x, &xd) in self.x.iter_mut().zip(self.x_dc.iter()).take(self.n) {
+            *x = xd * self.v;
         }
         self.ring = [y0; MAX_ORDER + 1];
         self.phase = 0;
@@ -472,27 +473,39 @@ impl<T: Real> Zpetc<T> {
         if !due {
             return self.v;
         }
-        for i in (1..self.taps).rev() {
-            self.ring[i] = self.ring[i - 1];
+        let taps = self.taps.min(MAX_ORDER + 1);
+        let n = self.n.min(MAX_ORDER);
+        // Shift the reference history by one, newest first.
+        let mut carry = y_ahead;
+        for r in self.ring.iter_mut().take(taps) {
+            carry = core::mem::replace(r, carry);
         }
-        self.ring[0] = y_ahead;
-        let mut w = T::ZERO;
-        for i in 0..self.taps {
-            w += self.fir[i] * self.ring[i];
-        }
-        let mut v = self.g * w;
-        for i in 0..self.n {
-            v -= self.k[i] * self.x[i];
-        }
+        let w = self
+            .fir
+            .iter()
+            .zip(self.ring.iter())
+            .take(taps)
+            .fold(T::ZERO, |acc, (&f, &r)| acc + f * r);
+        let v = self
+            .k
+            .iter()
+            .zip(self.x.iter())
+            .take(n)
+            .fold(self.g * w, |acc, (&k, &x)| acc - k * x);
         let mut next = [T::ZERO; MAX_ORDER];
-        for i in 0..self.n {
-            let mut acc = self.gamma[i] * v;
-            for j in 0..self.n {
-                acc += self.phi[i][j] * self.x[j];
-            }
-            next[i] = acc;
+        for ((nx, row), &g) in next
+            .iter_mut()
+            .zip(self.phi.iter())
+            .zip(self.gamma.iter())
+            .take(n)
+        {
+            *nx = row
+                .iter()
+                .zip(self.x.iter())
+                .take(n)
+                .fold(g * v, |acc, (&p, &x)| acc + p * x);
         }
-        if v.is_finite() && next[..self.n].iter().all(|x| x.is_finite()) {
+        if v.is_finite() && next.iter().take(n).all(|x| x.is_finite()) {
             self.x = next;
             self.v = v;
         } else {

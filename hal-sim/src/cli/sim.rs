@@ -1,5 +1,7 @@
 //! `piezo sim`: runs scenarios x controllers on the simulated stage and prints tracking
-//! metrics; `--json` for machines, `--out DIR` for CSV time series and SVG plots.
+//! metrics; `--json` for machines, `--out DIR` for CSV time series, SVG plots and each run
+//! as a `piezo fit` record (`<scenario>_<controller>_record.csv`: t, u = applied volts,
+//! y = measured um).
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::io::Write;
@@ -282,6 +284,10 @@ fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {
         writeln!(f)?;
     }
     f.flush()?;
+    // The same run as a `piezo fit` record (t, u = applied volts, y = measured um).
+    let path = dir.join(format!("{stem}_record.csv"));
+    std::fs::write(&path, rec.fit_record(None)?.to_csv())
+        .with_context(|| format!("cannot write {}", path.display()))?;
     let mut plots = Vec::new();
     for i in 0..n_ax {
         let err: Vec<f64> = rec.reference[i]
