@@ -1,10 +1,12 @@
 # Sourced by the .ci/test.d scripts that talk to the QEMU firmware over its UART.
-# Needs `work` (a temp dir) and `fail` (prints and exits) from the caller.
+# Needs `work` (a temp dir) from the caller or qemu_session; `fail` (prints, exits) may be redefined.
 #   piezo_cli                          sets $piezo: PIEZO_BIN, else the dev-profile CLI
 #   qemu_boot <elf> <machine> <cpu>    boots with the UART on a free TCP port ($port, $qemu;
 #                                      defmt to <elf>.defmt) and waits for `ok pong`
 #   s <args>                           one `piezo serial` call against it
 #   qemu_stop                          fails if the firmware exited early, then stops it
+#   qemu_session <step>                the f32 build (mps2-an386) built and booted: sets
+#                                      $work (removed with QEMU at exit) and fail()
 qemu=
 
 piezo_cli() {
@@ -59,4 +61,22 @@ qemu_cleanup() {
     wait "$qemu" 2>/dev/null || true
   fi
   rm -rf "$work"
+}
+
+# qemu_session <step name>: builds the f32 QEMU firmware, boots it on mps2-an386 with its UART
+# on TCP and answers `ping`; `fail` names the step. Leaves $work, $port and $piezo set.
+qemu_session() {
+  step=$1
+  command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
+  cargo build --release --target thumbv7em-none-eabihf -p piezo-core --bin qemu
+  piezo_cli
+  work=$(mktemp -d)
+  trap qemu_cleanup EXIT
+  cp target/thumbv7em-none-eabihf/release/qemu "$work/firmware.elf"
+  qemu_boot "$work/firmware.elf" mps2-an386 cortex-m4
+}
+
+fail() {
+  echo "${step:-qemu}: FAIL: $*"
+  exit 1
 }

@@ -406,8 +406,9 @@ mod tests {
         s
     }
 
-    #[test]
-    fn rising_edge_with_pre_trigger() {
+    /// Two channels (reference, position), rising trigger at 10 on the reference, 3
+    /// frames before it.
+    fn rising_at_10_pre_3() -> Recorder<f32, 2, 8> {
         let mut r = Recorder::<f32, 2, 8>::new();
         r.select(&[Signal::RefUm, Signal::YUm]).unwrap();
         r.set_trigger(
@@ -418,6 +419,12 @@ mod tests {
             3,
         )
         .unwrap();
+        r
+    }
+
+    #[test]
+    fn rising_edge_with_pre_trigger() {
+        let mut r = rising_at_10_pre_3();
         r.arm();
         // Ramp 0, 1, 2, ...: crosses 10 at sample 10.
         for k in 0..40 {
@@ -433,16 +440,7 @@ mod tests {
 
     #[test]
     fn progress_grows_until_done() {
-        let mut r = Recorder::<f32, 2, 8>::new();
-        r.select(&[Signal::RefUm, Signal::YUm]).unwrap();
-        r.set_trigger(
-            Trigger::Rising {
-                channel: 0,
-                level: 10.0,
-            },
-            3,
-        )
-        .unwrap();
+        let mut r = rising_at_10_pre_3();
         assert_eq!(r.progress(), 0);
         r.arm();
         let mut seen = vec![];

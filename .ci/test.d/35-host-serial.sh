@@ -7,19 +7,8 @@
 # PIEZO_SERIAL_OUT=<dir> keeps the CSVs and the SVG plot there (the README's main job).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
-target=thumbv7em-none-eabihf
-cargo build --release --target "$target" -p piezo-core --bin qemu
 . .ci/qemu-serial.sh
-piezo_cli
-work=$(mktemp -d)
-trap qemu_cleanup EXIT
-fail() {
-  echo "35-host-serial: FAIL: $*"
-  exit 1
-}
-cp "target/$target/release/qemu" "$work/firmware.elf"
-qemu_boot "$work/firmware.elf" mps2-an386 cortex-m4
+qemu_session 35-host-serial
 
 run() {
   echo "\$ piezo serial $*"

@@ -6,19 +6,8 @@
 # must fail with the file named and the firmware's error, leaving the model as it was.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
-target=thumbv7em-none-eabihf
-cargo build --release --target "$target" -p piezo-core --bin qemu
 . .ci/qemu-serial.sh
-piezo_cli
-work=$(mktemp -d)
-trap qemu_cleanup EXIT
-fail() {
-  echo "37-load-fit: FAIL: $*"
-  exit 1
-}
-cp "target/$target/release/qemu" "$work/firmware.elf"
-qemu_boot "$work/firmware.elf" mps2-an386 cortex-m4
+qemu_session 37-load-fit
 
 # fit <file> <d> <alpha> <beta> <gamma/beta>: a one-part CBW report as `piezo fit` writes it.
 fit() {

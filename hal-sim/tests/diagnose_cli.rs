@@ -1,5 +1,7 @@
 //! `piezo diagnose` end to end: JSON contract, `--predict` recomputes the gain, bad files
 //! give an error naming the line.
+
+mod cli_support;
 mod diagnose_support;
 
 use diagnose_support::Plant;
@@ -33,11 +35,7 @@ fn json_and_predict_agree() {
         .arg(dir.join("plots"))
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    cli_support::ok(&out);
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["cause"], "delay");
     assert_eq!(j["causes"][0], "delay");

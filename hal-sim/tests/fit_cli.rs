@@ -1,5 +1,7 @@
 //! `piezo fit --valid-periodic`: the steady-state simulation is scored, the from-rest one is
 //! reported beside it (JSON and the `y_rest` column of `--predict`), so both are visible.
+
+mod cli_support;
 use hal_sim::record::Record;
 use piezo_core::hysteresis::{Cbw, Hysteresis};
 use std::process::Command;
@@ -49,11 +51,7 @@ fn periodic_validation_reports_steady_state_and_from_rest() {
         .arg(dir.join("p.csv"))
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    cli_support::ok(&out);
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let steady = j["valid_metrics"][0]["metrics"]["rmse"].as_f64().unwrap();
     let rest = j["valid_from_rest_metrics"][0]["metrics"]["rmse"]

@@ -4,6 +4,8 @@
 //! run on the same records and must do clearly worse; the identified matrices are handed
 //! to the multivariable IMS (003 eq. 16) and compensate the ground truth.
 
+mod cli_support;
+
 use hal_sim::cli::fit::{identify, identify_pairs, Identified, Part};
 use hal_sim::ident::fit::resample::Edge;
 use hal_sim::ident::fit::{metrics, models, FitOptions};
@@ -268,11 +270,7 @@ fn cli_prints_and_saves_the_matrices() {
         .arg(dir.join("y.csv"))
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    cli_support::ok(&out);
     // `t,y1,y2` after `#` comments and the header.
     let text = std::fs::read_to_string(dir.join("y.csv")).unwrap();
     let rows: Vec<Vec<f64>> = text

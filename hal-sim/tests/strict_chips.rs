@@ -5,7 +5,8 @@
 use embedded_hal::digital::OutputPin;
 use embedded_hal::spi::SpiDevice;
 use hal_sim::mock::{
-    AdcSpec, DacOutput, DacSpec, MockAdc, MockClock, MockDac, MockDelay, MockSpiError,
+    AdcSpec, DacOutput, DacSpec, MockAdc, MockAdcSpi, MockClock, MockCnv, MockDac, MockDelay,
+    MockSpiError,
 };
 use piezo_core::drivers::ad4000::{self, Ad4000Config, CodeFormat};
 use piezo_core::drivers::ad5791::{self, REG_CTRL, REG_DAC, REG_SWCTRL, SW_RESET};
@@ -34,16 +35,21 @@ fn bipolar_dac() -> (MockClock, MockDac) {
 
 const MID: i32 = 1 << 19;
 
-#[test]
-fn adc_driver_configures_and_converts_with_no_violation() {
-    let (clock, chip) = adc();
-    let mut adc = Ad4000::new(
+/// The core's AD4020 driver on the mock chip (not yet initialised).
+fn driver(clock: &MockClock, chip: &MockAdc) -> Ad4000<MockAdcSpi, MockCnv, MockDelay> {
+    Ad4000::new(
         chip.spi(),
         chip.cnv(),
         MockDelay(clock.clone()),
         Ad4000Config::AD4020,
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn adc_driver_configures_and_converts_with_no_violation() {
+    let (clock, chip) = adc();
+    let mut adc = driver(&clock, &chip);
     adc.init().unwrap();
     assert_eq!(chip.register(), Ad4000Config::AD4020.register());
     let lsb = 10.0 / (1 << 20) as f64;
@@ -121,13 +127,7 @@ fn old_adc_init_is_refused_outside_a_cnv_frame() {
 #[test]
 fn adc_read_before_t_conv_is_refused() {
     let (clock, chip) = adc();
-    let mut adc = Ad4000::new(
-        chip.spi(),
-        chip.cnv(),
-        MockDelay(clock.clone()),
-        Ad4000Config::AD4020,
-    )
-    .unwrap();
+    let mut adc = driver(&clock, &chip);
     adc.init().unwrap();
     clock.advance_ns(10_000);
     adc.start_conversion().unwrap();
@@ -146,13 +146,7 @@ fn adc_read_before_t_conv_is_refused() {
 #[test]
 fn adc_three_wire_reads_need_sdi_high_at_the_cnv_edge() {
     let (clock, chip) = adc();
-    let mut adc = Ad4000::new(
-        chip.spi(),
-        chip.cnv(),
-        MockDelay(clock.clone()),
-        Ad4000Config::AD4020,
-    )
-    .unwrap();
+    let mut adc = driver(&clock, &chip);
     adc.init().unwrap();
     let mut cnv = chip.cnv();
     let mut spi = chip.spi();
@@ -184,13 +178,7 @@ fn adc_three_wire_reads_need_sdi_high_at_the_cnv_edge() {
 #[test]
 fn adc_frame_with_cnv_high_or_sck_too_fast_is_refused() {
     let (clock, chip) = adc();
-    let mut adc = Ad4000::new(
-        chip.spi(),
-        chip.cnv(),
-        MockDelay(clock.clone()),
-        Ad4000Config::AD4020,
-    )
-    .unwrap();
+    let mut adc = driver(&clock, &chip);
     adc.init().unwrap();
     adc.start_conversion().unwrap();
     let e = chip.spi().transfer(&mut [0; 3], &[0xFF; 3]).unwrap_err();

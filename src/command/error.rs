@@ -36,6 +36,44 @@ pub enum Error {
 }
 
 impl Error {
+    /// Every error, in code order: hosts map a reply's code back with [`Error::from_code`].
+    /// A new variant breaks the exhaustive match of [`Error::is_listed`] until it is added here.
+    pub const ALL: [Error; 14] = {
+        use Error::*;
+        [
+            LineTooLong,
+            NotAscii,
+            UnknownCommand,
+            MissingArgument,
+            TooManyArguments,
+            BadNumber,
+            UnknownParam,
+            OutOfRange,
+            UnknownMode,
+            UnknownSignal,
+            BadKeyword,
+            Busy,
+            Unsupported,
+            TooManyDigits,
+        ]
+    };
+
+    /// The error of a numbered reply code.
+    pub fn from_code(code: u8) -> Option<Error> {
+        Self::ALL.into_iter().find(|e| e.code() == code)
+    }
+
+    /// Compile-time reminder: every variant named here must be in [`Error::ALL`].
+    #[allow(dead_code)]
+    const fn is_listed(self) {
+        use Error::*;
+        match self {
+            LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
+            | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
+            | Busy | Unsupported | TooManyDigits => {}
+        }
+    }
+
     /// Stable numeric code sent in `err <code> <message>`.
     pub fn code(self) -> u8 {
         match self {
@@ -80,5 +118,19 @@ impl Error {
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "err {} {}", self.code(), self.message())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_are_one_to_n_in_list_order() {
+        for (i, e) in Error::ALL.into_iter().enumerate() {
+            assert_eq!(usize::from(e.code()), i + 1, "{e:?}");
+            assert_eq!(Error::from_code(e.code()), Some(e));
+        }
+        assert_eq!(Error::from_code(0), None);
     }
 }

@@ -112,24 +112,7 @@ impl<T: Real> AbwU<T> {
         Self::new(k, -alpha, beta, -gamma, n, delta)
     }
 
-    pub fn d(&self) -> T {
-        self.d
-    }
-    pub fn alpha(&self) -> T {
-        self.alpha
-    }
-    pub fn beta(&self) -> T {
-        self.beta
-    }
-    pub fn gamma(&self) -> T {
-        self.gamma
-    }
-    pub fn n(&self) -> T {
-        self.n
-    }
-    pub fn delta(&self) -> T {
-        self.delta
-    }
+    super::getters!(d, alpha, beta, gamma, n, delta);
 
     /// `dh/du` at state `h`, input `u` and input rate `du_dt` (V/s): the CBW part minus
     /// `delta*u/|u'|`. Zero rate gives the CBW part only (the term then has no meaning).
@@ -170,22 +153,21 @@ impl<T: Real> Hysteresis<T> for AbwU<T> {
     type State = BwState<T>;
 
     fn init(&self, u0: T) -> BwState<T> {
-        BwState {
-            u: sane_input(u0, T::ZERO),
-            h: T::ZERO,
-        }
+        BwState::rest(u0)
     }
 
     #[inline]
     fn step(&self, s: &mut BwState<T>, u: T, dt: T) -> T {
-        let u = sane_input(u, s.u);
-        let h = self.advance_h(s.h, s.u, u - s.u, dt);
-        // Only a non-finite result (impossible for validated parameters and finite dt) is refused.
-        if h.is_finite() {
-            s.h = h;
-        }
-        s.u = u;
-        self.d * u - s.h
+        s.step_piezo(self.d, u, |h, u0, du| {
+            let next = self.advance_h(h, u0, du, dt);
+            // Only a non-finite result (impossible for validated parameters and finite dt)
+            // is refused.
+            if next.is_finite() {
+                next
+            } else {
+                h
+            }
+        })
     }
 }
 
@@ -251,24 +233,7 @@ impl<T: Real> AbwAbs<T> {
         Self::new(k, -alpha, beta, -gamma, n, -delta)
     }
 
-    pub fn d(&self) -> T {
-        self.d
-    }
-    pub fn alpha(&self) -> T {
-        self.alpha
-    }
-    pub fn beta(&self) -> T {
-        self.beta
-    }
-    pub fn gamma(&self) -> T {
-        self.gamma
-    }
-    pub fn n(&self) -> T {
-        self.n
-    }
-    pub fn delta(&self) -> T {
-        self.delta
-    }
+    super::getters!(d, alpha, beta, gamma, n, delta);
 
     /// Bound of `|h|`: `((alpha + |delta|)/(beta + gamma))^(1/n)`.
     pub fn h_bound(&self) -> T {
@@ -308,18 +273,12 @@ impl<T: Real> Hysteresis<T> for AbwAbs<T> {
     type State = BwState<T>;
 
     fn init(&self, u0: T) -> BwState<T> {
-        BwState {
-            u: sane_input(u0, T::ZERO),
-            h: T::ZERO,
-        }
+        BwState::rest(u0)
     }
 
     #[inline]
     fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        let u = sane_input(u, s.u);
-        s.h = self.advance_h(s.h, u - s.u);
-        s.u = u;
-        self.d * u - s.h
+        s.step_piezo(self.d, u, |h, _, du| self.advance_h(h, du))
     }
 }
 
@@ -372,12 +331,7 @@ impl<T: Real> Mbw002<T> {
     pub fn abw(&self) -> &AbwAbs<T> {
         &self.abw
     }
-    pub fn p(&self) -> T {
-        self.p
-    }
-    pub fn q(&self) -> T {
-        self.q
-    }
+    super::getters!(p, q);
 
     /// The rate term `p*u' + q*u'^3` (002 eq. 4).
     #[inline]

@@ -1,8 +1,7 @@
 //! Classical Bouc-Wen (CBW) in piezo form.
 
 use super::{
-    ensure, ensure_finite, rk4_input, sane_input, step_piecewise_affine, BwState, Hysteresis,
-    ParamError,
+    ensure, ensure_finite, rk4_input, step_piecewise_affine, BwState, Hysteresis, ParamError,
 };
 use crate::real::Real;
 
@@ -70,21 +69,7 @@ impl<T: Real> Cbw<T> {
         Self::new(d, alpha, beta, gamma, T::ONE)
     }
 
-    pub fn d(&self) -> T {
-        self.d
-    }
-    pub fn alpha(&self) -> T {
-        self.alpha
-    }
-    pub fn beta(&self) -> T {
-        self.beta
-    }
-    pub fn gamma(&self) -> T {
-        self.gamma
-    }
-    pub fn n(&self) -> T {
-        self.n
-    }
+    super::getters!(d, alpha, beta, gamma, n);
 
     /// The bound of `|h|` on the major loop: `(alpha / (beta + gamma))^(1/n)`.
     pub fn h_bound(&self) -> T {
@@ -124,10 +109,7 @@ impl<T: Real> Cbw<T> {
     /// same result without the RK4 branch, small enough to inline (the simulated stage).
     #[inline]
     pub fn step_n1(&self, s: &mut BwState<T>, u: T) -> T {
-        let u = sane_input(u, s.u);
-        s.h = self.advance_h_n1(s.h, u - s.u);
-        s.u = u;
-        self.d * u - s.h
+        s.step_piezo(self.d, u, |h, _, du| self.advance_h_n1(h, du))
     }
 }
 
@@ -135,18 +117,12 @@ impl<T: Real> Hysteresis<T> for Cbw<T> {
     type State = BwState<T>;
 
     fn init(&self, u0: T) -> BwState<T> {
-        BwState {
-            u: sane_input(u0, T::ZERO),
-            h: T::ZERO,
-        }
+        BwState::rest(u0)
     }
 
     #[inline]
     fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        let u = sane_input(u, s.u);
-        s.h = self.advance_h(s.h, s.u, u - s.u);
-        s.u = u;
-        self.d * u - s.h
+        s.step_piezo(self.d, u, |h, u0, du| self.advance_h(h, u0, du))
     }
 }
 

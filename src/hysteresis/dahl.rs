@@ -1,6 +1,6 @@
 //! Dahl model in piezo form.
 
-use super::{ensure, ensure_finite, sane_input, BwState, Hysteresis, ParamError};
+use super::{ensure, ensure_finite, BwState, Hysteresis, ParamError};
 use crate::real::Real;
 
 /// Dahl hysteresis, piezo form `y = d*u - h` (000 eq. 2 structure) with
@@ -35,18 +35,7 @@ impl<T: Real> Dahl<T> {
         Ok(Self { d, sigma0, hc, i })
     }
 
-    pub fn d(&self) -> T {
-        self.d
-    }
-    pub fn sigma0(&self) -> T {
-        self.sigma0
-    }
-    pub fn hc(&self) -> T {
-        self.hc
-    }
-    pub fn i(&self) -> T {
-        self.i
-    }
+    super::getters!(d, sigma0, hc, i);
 
     /// `dh/du` at state `h` for input direction `s = sgn(du/dt)`.
     #[inline]
@@ -86,18 +75,12 @@ impl<T: Real> Hysteresis<T> for Dahl<T> {
     type State = BwState<T>;
 
     fn init(&self, u0: T) -> BwState<T> {
-        BwState {
-            u: sane_input(u0, T::ZERO),
-            h: T::ZERO,
-        }
+        BwState::rest(u0)
     }
 
     #[inline]
     fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        let u = sane_input(u, s.u);
-        s.h = self.advance_h(s.h, u - s.u);
-        s.u = u;
-        self.d * u - s.h
+        s.step_piezo(self.d, u, |h, _, du| self.advance_h(h, du))
     }
 }
 

@@ -1,8 +1,7 @@
 //! Generalized Bouc-Wen (GBW) in piezo form.
 
 use super::{
-    ensure, ensure_finite, rk4_input, sane_input, step_piecewise_affine, BwState, Hysteresis,
-    ParamError,
+    ensure, ensure_finite, rk4_input, step_piecewise_affine, BwState, Hysteresis, ParamError,
 };
 use crate::real::Real;
 
@@ -103,12 +102,7 @@ impl<T: Real> Gbw<T> {
         })
     }
 
-    pub fn d(&self) -> T {
-        self.d
-    }
-    pub fn alpha(&self) -> T {
-        self.alpha
-    }
+    super::getters!(d, alpha, n);
     /// `A_bw`.
     pub fn a(&self) -> T {
         self.a
@@ -124,9 +118,6 @@ impl<T: Real> Gbw<T> {
     /// `G_bw`.
     pub fn g(&self) -> T {
         self.g
-    }
-    pub fn n(&self) -> T {
-        self.n
     }
 
     /// Equilibrium of `h` for a long rise: `(A/(B_h+B+G))^(1/n)`.
@@ -187,18 +178,12 @@ impl<T: Real> Hysteresis<T> for Gbw<T> {
     type State = BwState<T>;
 
     fn init(&self, u0: T) -> BwState<T> {
-        BwState {
-            u: sane_input(u0, T::ZERO),
-            h: T::ZERO,
-        }
+        BwState::rest(u0)
     }
 
     #[inline]
     fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        let u = sane_input(u, s.u);
-        s.h = self.advance_h(s.h, s.u, u - s.u);
-        s.u = u;
-        self.d * u - s.h
+        s.step_piezo(self.d, u, |h, u0, du| self.advance_h(h, u0, du))
     }
 }
 

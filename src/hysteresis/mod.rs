@@ -93,6 +93,38 @@ pub struct BwState<T> {
     pub h: T,
 }
 
+impl<T: Real> BwState<T> {
+    /// At rest at input `u0` (a non-finite one counts as 0 V), `h = 0`.
+    pub fn rest(u0: T) -> Self {
+        Self {
+            u: sane_input(u0, T::ZERO),
+            h: T::ZERO,
+        }
+    }
+
+    /// One sample of a piezo-form model `y = d*u - h` (000 eq. 2): the input made sane,
+    /// `h` advanced by `advance(h, u_prev, du)`. The models differ only in `advance`.
+    #[inline(always)]
+    pub fn step_piezo(&mut self, d: T, u: T, advance: impl FnOnce(T, T, T) -> T) -> T {
+        let u = sane_input(u, self.u);
+        self.h = advance(self.h, self.u, u - self.u);
+        self.u = u;
+        d * u - self.h
+    }
+}
+
+/// Copy accessors for a model's parameter fields.
+macro_rules! getters {
+    ($($name:ident),* $(,)?) => {
+        $(
+            pub fn $name(&self) -> T {
+                self.$name
+            }
+        )*
+    };
+}
+pub(crate) use getters;
+
 /// Replaces a non-finite input by the previous one so NaN never enters a state.
 #[inline(always)]
 pub(crate) fn sane_input<T: Real>(u: T, prev: T) -> T {

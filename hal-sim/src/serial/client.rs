@@ -265,7 +265,7 @@ pub(crate) mod scripted {
 mod tests {
     use super::scripted::client;
     use super::*;
-    use crate::serial::error::{known_error, ERRORS};
+    use crate::serial::error::known_error;
     use piezo_core::command;
 
     #[test]
@@ -293,7 +293,7 @@ mod tests {
         );
         assert_eq!(known_error(12), Some(command::Error::Busy));
         assert_eq!(known_error(0), None);
-        for e in ERRORS {
+        for e in command::Error::ALL {
             assert_eq!(known_error(e.code()), Some(e));
         }
     }

@@ -5,41 +5,9 @@ use std::time::Duration;
 
 use piezo_core::command;
 
-/// Every protocol error, for mapping a reply's code back to its meaning. The match below
-/// fails to compile when the firmware gains an error the host does not list.
-pub const ERRORS: [command::Error; 14] = {
-    use command::Error::*;
-    [
-        LineTooLong,
-        NotAscii,
-        UnknownCommand,
-        MissingArgument,
-        TooManyArguments,
-        BadNumber,
-        UnknownParam,
-        OutOfRange,
-        UnknownMode,
-        UnknownSignal,
-        BadKeyword,
-        Busy,
-        Unsupported,
-        TooManyDigits,
-    ]
-};
-
-#[allow(dead_code)]
-fn errors_are_listed(e: command::Error) {
-    use command::Error::*;
-    match e {
-        LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
-        | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
-        | Busy | Unsupported | TooManyDigits => {}
-    }
-}
-
-/// The protocol error of a numbered reply code.
+/// The protocol error of a numbered reply code (the list lives in the core).
 pub fn known_error(code: u8) -> Option<command::Error> {
-    ERRORS.into_iter().find(|e| e.code() == code)
+    command::Error::from_code(code)
 }
 
 /// Why a command failed.
