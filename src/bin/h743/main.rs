@@ -171,7 +171,7 @@ mod app {
         hw_spi: Hw,
         rx: serial::Rx<pac::USART3>,
         port: Usart3,
-        cli: CommandLine,
+        cli: CommandLine<Conv>,
     }
 
     #[init]
@@ -390,10 +390,10 @@ mod app {
         };
 
         defmt::info!("firmware up: {} Hz sample rate", SAMPLE_HZ);
+        let ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        let cli = CommandLine::new(&ctl.lp);
         (
-            Shared {
-                ctl: Ctl::new(c(SAMPLE_HZ as f64)),
-            },
+            Shared { ctl },
             Local {
                 #[cfg(not(feature = "spi-converters"))]
                 hw_adc: hw,
@@ -401,7 +401,7 @@ mod app {
                 hw_spi: hw,
                 rx,
                 port: Usart3 { tx },
-                cli: CommandLine::new(),
+                cli,
             },
         )
     }
