@@ -5,7 +5,7 @@ use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
 use super::execute::{push_stats, run, stream_frames};
-use super::target::REPLY_LEN;
+use super::target::{R, REPLY_LEN};
 use crate::command::{self, Command, Error, LineBuffer, RecCmd};
 use crate::pipeline::Parts;
 use rtic_core::Mutex;
@@ -62,6 +62,19 @@ impl<C: Converters> CommandLine<C> {
             line: LineBuffer::new(),
             replica: Replica {
                 lp: live.clone(),
+                table: PointTable::new(),
+                axis: 0,
+            },
+        }
+    }
+
+    /// The command line of a control state fresh from [`Ctl::new`]`(sample_hz)` (its
+    /// replica built the same way: no copy of the live state on the caller's stack).
+    pub fn for_new(sample_hz: R) -> Self {
+        Self {
+            line: LineBuffer::new(),
+            replica: Replica {
+                lp: Loop::new(sample_hz),
                 table: PointTable::new(),
                 axis: 0,
             },
