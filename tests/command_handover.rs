@@ -69,7 +69,7 @@ fn the_replica_path_answers_and_steps_as_the_direct_executor() {
         for byte in line.bytes().chain(Some(b'\n')) {
             cli.byte(byte, &mut Exclusive(&mut b), &mut port);
         }
-        assert_eq!(port.0, [want.clone()], "reply to `{line}`");
+        assert_eq!(port.0, [want], "reply to `{line}`");
         for _ in 0..50 {
             k += 1;
             let code = [mid + (k * 37) % 900 - 450];
