@@ -479,7 +479,10 @@ fn the_gbw_laws_predict_with_the_gbw() {
     let mid = 1 << (control::ADC_BITS - 1);
     assert_eq!(ask(&mut ctl, "wave sine 5 100 20"), "ok wave sine 5 100 20");
     for law in ["fts-gbw", "nmpc-gbw"] {
-        assert_eq!(ask(&mut ctl, &format!("mode {law}")), format!("ok mode {law}"));
+        assert_eq!(
+            ask(&mut ctl, &format!("mode {law}")),
+            format!("ok mode {law}")
+        );
         assert_eq!(ctl.lp.law, law);
         for f in ctl.lp.p.feedback() {
             assert_eq!(f.name(), law);
@@ -498,7 +501,10 @@ fn the_gbw_laws_predict_with_the_gbw() {
     }
     assert_eq!(ask(&mut ctl, "mode ff+nmpc-gbw"), "err 9 unknown mode name");
     assert_eq!(ask(&mut ctl, "set gbw_b 0.03"), "err 8 value out of range");
-    assert_eq!(ask(&mut ctl, "set gbw_b -0.031"), "err 8 value out of range");
+    assert_eq!(
+        ask(&mut ctl, "set gbw_b -0.031"),
+        "err 8 value out of range"
+    );
     assert_eq!(ask(&mut ctl, "get gbw_b"), "ok gbw_b 0.006");
     assert_eq!(
         ask(&mut ctl, "fault"),
