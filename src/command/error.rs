@@ -33,6 +33,12 @@ pub enum Error {
     Unsupported,
     /// A number with more than [`MAX_DIGITS`](super::MAX_DIGITS) significant digits.
     TooManyDigits,
+    /// `load`: the flash holds no settings record.
+    NoSettings,
+    /// `load`: the stored record is damaged or of another version; nothing was changed.
+    BadSettings,
+    /// The settings flash failed (erase/program/read error).
+    Flash,
 }
 
 impl Error {
@@ -53,6 +59,9 @@ impl Error {
             Error::Busy => 12,
             Error::Unsupported => 13,
             Error::TooManyDigits => 14,
+            Error::NoSettings => 15,
+            Error::BadSettings => 16,
+            Error::Flash => 17,
         }
     }
 
@@ -73,6 +82,9 @@ impl Error {
             Error::Busy => "not possible in the current state",
             Error::Unsupported => "not supported on this board",
             Error::TooManyDigits => "number has more than 19 significant digits",
+            Error::NoSettings => "no settings stored",
+            Error::BadSettings => "stored settings damaged or stale; nothing changed",
+            Error::Flash => "settings flash failed",
         }
     }
 }

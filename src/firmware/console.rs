@@ -4,6 +4,7 @@
 use super::converters::Converters;
 use super::ctl::Ctl;
 use super::execute::stream_frames;
+use super::storage::{decode, MAX_RECORD};
 use super::target::REPLY_LEN;
 use crate::command::{self, Command, Error, LineBuffer, RecCmd};
 use rtic_core::Mutex;
@@ -21,6 +22,16 @@ pub trait Port {
     /// what it found to `reply` (after `ok selftest`). Boards without one answer
     /// [`Error::Unsupported`].
     fn selftest(&mut self, _reply: &mut command::Reply<REPLY_LEN>) -> Result<(), Error> {
+        Err(Error::Unsupported)
+    }
+    /// `save`: keeps the settings record in the board's settings flash. Boards without
+    /// one answer [`Error::Unsupported`].
+    fn save(&mut self, _record: &[u8]) -> Result<(), Error> {
+        Err(Error::Unsupported)
+    }
+    /// `load`: the stored settings record copied into `out`, its length (`None`: nothing
+    /// stored).
+    fn load(&mut self, _out: &mut [u8; MAX_RECORD]) -> Result<Option<usize>, Error> {
         Err(Error::Unsupported)
     }
     /// A line of the board's own, outside the protocol (the QEMU test harness' `exit`):
@@ -74,6 +85,39 @@ impl CommandLine {
                 if let Err(e) = port.selftest(&mut reply) {
                     reply.clear();
                     reply.push_error(e);
+                }
+            }
+            Ok(Command::Save) => {
+                let mut buf = [0u8; MAX_RECORD];
+                let saved = ctl
+                    .lock(|c| c.settings_record(&mut buf))
+                    .and_then(|n| buf.get(..n).ok_or(Error::Flash))
+                    .and_then(|r| port.save(r).map(|()| r.len()));
+                match saved {
+                    Ok(n) => {
+                        reply.push_str("ok save ");
+                        reply.push_usize(super::storage::stored().count());
+                        reply.push_str(" settings ");
+                        reply.push_usize(n);
+                        reply.push_str(" B");
+                    }
+                    Err(e) => reply.push_error(e),
+                }
+            }
+            Ok(Command::Load) => {
+                let mut buf = [0u8; MAX_RECORD];
+                let loaded = port
+                    .load(&mut buf)
+                    .and_then(|n| n.ok_or(Error::NoSettings))
+                    .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
+                    .and_then(|rec| ctl.lock(|c| c.apply_settings(&rec)).map(|()| rec.len()));
+                match loaded {
+                    Ok(n) => {
+                        reply.push_str("ok load ");
+                        reply.push_usize(n);
+                        reply.push_str(" settings");
+                    }
+                    Err(e) => reply.push_error(e),
                 }
             }
             Ok(Command::Rec(RecCmd::Read { start, count })) => {

@@ -35,7 +35,7 @@ impl<C: Converters> Ctl<C> {
             Command::Ping => out.push_str("ok pong"),
             Command::Help => {
                 out.push_str(
-                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest; params:",
+                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest save load defaults; params:",
                 );
                 for p in PARAMS {
                     out.push_str(" ");
@@ -270,7 +270,14 @@ impl<C: Converters> Ctl<C> {
                 lp.p.clear_fault();
                 push_fault(out, &lp.p);
             }
-            Command::Bench | Command::Selftest => return Err(Error::Unsupported),
+            Command::Defaults => {
+                self.default_settings()?;
+                out.push_str("ok defaults");
+            }
+            // The board's own: its console runs them (see `Port`).
+            Command::Bench | Command::Selftest | Command::Save | Command::Load => {
+                return Err(Error::Unsupported)
+            }
         }
         Ok(())
     }
@@ -475,7 +482,10 @@ pub const PARAMS: [&str; 17] = [
     "pid_ki",
 ];
 
-fn get_param<C: Converters>(lp: &Loop<C>, name: &str) -> Result<R, Error> {
+/// The parameters of [`PARAMS`] that only `get` reads.
+pub const READ_ONLY: [&str; 3] = ["um_per_code", "volts_per_code", "sample_hz"];
+
+pub(super) fn get_param<C: Converters>(lp: &Loop<C>, name: &str) -> Result<R, Error> {
     let cfg = lp.p.config();
     let a = &cfg.axes[0];
     Ok(match name {
@@ -511,7 +521,7 @@ fn set_param<C: Converters>(lp: &mut Loop<C>, name: &str, v: R) -> Result<(), Er
             check(v > c(0.0))?;
             lp.set_limits(|l| l.slew_volts_per_s = v)
         }
-        "um_per_code" | "volts_per_code" | "sample_hz" => Err(Error::Busy),
+        _ if READ_ONLY.contains(&name) => Err(Error::Busy),
         _ => lp.set_params(name, v),
     }
 }

@@ -7,7 +7,7 @@ use piezo_core::command;
 
 /// Every protocol error, for mapping a reply's code back to its meaning. The match below
 /// fails to compile when the firmware gains an error the host does not list.
-pub const ERRORS: [command::Error; 14] = {
+pub const ERRORS: [command::Error; 17] = {
     use command::Error::*;
     [
         LineTooLong,
@@ -24,6 +24,9 @@ pub const ERRORS: [command::Error; 14] = {
         Busy,
         Unsupported,
         TooManyDigits,
+        NoSettings,
+        BadSettings,
+        Flash,
     ]
 };
 
@@ -33,7 +36,7 @@ fn errors_are_listed(e: command::Error) {
     match e {
         LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
         | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
-        | Busy | Unsupported | TooManyDigits => {}
+        | Busy | Unsupported | TooManyDigits | NoSettings | BadSettings | Flash => {}
     }
 }
 

@@ -61,10 +61,24 @@ mod board {
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
     use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
+    use piezo_core::firmware::{RamNor, SettingsFlash, MAX_RECORD};
     use {cortex_m_rt as _, defmt_semihosting as _};
 
     /// The control state over this board's converters (the SPI pair, on mock chips).
     pub type Ctl = firmware::Ctl<SpiPair>;
+
+    /// The settings flash: 4 sectors of 2 KiB, programmed in 32-byte words like the H743's
+    /// flash (the sector is smaller: QEMU's RAM is the flash).
+    pub type SettingsNor = RamNor<8192, 2048, 32>;
+
+    /// The settings flash over all of [`SettingsNor`].
+    pub fn settings_flash() -> SettingsFlash<SettingsNor> {
+        match SettingsFlash::new(SettingsNor::new(), 0..8192) {
+            Ok(f) => f,
+            // A compile-time geometry: unreachable, but no panic path for it.
+            Err(_) => semihosting::process::exit(1),
+        }
+    }
 
     /// SysTick clock of QEMU's mps2 machines (Hz).
     pub const SYSTICK_HZ: u32 = 25_000_000;
@@ -137,6 +151,8 @@ mod board {
     /// harness' `exit` and `panic`.
     pub struct Uart {
         pub table: bench::Table,
+        /// The settings flash (RAM-backed: QEMU keeps nothing across runs).
+        pub settings: SettingsFlash<SettingsNor>,
         /// The harness asked to end the run, or to panic.
         pub exit: bool,
         pub panic: bool,
@@ -149,6 +165,12 @@ mod board {
         fn bench(&mut self) -> Result<usize, Error> {
             bench::print(&self.table, false);
             Ok(bench::ROWS)
+        }
+        fn save(&mut self, record: &[u8]) -> Result<(), Error> {
+            self.settings.save(record)
+        }
+        fn load(&mut self, out: &mut [u8; MAX_RECORD]) -> Result<Option<usize>, Error> {
+            self.settings.load(out)
         }
         fn harness(&mut self, line: &[u8]) -> bool {
             self.exit |= line == EXIT_LINE;
@@ -259,13 +281,13 @@ mod board {
 mod app {
     use super::io::SimIo;
     use super::{
-        bench, chips, uart, Ctl, SysTickClock, Uart, PERIODS_MAX, PERIODS_MIN, SAFE_CODE,
-        SYSTICK_HZ,
+        bench, chips, settings_flash, uart, Ctl, SysTickClock, Uart, PERIODS_MAX, PERIODS_MIN,
+        SAFE_CODE, SYSTICK_HZ,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
     use piezo_core::command::Reply;
-    use piezo_core::firmware::{c, control_period, CommandLine, AXES, SAMPLE_HZ};
+    use piezo_core::firmware::{c, control_period, Boot, CommandLine, AXES, SAMPLE_HZ};
     use piezo_core::firmware::{Converters, SpiPair};
     use piezo_core::pipeline::Wave;
 
@@ -313,8 +335,21 @@ mod app {
         syst.enable_interrupt();
         syst.enable_counter();
         defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
-        uart::line("ready");
+        // The stored settings, if any (QEMU's flash is RAM: none at power-up).
         let mut ctl = ctl;
+        let mut settings = settings_flash();
+        match ctl.boot_settings(&mut settings) {
+            Boot::Loaded => defmt::info!("settings: stored settings loaded"),
+            Boot::Empty => defmt::info!("settings: none stored, defaults"),
+            Boot::Refused(e) => {
+                defmt::warn!(
+                    "settings: stored record refused (err {=u8}), defaults",
+                    e.code()
+                );
+                uart::line("warn settings: stored record refused, defaults in use");
+            }
+        }
+        uart::line("ready");
         for axis in 0..AXES {
             ctl.lp.p.set_wave(axis, Wave::Hold { y_um: c(10.0) }).ok();
         }
@@ -325,6 +360,7 @@ mod app {
                 cli: CommandLine::new(),
                 port: Uart {
                     table,
+                    settings,
                     exit: false,
                     panic: false,
                 },
