@@ -99,7 +99,7 @@ impl<const SIZE: usize, const ERASE: usize, const WRITE: usize> RamNor<SIZE, ERA
         if end > SIZE {
             return Err(NorError::OutOfBounds);
         }
-        if start % align != 0 || len % align != 0 {
+        if !start.is_multiple_of(align) || !len.is_multiple_of(align) {
             return Err(NorError::NotAligned);
         }
         Ok(start..end)
