@@ -30,14 +30,14 @@ mod storage;
 mod target;
 mod timing;
 
-pub use console::{CommandLine, Port};
+pub use console::{CommandLine, Port, Replica};
 pub use control_loop::Loop;
 pub use converters::{
     converter_config, ActuatorDac, Converters, OnChip, PositionAdc, SpiPair, ADC_CONFIG,
     DAC_CONFIG, SPI_CENTER_UM, SPI_SPAN_UM,
 };
 pub use ctl::{Ctl, PointTable};
-pub use execute::{push_real, stream_frames, PARAMS, READ_ONLY};
+pub use execute::{push_real, push_stats, stream_frames, PARAMS, READ_ONLY};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;

@@ -30,7 +30,7 @@ fn record(i: u32) -> Vec<u8> {
     let x = i as f32;
     let ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
     let mut out = [0u8; MAX_RECORD];
-    let n = ctl.settings_record(&mut out).unwrap();
+    let n = ctl.lp.settings_record(&mut out).unwrap();
     let defaults = decode(&out[..n]).unwrap();
     let n = encode(
         stored().map(|name| {
@@ -114,14 +114,14 @@ fn a_power_loss_at_every_byte_of_a_save_leaves_old_or_new() {
 fn save_load_defaults_round_trip_through_the_flash() {
     let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
     let mut flash = SettingsFlash::new(Nor::new(), RANGE).unwrap();
-    assert_eq!(ctl.boot_settings(&mut flash), Boot::Empty);
+    assert_eq!(ctl.lp.boot_settings(&mut flash), Boot::Empty);
     assert_eq!(ask(&mut ctl, "set pid_kp 0.75"), "ok pid_kp 0.75");
     assert_eq!(ask(&mut ctl, "set u_max 120"), "ok u_max 120");
     // Not while the loop drives the stage.
     assert!(ask(&mut ctl, "wave sine 1 10 5").starts_with("ok wave sine"));
-    assert_eq!(ctl.save_settings(&mut flash), Err(Error::Busy));
+    assert_eq!(ctl.lp.save_settings(&mut flash), Err(Error::Busy));
     assert_eq!(ask(&mut ctl, "wave off"), "ok wave off");
-    let n = ctl.save_settings(&mut flash).unwrap();
+    let n = ctl.lp.save_settings(&mut flash).unwrap();
     assert_eq!(n, 8 + 8 * stored().count() + 4);
     assert_eq!(ask(&mut ctl, "defaults"), "ok defaults");
     assert_eq!(ask(&mut ctl, "get pid_kp"), "ok pid_kp 0.5");
@@ -129,7 +129,7 @@ fn save_load_defaults_round_trip_through_the_flash() {
     // Power cycle: a fresh controller over the same flash boots with the stored settings.
     let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
     let mut flash = SettingsFlash::new(flash.into_flash(), RANGE).unwrap();
-    assert_eq!(ctl.boot_settings(&mut flash), Boot::Loaded);
+    assert_eq!(ctl.lp.boot_settings(&mut flash), Boot::Loaded);
     assert_eq!(ask(&mut ctl, "get pid_kp"), "ok pid_kp 0.75");
     assert_eq!(ask(&mut ctl, "get u_max"), "ok u_max 120");
 }
@@ -139,7 +139,7 @@ fn a_damaged_or_stale_record_is_refused_at_boot_and_defaults_run() {
     let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
     assert_eq!(ask(&mut ctl, "set lambda1 1234"), "ok lambda1 1234");
     let mut buf = [0u8; MAX_RECORD];
-    let n = ctl.settings_record(&mut buf).unwrap();
+    let n = ctl.lp.settings_record(&mut buf).unwrap();
     // Stale: another layout version, with a valid checksum over it.
     let mut stale = buf[..n].to_vec();
     stale[4] = 2;
@@ -153,7 +153,7 @@ fn a_damaged_or_stale_record_is_refused_at_boot_and_defaults_run() {
         flash.save(&bad).unwrap();
         let mut fresh = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
         assert_eq!(
-            fresh.boot_settings(&mut flash),
+            fresh.lp.boot_settings(&mut flash),
             Boot::Refused(Error::BadSettings)
         );
         assert_eq!(ask(&mut fresh, "get lambda1"), "ok lambda1 2000");
@@ -189,7 +189,7 @@ fn a_record_with_one_refused_value_changes_nothing() {
         .unwrap();
         let rec = decode(&out[..n]).unwrap();
         assert_eq!(
-            ctl.apply_settings(&rec),
+            ctl.lp.apply_settings(&rec),
             Err(Error::BadSettings),
             "{bad_name}"
         );
@@ -199,7 +199,7 @@ fn a_record_with_one_refused_value_changes_nothing() {
         assert_eq!(before, after, "{bad_name} = {bad}: settings changed");
     }
     // The same record with a valid value goes in whole.
-    assert_eq!(ctl.apply_settings(&decode(&record(3)).unwrap()), Ok(()));
+    assert_eq!(ctl.lp.apply_settings(&decode(&record(3)).unwrap()), Ok(()));
     assert_eq!(ask(&mut ctl, "get u_max"), "ok u_max 103");
 }
 
@@ -245,7 +245,7 @@ proptest! {
         }
         let mut f = SettingsFlash::new(nor, RANGE).unwrap();
         let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
-        let boot = ctl.boot_settings(&mut f);
+        let boot = ctl.lp.boot_settings(&mut f);
         prop_assert!(matches!(boot, Boot::Loaded | Boot::Empty | Boot::Refused(_)));
         if boot == Boot::Loaded {
             prop_assert_eq!(ask(&mut ctl, "get u_max"), "ok u_max 107");

@@ -1,12 +1,14 @@
 //! The serial command line, written once for every board: the board supplies its port
 //! ([`Port`]).
 
+use super::control_loop::Loop;
 use super::converters::Converters;
-use super::ctl::Ctl;
-use super::execute::stream_frames;
-use super::storage::{decode, MAX_RECORD};
-use super::target::REPLY_LEN;
+use super::ctl::{Ctl, PointTable};
+use super::execute::{push_stats, run, stream_frames};
+use super::storage::{decode, stored, Boot, SettingsFlash, MAX_RECORD};
+use super::target::{R, REPLY_LEN};
 use crate::command::{self, Command, Error, LineBuffer, RecCmd};
+use crate::pipeline::Parts;
 use rtic_core::Mutex;
 
 /// A board's serial port, and what the board adds to the protocol.
@@ -41,24 +43,93 @@ pub trait Port {
     }
 }
 
-/// The command line: bytes in, one reply line per command out (`rec read` streams its
-/// frames first, each under a short lock of the control state).
-pub struct CommandLine {
+/// The command line: bytes in, one reply line per command out.
+///
+/// Nothing here holds the control task's lock longer than a copy: a command runs on the
+/// command task's replica of the loop ([`Replica`]: validation, law and compensator
+/// builds, the reply), between two short locks: the live state copied into the replica
+/// before, the changed parts copied into the live pipeline after (with one bumpless
+/// restart, [`crate::pipeline::Pipeline::adopt`]). `stats` copies the timing out;
+/// `rec read` streams its frames, each copied under its own lock; the recorder's own
+/// commands set a few fields under the lock.
+pub struct CommandLine<C> {
     line: LineBuffer,
+    replica: Replica<C>,
 }
 
-impl CommandLine {
-    pub const fn new() -> Self {
+/// The command task's replica of the loop, with what only commands use (the point table of
+/// `table add`, the axis of `axis`). Its configuration follows the live loop's: only
+/// commands change it, and each command's changes go to both.
+pub struct Replica<C> {
+    lp: Loop<C>,
+    table: PointTable,
+    axis: usize,
+}
+
+impl<C: Converters> CommandLine<C> {
+    /// `live` is the loop as the control task starts with it.
+    pub fn new(live: &Loop<C>) -> Self {
         Self {
             line: LineBuffer::new(),
+            replica: Replica {
+                lp: live.clone(),
+                table: PointTable::new(),
+                axis: 0,
+            },
+        }
+    }
+
+    /// The command line of a control state fresh from [`Ctl::new`]`(sample_hz)` (its
+    /// replica built the same way: no copy of the live state on the caller's stack).
+    pub fn for_new(sample_hz: R) -> Self {
+        Self {
+            line: LineBuffer::new(),
+            replica: Replica {
+                lp: Loop::new(sample_hz),
+                table: PointTable::new(),
+                axis: 0,
+            },
+        }
+    }
+
+    /// Installs a checked settings record on the replica and hands it to the live loop (all
+    /// or nothing: a refused record changes neither).
+    fn apply<M: Mutex<T = Ctl<C>>>(
+        &mut self,
+        rec: &super::Record,
+        ctl: &mut M,
+    ) -> Result<(), Error> {
+        let r = &mut self.replica;
+        ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
+        r.lp.apply_settings(rec)?;
+        ctl.lock(|live| live.lp.adopt(&r.lp, Parts::MODEL.union(Parts::LIMITS)));
+        Ok(())
+    }
+
+    /// At power-up: the stored settings if a valid record is there (installed like `load`),
+    /// else the defaults stay.
+    pub fn boot_settings<M, F>(&mut self, ctl: &mut M, flash: &mut SettingsFlash<F>) -> Boot
+    where
+        M: Mutex<T = Ctl<C>>,
+        F: embedded_storage::nor_flash::NorFlash,
+    {
+        let mut buf = [0u8; MAX_RECORD];
+        let got = flash
+            .load(&mut buf)
+            .and_then(|n| n.ok_or(Error::NoSettings))
+            .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
+            .and_then(|rec| self.apply(&rec, ctl));
+        match got {
+            Ok(()) => Boot::Loaded,
+            Err(Error::NoSettings) => Boot::Empty,
+            Err(e) => Boot::Refused(e),
         }
     }
 
     /// Takes one received byte; at the end of a line runs the command and sends its reply.
     /// Returns true when a reply went out (empty lines and harness lines get none).
-    pub fn byte<C, M, P>(&mut self, byte: u8, ctl: &mut M, port: &mut P) -> bool
+    pub fn byte<M, P>(&mut self, byte: u8, ctl: &mut M, port: &mut P) -> bool
     where
-        C: Converters,
         M: Mutex<T = Ctl<C>>,
         P: Port,
     {
@@ -87,16 +158,27 @@ impl CommandLine {
                     reply.push_error(e);
                 }
             }
+            Ok(Command::Rec(RecCmd::Read { start, count })) => {
+                stream_frames(
+                    start,
+                    count,
+                    |i| ctl.lock(|c| c.rec.frame(i).copied()),
+                    |l| port.send(l),
+                );
+                return true;
+            }
             Ok(Command::Save) => {
+                let r = &mut self.replica;
+                ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
                 let mut buf = [0u8; MAX_RECORD];
-                let saved = ctl
-                    .lock(|c| c.settings_record(&mut buf))
-                    .and_then(|n| buf.get(..n).ok_or(Error::Flash))
-                    .and_then(|r| port.save(r).map(|()| r.len()));
+                let saved =
+                    r.lp.settings_record(&mut buf)
+                        .and_then(|n| buf.get(..n).ok_or(Error::Flash))
+                        .and_then(|rec| port.save(rec).map(|()| rec.len()));
                 match saved {
                     Ok(n) => {
                         reply.push_str("ok save ");
-                        reply.push_usize(super::storage::stored().count());
+                        reply.push_usize(stored().count());
                         reply.push_str(" settings ");
                         reply.push_usize(n);
                         reply.push_str(" B");
@@ -110,7 +192,7 @@ impl CommandLine {
                     .load(&mut buf)
                     .and_then(|n| n.ok_or(Error::NoSettings))
                     .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
-                    .and_then(|rec| ctl.lock(|c| c.apply_settings(&rec)).map(|()| rec.len()));
+                    .and_then(|rec| self.apply(&rec, ctl).map(|()| rec.len()));
                 match loaded {
                     Ok(n) => {
                         reply.push_str("ok load ");
@@ -120,25 +202,29 @@ impl CommandLine {
                     Err(e) => reply.push_error(e),
                 }
             }
-            Ok(Command::Rec(RecCmd::Read { start, count })) => {
-                stream_frames(
-                    start,
-                    count,
-                    |i| ctl.lock(|c| c.rec.frame(i).copied()),
-                    |l| port.send(l),
-                );
-                return true;
+            Ok(Command::Stats) => push_stats(&mut reply, &ctl.lock(|c| c.timing)),
+            Ok(c @ (Command::StatsReset | Command::Rec(_))) => {
+                ctl.lock(|ctl| ctl.execute(c, &mut reply))
             }
-            Ok(c) => ctl.lock(|ctl| ctl.execute(c, &mut reply)),
+            Ok(c) => {
+                let r = &mut self.replica;
+                ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
+                match run(&mut r.lp, &mut r.table, &mut r.axis, c, &mut reply) {
+                    Ok(parts) if parts != Parts::NONE => {
+                        ctl.lock(|live| live.lp.adopt(&r.lp, parts))
+                    }
+                    Ok(_) => {}
+                    // A refused command changed nothing (the setters check everything
+                    // before they change anything), so the replica still matches.
+                    Err(e) => {
+                        reply.clear();
+                        reply.push_error(e);
+                    }
+                }
+            }
             Err(e) => reply.push_error(e),
         }
         port.send(reply.as_str());
         true
-    }
-}
-
-impl Default for CommandLine {
-    fn default() -> Self {
-        Self::new()
     }
 }

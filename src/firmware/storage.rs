@@ -9,9 +9,9 @@
 //! it names a setting this firmware does not store or lacks one it does, or when the values
 //! together do not pass the same checks as `set`.
 
+use super::control_loop::Loop;
 use super::converters::converter_config;
 use super::converters::Converters;
-use super::ctl::Ctl;
 use super::execute::{get_param, PARAMS, READ_ONLY};
 use super::nor::Blocking;
 use super::params::Params;
@@ -109,7 +109,7 @@ pub fn encode<'a>(
     Ok(end + 4)
 }
 
-/// Checks a record's format (not yet its values; see [`Ctl::apply_settings`]).
+/// Checks a record's format (not yet its values; see [`Loop::apply_settings`]).
 pub fn decode(blob: &[u8]) -> Result<Record, Error> {
     let bad = Error::BadSettings;
     let (body, crc) = blob.split_last_chunk::<4>().ok_or(bad)?;
@@ -220,11 +220,11 @@ pub enum Boot {
     Refused(Error),
 }
 
-impl<C: Converters> Ctl<C> {
+impl<C: Converters> Loop<C> {
     /// True when the loop drives the stage (a feedback law or the feedforward, or a moving
     /// reference), i.e. not in the safe state: `save` is refused then.
     pub fn drives_stage(&self) -> bool {
-        let lp = &self.lp;
+        let lp = self;
         if lp.p.state().fault.is_some() {
             return false;
         }
@@ -242,7 +242,7 @@ impl<C: Converters> Ctl<C> {
         if self.drives_stage() {
             return Err(Error::Busy);
         }
-        let lp = &self.lp;
+        let lp = self;
         encode(
             stored().map(|n| (n, get_param(lp, n).map_or(f32::NAN, |v| v.to_f64() as f32))),
             out,
@@ -251,7 +251,7 @@ impl<C: Converters> Ctl<C> {
 
     /// Installs every setting of `rec` or, if any is refused, none (`load`).
     pub fn apply_settings(&mut self, rec: &Record) -> Result<(), Error> {
-        let mut p = self.lp.params;
+        let mut p = self.params;
         for name in stored() {
             let v = rec.value(name).ok_or(Error::BadSettings)?;
             if let Some(slot) = p.slot(name) {
@@ -268,9 +268,9 @@ impl<C: Converters> Ctl<C> {
             .map_err(|_| Error::BadSettings)
     }
 
-    /// The built-in settings (`defaults`): those of a fresh [`Ctl`].
+    /// The built-in settings (`defaults`): those of a fresh [`Loop`].
     pub fn default_settings(&mut self) -> Result<(), Error> {
-        let l = converter_config::<C>(self.lp.sample_hz).axes[0].limits;
+        let l = converter_config::<C>(self.sample_hz).axes[0].limits;
         self.install_settings(
             Params::default(),
             [l.volts_min, l.volts_max, l.slew_volts_per_s],
@@ -283,7 +283,7 @@ impl<C: Converters> Ctl<C> {
         if !(lo >= c(0.0) && lo < hi && hi <= c(150.0) && slew > c(0.0)) {
             return Err(Error::OutOfRange);
         }
-        let lp = &mut self.lp;
+        let lp = self;
         let old = lp.params;
         lp.install(p)?;
         let limits = lp.set_limits(|l| {
