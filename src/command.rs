@@ -10,7 +10,7 @@
 //! | command | effect | reply |
 //! |---|---|---|
 //! | `ping` | liveness | `ok pong` |
-//! | `help` | list of commands and parameters | `ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest save load defaults; params: ...` |
+//! | `help` | list of commands and parameters | `ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest; params: ...` |
 //! | `get <param>` | read a parameter | `ok <param> <value>` |
 //! | `set <param> <value>` | write a parameter (range-checked) | `ok <param> <value>` |
 //! | `cbw <d> <alpha> <beta> <gamma>` | the CBW model (um/V, um/V, 1/V, 1/V) at once, as `piezo fit --model cbw` reports it | `ok cbw <d> <alpha> <beta> <gamma>` |

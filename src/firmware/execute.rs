@@ -60,7 +60,7 @@ pub(super) fn run<C: Converters, const N: usize>(
         Command::Ping => out.push_str("ok pong"),
         Command::Help => {
             out.push_str(
-                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest save load defaults; params:",
+                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest; params:",
                 );
             for p in PARAMS {
                 out.push_str(" ");
