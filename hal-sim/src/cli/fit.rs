@@ -27,6 +27,9 @@ pub struct Args {
     /// State-space models: iterations of the joint (hysteresis + linear) refinement.
     #[arg(long, default_value_t = 30)]
     pub joint_iterations: usize,
+    /// `scheduled-ss`: time constant of the running input RMS that schedules the model (s).
+    #[arg(long, default_value_t = 0.15)]
+    pub schedule_tau_s: f64,
     /// Unit of the input columns, written to fit.json.
     #[arg(long, default_value = "V")]
     pub input_unit: String,

@@ -155,7 +155,7 @@ impl Loaded {
                     "the record is sampled at {fs:.6} Hz, the model at {:.6} Hz",
                     s.sample_rate_hz
                 );
-                s.to_model()?.simulate(&rec.u, rec.dt())
+                s.simulate(&rec.u, rec.dt())
             }
             Self::Parts { parts, outputs } => {
                 let shaped = Record {
