@@ -1,6 +1,6 @@
-//! Writes the firmware's memory layout for the selected board into OUT_DIR as
-//! `board-memory.x` (included by the top-level `memory.x`, see there why): the STM32H743 by
-//! default, the QEMU mps2-an385/an386 layout with the `board-qemu` feature.
+//! Writes each firmware binary's memory layout into OUT_DIR as `<board>/board-memory.x`
+//! (included by the top-level `memory.x`, see there why) and points that binary's linker at
+//! its own directory: `h743` gets the STM32H743, `qemu` the QEMU mps2-an385/an386 layout.
 use std::{env, fs, path::PathBuf};
 
 /// QEMU mps2-an385/an386: 4 MiB ZBT SSRAM1 at 0 (code), 4 MiB SSRAM2/3 at 0x2000_0000.
@@ -26,13 +26,14 @@ MEMORY
 
 fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    let target = out.join("board-memory.x");
-    if env::var_os("CARGO_FEATURE_BOARD_QEMU").is_some() {
-        fs::write(&target, QEMU_MEMORY).expect("write board-memory.x to OUT_DIR");
-    } else {
-        fs::write(&target, H743_MEMORY).expect("write board-memory.x to OUT_DIR");
+    for (bin, memory) in [("h743", H743_MEMORY), ("qemu", QEMU_MEMORY)] {
+        let dir = out.join(bin);
+        fs::create_dir_all(&dir).expect("create a board directory in OUT_DIR");
+        fs::write(dir.join("board-memory.x"), memory).expect("write board-memory.x to OUT_DIR");
+        // Two arguments: flip-link reads `-L <dir>` (not `-L<dir>`) when it looks for RAM.
+        println!("cargo:rustc-link-arg-bin={bin}=-L");
+        println!("cargo:rustc-link-arg-bin={bin}={}", dir.display());
     }
-    println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
 }

@@ -47,7 +47,7 @@ HEAP = re.compile(r"__rust_alloc|__rg_alloc|__rust_alloc_error_handler|__rdl_all
 INDIRECT = re.compile(r"\t(blx\s+r\d+|bx\s+r\d+|mov\s+pc,|ldr(\.w)?\s+pc,)")
 # Exception entry with lazy FPU stacking: 8 core + 18 FPU words.
 EXC_FRAME = 104
-# Priorities of the RTIC tasks bound to interrupts (board_h743.rs), for the system bound.
+# Priorities of the RTIC tasks bound to interrupts (src/bin/h743/main.rs), for the system bound.
 PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1}
 
 
@@ -62,7 +62,7 @@ def build(features):
         cfg = tomllib.load(f)
     flags = cfg["target"][TARGET].get("rustflags", []) + ["-Z", "emit-stack-sizes"]
     env = dict(os.environ, RUSTFLAGS=" ".join(flags), CARGO_TARGET_DIR=TDIR)
-    cmd = ["cargo", "+nightly", "build", "--release", "--target", TARGET, "--bin", "firmware"]
+    cmd = ["cargo", "+nightly", "build", "--release", "--target", TARGET, "--bin", "h743"]
     if features:
         cmd += ["--features", features]
     subprocess.check_call(cmd, cwd=ROOT, env=env)
@@ -254,7 +254,7 @@ def address_taken(elf, addr, consts):
 def main():
     args = sys.argv[1:]
     features = args[args.index("--features") + 1] if "--features" in args else ""
-    elf = args[args.index("--elf") + 1] if "--elf" in args else os.path.join(TDIR, TARGET, "release", "firmware")
+    elf = args[args.index("--elf") + 1] if "--elf" in args else os.path.join(TDIR, TARGET, "release", "h743")
     if "--no-build" not in args and "--elf" not in args:
         build(features)
     addr, pretty = symbols(elf)

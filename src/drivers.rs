@@ -1,5 +1,6 @@
-//! Converter drivers generic over embedded-hal 1.0 (`SpiDevice`, `OutputPin`, `DelayNs`):
-//! the firmware and hal-sim run the same ones.
+//! Converter drivers generic over embedded-hal 1.0 (`SpiDevice`, `OutputPin`, `DelayNs`)
+//! plus [`SpiClock`]: the firmware and hal-sim run the same ones, and hal-sim's and the QEMU
+//! board's mock chips enforce the data sheets' timing on them.
 //!
 //! * [`Ad4000`]: AD4000-family SAR position ADC (16/18/20 bit, straight binary or two's
 //!   complement, CNV conversion start).
@@ -12,9 +13,18 @@ pub use ad4000::{Ad4000, Ad4000Config, CodeFormat};
 pub use ad5791::{Ad5791, Ad5791Config, DacCoding};
 
 /// The ADC driver the firmware runs (the position ADC).
-pub type FirmwareAdc<SPI, CNV> = Ad4000<SPI, CNV>;
+pub type FirmwareAdc<SPI, CNV, D> = Ad4000<SPI, CNV, D>;
 /// The DAC driver the firmware runs (the actuator DAC).
-pub type FirmwareDac<SPI, LDAC> = Ad5791<SPI, LDAC>;
+pub type FirmwareDac<SPI, LDAC, D> = Ad5791<SPI, LDAC, D>;
+
+/// An SPI device whose SCLK rate the driver sets between transactions: the converters'
+/// limits differ by operation (AD5791: 25 MHz writes, 10.87 MHz read-back), which
+/// embedded-hal's `SpiDevice` does not express.
+pub trait SpiClock {
+    /// Runs the following transactions at the fastest rate the bus has that is at most
+    /// `max_hz`; returns that rate, or 0 if the bus cannot go that slow.
+    fn set_sclk_max_hz(&mut self, max_hz: u32) -> u32;
+}
 
 /// A driver error: the bus, a pin, a register that did not read back, or a bad config.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

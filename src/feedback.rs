@@ -96,22 +96,44 @@ impl<T: Real> Feedback<T> {
         g.restart();
     }
 
-    /// Short name for tables and logs.
+    /// Short name for tables and logs; laws predicting with GBW (000 eq. 3) end in `-gbw`.
     pub fn name(&self) -> &'static str {
         match self {
             Feedback::OpenLoop => "open-loop",
             Feedback::Pid(l) if l.config().feedforward => "ff+pid",
             Feedback::Pid(_) => "pid",
-            Feedback::Robust(l) => match (l.config().convergence, l.config().feedforward) {
-                (Convergence::Exponential, false) => "hgo-robust",
-                (Convergence::Exponential, true) => "ff+hgo-robust",
-                (Convergence::FiniteTime { .. }, false) => "fts",
-                (Convergence::FiniteTime { .. }, true) => "ff+fts",
-            },
-            Feedback::Adrc(l) if l.config().feedforward => "ff+adrc",
-            Feedback::Adrc(_) => "adrc",
-            Feedback::Nmpc(l) if l.config().feedforward => "ff+nmpc",
-            Feedback::Nmpc(_) => "nmpc",
+            Feedback::Robust(l) => {
+                let gbw = matches!(l.observer().model(), ObserverModel::Gbw(_));
+                match (l.config().convergence, l.config().feedforward, gbw) {
+                    (Convergence::Exponential, false, false) => "hgo-robust",
+                    (Convergence::Exponential, true, false) => "ff+hgo-robust",
+                    (Convergence::Exponential, false, true) => "hgo-robust-gbw",
+                    (Convergence::Exponential, true, true) => "ff+hgo-robust-gbw",
+                    (Convergence::FiniteTime { .. }, false, false) => "fts",
+                    (Convergence::FiniteTime { .. }, true, false) => "ff+fts",
+                    (Convergence::FiniteTime { .. }, false, true) => "fts-gbw",
+                    (Convergence::FiniteTime { .. }, true, true) => "ff+fts-gbw",
+                }
+            }
+            Feedback::Adrc(l) => {
+                let c = l.config();
+                let known = c.a1 != T::ZERO || c.a2 != T::ZERO;
+                match (c.feedforward, known) {
+                    (false, false) => "adrc",
+                    (true, false) => "ff+adrc",
+                    (false, true) => "adrc-lin",
+                    (true, true) => "ff+adrc-lin",
+                }
+            }
+            Feedback::Nmpc(l) => {
+                let gbw = matches!(l.observer().model(), ObserverModel::Gbw(_));
+                match (l.config().feedforward, gbw) {
+                    (false, false) => "nmpc",
+                    (true, false) => "ff+nmpc",
+                    (false, true) => "nmpc-gbw",
+                    (true, true) => "ff+nmpc-gbw",
+                }
+            }
         }
     }
 }

@@ -11,15 +11,19 @@ pub mod ims;
 pub mod mbw;
 pub mod multi;
 pub mod pi;
+pub mod prefilter;
 pub mod solve;
 pub mod wpmbw;
+pub mod zpetc;
 
 pub use creep::CreepInverse;
 pub use ims::{Ims, ImsLoop, ImsModel};
 pub use mbw::MbwFf;
 pub use multi::{pseudo_inverse, MultiIms};
 pub use pi::{ppi_inverse, DpiInverse, PiInverse, PpiInverse, MAX_OPS};
-pub use wpmbw::{LinearPart, WpmbwInverse};
+pub use prefilter::FullPass;
+pub use wpmbw::{InverseDynamics, LinearPart, WpmbwInverse};
+pub use zpetc::Zpetc;
 
 use crate::hysteresis::{AbwAbs, Cbw, Dahl, Gbw, Mbw002, ParamError};
 use crate::real::Real;

@@ -14,6 +14,7 @@ pub mod command;
 pub mod drivers;
 pub mod feedback;
 pub mod feedforward;
+pub mod firmware;
 pub mod fixed;
 pub mod hysteresis;
 pub mod linear;

@@ -1,6 +1,11 @@
 //! Hammerstein linear dynamics (004 eq. 8): a cascade of first- and second-order sections
 //! built from continuous poles and zeros, discretised once at construction.
 //!
+//! Any stable transfer function of modest order with zeros anywhere (left or right half
+//! plane: the non-collocated zeros of 004's identified model, eq. 8 with `n = 4`, `m = 2`)
+//! is a cascade of sections; [`Linear::from_tf`] factors 004's polynomial form
+//! (`sum a_i s^i y = sum b_j s^j v`) into one ([`poly`]).
+//!
 //! Two discretisations:
 //! * [`Discretisation::Zoh`] (default): the exact discrete equivalent of the continuous
 //!   section driven through a zero-order hold, `Phi = e^(A*dt)`, `Gamma = int e^(A*t) dt B`,
@@ -11,27 +16,53 @@
 //!   frequency (its zero pair if it has one, else its poles), so a resonance peak or a
 //!   notch stays at exactly the right frequency; use it for notch filters / inverses.
 //!
-//! Each section has unity DC gain; the cascade's DC gain is `gain`. The per-sample update
-//! is a few multiply-adds per section, no allocation.
+//! Each section has unity DC gain; the cascade's DC gain is `gain`. States are scaled to
+//! the section's output (`x1` its pole part at DC gain 1, `x2 = x1'/wn`), so every entry of
+//! the discrete matrices is of order one whatever the frequencies (the fixed-point `Real`
+//! keeps its digits). The per-sample update is a few multiply-adds per section, no
+//! allocation.
 
 // Construction-time dense linear algebra reads clearer with index loops.
 #![allow(clippy::needless_range_loop)]
 
+mod matrix;
+pub mod poly;
+
 use crate::hysteresis::{ensure, ParamError};
 use crate::real::Real;
+use matrix::{csolve, expm, solve, tustin, Mat, NMAX};
 
-/// A continuous section, unity DC gain. Frequencies in rad/s.
+/// A continuous section, unity DC gain. Frequencies in rad/s. Zeros may lie anywhere
+/// except at `s = 0` (a section keeps unity DC gain); poles must be stable.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Section {
-    /// `w/(s + w)`, optionally times `(s + wz)/wz`.
+    /// `w/(s + w)`, optionally times `(s + wz)/wz`: a zero at `s = -wz` (`wz < 0`: right
+    /// half plane).
     First { w: f64, wz: Option<f64> },
     /// `wn^2/(s^2 + 2 zeta wn s + wn^2)`, optionally times
-    /// `(s^2 + 2 zeta_z wz s + wz^2)/wz^2` (a zero pair: notch for `zeta_z` small).
+    /// `(s^2 + 2 zeta_z wz s + wz^2)/wz^2` (a zero pair: notch for `zeta_z` small,
+    /// right half plane for `zeta_z < 0`).
     Second {
         wn: f64,
         zeta: f64,
         zero: Option<(f64, f64)>,
     },
+    /// `(1 + q1 s + q2 s^2) / (1 + p1 s + p2 s^2)`: any numerator with `q(0) = 1` (two real
+    /// zeros of opposite sign included) over stable poles (`p1 > 0`, `p2 >= 0`;
+    /// `p2 = 0` is first order and then needs `q2 = 0`).
+    Quadratic { q: [f64; 2], p: [f64; 2] },
+}
+
+/// A section as normalised polynomials `(1 + q1 s + q2 s^2) / (1 + p1 s + p2 s^2)`.
+fn normalised(sec: &Section) -> ([f64; 2], [f64; 2]) {
+    match *sec {
+        Section::First { w, wz } => ([wz.map_or(0.0, |z| 1.0 / z), 0.0], [1.0 / w, 0.0]),
+        Section::Second { wn, zeta, zero } => {
+            let q = zero.map_or([0.0; 2], |(wz, zz)| [2.0 * zz / wz, 1.0 / (wz * wz)]);
+            (q, [2.0 * zeta / wn, 1.0 / (wn * wn)])
+        }
+        Section::Quadratic { q, p } => (q, p),
+    }
 }
 
 impl Section {
@@ -44,40 +75,38 @@ impl Section {
         }
     }
 
-    /// Continuous state space `(A, B, C, D)` (2 states; a first-order section leaves the
-    /// second state undriven and decaying) and its prewarp frequency.
+    /// Continuous state space `(A, B, C, D)` (2 states, scaled to the output; a
+    /// first-order section leaves the second state undriven and decaying) and its prewarp
+    /// frequency.
     fn state_space(&self) -> ([[f64; 2]; 2], [f64; 2], [f64; 2], f64, f64) {
-        match *self {
-            Section::First { w, wz } => {
-                let (c, d) = match wz {
-                    None => (w, 0.0),
-                    Some(wz) => (w / wz * (wz - w), w / wz),
-                };
-                (
-                    [[-w, 0.0], [0.0, -w]],
-                    [1.0, 0.0],
-                    [c, 0.0],
-                    d,
-                    wz.unwrap_or(w),
-                )
-            }
-            Section::Second { wn, zeta, zero } => {
-                let a0 = wn * wn;
-                let a1 = 2.0 * zeta * wn;
-                // numerator n2 s^2 + n1 s + n0, scaled so that H(0) = 1
-                let (n2, n1, n0, w0) = match zero {
-                    None => (0.0, 0.0, a0, wn),
-                    Some((wz, zz)) => {
-                        let k = a0 / (wz * wz);
-                        (k, k * 2.0 * zz * wz, a0, wz)
-                    }
-                };
-                // controllable canonical form, strictly proper part + feedthrough n2
-                let a = [[0.0, 1.0], [-a0, -a1]];
-                let c = [n0 - n2 * a0, n1 - n2 * a1];
-                (a, [0.0, 1.0], c, n2, w0)
-            }
+        let ([q1, q2], [p1, p2]) = normalised(self);
+        if p2 == 0.0 {
+            // x' = w (v - x), y = x + q1 x' (q2 = 0 checked).
+            let w = 1.0 / p1;
+            let w0 = if q1 != 0.0 { libm::fabs(1.0 / q1) } else { w };
+            return (
+                [[-w, 0.0], [0.0, -w]],
+                [w, 0.0],
+                [1.0 - q1 * w, 0.0],
+                q1 * w,
+                w0,
+            );
         }
+        // x1'' + 2 zeta wn x1' + wn^2 x1 = wn^2 v, x2 = x1'/wn, y = x1 + q1 x1' + q2 x1''.
+        let wn = libm::sqrt(1.0 / p2);
+        let zw = 0.5 * p1 * wn * wn; // zeta*wn
+        let w0 = if q2 != 0.0 {
+            libm::sqrt(libm::fabs(1.0 / q2))
+        } else {
+            wn
+        };
+        (
+            [[0.0, wn], [-wn, -2.0 * zw]],
+            [0.0, wn],
+            [1.0 - q2 * wn * wn, q1 * wn - 2.0 * q2 * zw * wn],
+            q2 * wn * wn,
+            w0,
+        )
     }
 
     fn check(&self) -> Result<(), ParamError> {
@@ -85,8 +114,8 @@ impl Section {
             Section::First { w, wz } => {
                 ensure(w.is_finite() && w > 0.0, "linear: first-order pole w > 0")?;
                 ensure(
-                    wz.is_none_or(|z| z.is_finite() && z > 0.0),
-                    "linear: first-order zero wz > 0",
+                    wz.is_none_or(|z| z.is_finite() && z != 0.0),
+                    "linear: first-order zero wz finite and != 0",
                 )
             }
             Section::Second { wn, zeta, zero } => {
@@ -96,10 +125,22 @@ impl Section {
                 )?;
                 ensure(zeta.is_finite() && zeta > 0.0, "linear: damping zeta > 0")?;
                 ensure(
-                    zero.is_none_or(|(wz, zz)| {
-                        wz.is_finite() && wz > 0.0 && zz.is_finite() && zz >= 0.0
-                    }),
-                    "linear: zero pair needs wz > 0 and zeta_z >= 0",
+                    zero.is_none_or(|(wz, zz)| wz.is_finite() && wz > 0.0 && zz.is_finite()),
+                    "linear: zero pair needs wz > 0 and a finite zeta_z",
+                )
+            }
+            Section::Quadratic { q, p } => {
+                ensure(
+                    q.iter().chain(p.iter()).all(|v| v.is_finite()),
+                    "linear: quadratic section coefficients must be finite",
+                )?;
+                ensure(
+                    p[0] > 0.0 && p[1] >= 0.0,
+                    "linear: quadratic section poles stable (p1 > 0, p2 >= 0)",
+                )?;
+                ensure(
+                    p[1] > 0.0 || q[1] == 0.0,
+                    "linear: a first-order section has at most one zero (q2 = 0)",
                 )
             }
         }
@@ -118,8 +159,6 @@ pub enum Discretisation {
 
 /// Largest number of sections (the ZOH design works on a `2S+1` square matrix).
 pub const MAX_SECTIONS: usize = 8;
-const NMAX: usize = 2 * MAX_SECTIONS + 1;
-type Mat = [[f64; NMAX]; NMAX];
 
 /// State of [`Linear`]: two states per section.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -176,32 +215,97 @@ fn compose(
     (a, b, c, drive_u)
 }
 
-/// Solves `m x = v` for the leading `n x n` block (Gauss, partial pivoting). `None` when
-/// singular.
-fn solve(m: &Mat, v: &[f64; NMAX], n: usize) -> Option<[f64; NMAX]> {
-    let mut m = *m;
-    let mut v = *v;
-    for k in 0..n {
-        let p = (k..n).max_by(|&i, &j| libm::fabs(m[i][k]).total_cmp(&libm::fabs(m[j][k])))?;
-        if !(libm::fabs(m[p][k]) > 1e-300) {
-            return None;
-        }
-        m.swap(k, p);
-        v.swap(k, p);
-        for i in k + 1..n {
-            let f = m[i][k] / m[k][k];
-            for j in k..n {
-                m[i][j] -= f * m[k][j];
+/// The discrete design of a cascade in f64 (construction time): `x' = Phi x + Gamma v`,
+/// `y = gain * (C x + D v)`, `n = 2 * sections` states, and the DC state per unit input.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Design {
+    pub n: usize,
+    pub phi: Mat,
+    pub gamma: [f64; NMAX],
+    pub c: [f64; NMAX],
+    pub d: f64,
+    pub gain: f64,
+    pub x_dc: [f64; NMAX],
+}
+
+/// Discretises `gain` times the cascade of `sections` for sample period `dt` (s).
+pub(crate) fn design(
+    gain: f64,
+    sections: &[Section],
+    dt: f64,
+    method: Discretisation,
+) -> Result<Design, ParamError> {
+    ensure(gain.is_finite(), "linear: gain must be finite")?;
+    ensure(dt.is_finite() && dt > 0.0, "linear: sample period dt > 0")?;
+    ensure(
+        (1..=MAX_SECTIONS).contains(&sections.len()),
+        "linear: 1 to MAX_SECTIONS sections",
+    )?;
+    let mut ss = [([[0.0; 2]; 2], [0.0; 2], [0.0; 2], 0.0); MAX_SECTIONS];
+    for (sec, o) in sections.iter().zip(ss.iter_mut()) {
+        sec.check()?;
+        let (a, b, c, d, w0) = sec.state_space();
+        *o = match method {
+            Discretisation::Zoh => (a, b, c, d),
+            Discretisation::Tustin => {
+                ensure(
+                    w0 * dt < core::f64::consts::PI,
+                    "linear: Tustin prewarp frequency must be below Nyquist",
+                )?;
+                tustin(&a, &b, &c, d, 2.0 / w0 * libm::tan(w0 * dt / 2.0))
             }
-            v[i] -= f * v[k];
+        };
+    }
+    let n = 2 * sections.len();
+    let (a, b, c, d) = compose(&ss[..sections.len()]);
+    let (phi, gamma) = match method {
+        Discretisation::Tustin => (a, b),
+        Discretisation::Zoh => {
+            // expm([[A, B], [0, 0]] dt) = [[Phi, Gamma], [0, 1]]
+            let mut m = [[0.0; NMAX]; NMAX];
+            for i in 0..n {
+                for j in 0..n {
+                    m[i][j] = a[i][j] * dt;
+                }
+                m[i][n] = b[i] * dt;
+            }
+            let mut e = expm(&m, n + 1);
+            let mut gamma = [0.0; NMAX];
+            for i in 0..n {
+                gamma[i] = e[i][n];
+                e[i][n] = 0.0;
+            }
+            e[n][n] = 0.0;
+            (e, gamma)
+        }
+    };
+    // DC steady state x = (I - Phi)^-1 Gamma per unit input.
+    let mut i_phi = [[0.0; NMAX]; NMAX];
+    for i in 0..n {
+        for j in 0..n {
+            i_phi[i][j] = if i == j { 1.0 } else { 0.0 } - phi[i][j];
         }
     }
-    let mut x = [0.0; NMAX];
-    for k in (0..n).rev() {
-        let s: f64 = (k + 1..n).map(|j| m[k][j] * x[j]).sum();
-        x[k] = (v[k] - s) / m[k][k];
+    let x_dc = solve(&i_phi, &gamma, n);
+    let finite = phi
+        .iter()
+        .flatten()
+        .chain(gamma.iter())
+        .all(|v| v.is_finite());
+    match x_dc {
+        Some(x_dc) if finite && x_dc.iter().all(|v| v.is_finite()) => Ok(Design {
+            n,
+            phi,
+            gamma,
+            c,
+            d,
+            gain,
+            x_dc,
+        }),
+        _ => Err(ParamError(
+            "linear: discretisation failed (frequency too high for dt?)",
+        )),
     }
-    Some(x)
 }
 
 impl<T: Real, const S: usize> Linear<T, S> {
@@ -212,69 +316,14 @@ impl<T: Real, const S: usize> Linear<T, S> {
         dt: f64,
         method: Discretisation,
     ) -> Result<Self, ParamError> {
-        ensure(gain.is_finite(), "linear: gain must be finite")?;
-        ensure(dt.is_finite() && dt > 0.0, "linear: sample period dt > 0")?;
-        ensure(
-            (1..=MAX_SECTIONS).contains(&S),
-            "linear: 1 to MAX_SECTIONS sections",
-        )?;
-        let mut ss = [([[0.0; 2]; 2], [0.0; 2], [0.0; 2], 0.0); MAX_SECTIONS];
-        for (sec, o) in sections.iter().zip(ss.iter_mut()) {
-            sec.check()?;
-            let (a, b, c, d, w0) = sec.state_space();
-            *o = match method {
-                Discretisation::Zoh => (a, b, c, d),
-                Discretisation::Tustin => {
-                    ensure(
-                        w0 * dt < core::f64::consts::PI,
-                        "linear: Tustin prewarp frequency must be below Nyquist",
-                    )?;
-                    tustin(&a, &b, &c, d, 2.0 / w0 * libm::tan(w0 * dt / 2.0))
-                }
-            };
-        }
-        let n = 2 * S;
-        let (a, b, c, d) = compose(&ss[..S]);
-        let (phi, gamma) = match method {
-            Discretisation::Tustin => (a, b),
-            Discretisation::Zoh => {
-                // expm([[A, B], [0, 0]] dt) = [[Phi, Gamma], [0, 1]]
-                let mut m = [[0.0; NMAX]; NMAX];
-                for i in 0..n {
-                    for j in 0..n {
-                        m[i][j] = a[i][j] * dt;
-                    }
-                    m[i][n] = b[i] * dt;
-                }
-                let e = expm(&m, n + 1);
-                let mut gamma = [0.0; NMAX];
-                for i in 0..n {
-                    gamma[i] = e[i][n];
-                }
-                (e, gamma)
-            }
-        };
-        // DC steady state x = (I - Phi)^-1 Gamma per unit input.
-        let mut i_phi = [[0.0; NMAX]; NMAX];
-        for i in 0..n {
-            for j in 0..n {
-                i_phi[i][j] = if i == j { 1.0 } else { 0.0 } - phi[i][j];
-            }
-        }
-        let x_dc = solve(&i_phi, &gamma, n);
-        let finite = phi
-            .iter()
-            .flatten()
-            .chain(gamma.iter())
-            .all(|v| v.is_finite());
-        let x_dc = match x_dc {
-            Some(x) if finite && x.iter().all(|v| v.is_finite()) => x,
-            _ => {
-                return Err(ParamError(
-                    "linear: discretisation failed (frequency too high for dt?)",
-                ))
-            }
-        };
+        let Design {
+            phi,
+            gamma,
+            c,
+            d,
+            x_dc,
+            ..
+        } = design(gain, &sections, dt, method)?;
         let t = T::from_f64;
         let mut out = Self {
             gain: t(gain),
@@ -297,6 +346,26 @@ impl<T: Real, const S: usize> Linear<T, S> {
             }
         }
         Ok(out)
+    }
+
+    /// The linear dynamics of 004 eq. (8), `sum_i a_i y^(i) = sum_j b_j v^(j)`, from its
+    /// coefficients in ascending order (`b = [b_0..b_m]`, `a = [a_0..a_n]`, `m <= n`),
+    /// factored into `S = ceil(n/2)` sections ([`poly::sections`]); zeros anywhere, poles
+    /// stable, `a_0, b_0 != 0` (DC gain `b_0/a_0`).
+    pub fn from_tf(
+        b: &[f64],
+        a: &[f64],
+        dt: f64,
+        method: Discretisation,
+    ) -> Result<Self, ParamError> {
+        let (gain, secs, count) = poly::sections(b, a)?;
+        ensure(
+            count == S,
+            "linear: the transfer function needs ceil(n/2) sections",
+        )?;
+        let mut arr = [secs[0]; S];
+        arr.copy_from_slice(&secs[..S]);
+        Self::new(gain, arr, dt, method)
     }
 
     /// DC gain of the cascade.
@@ -364,142 +433,6 @@ impl<T: Real, const S: usize> Linear<T, S> {
         let k = self.gain.to_f64();
         (h.0 * k, h.1 * k)
     }
-}
-
-/// Complex Gauss elimination: `(m[0] + j m[1]) x = g` (real `g`), leading `n x n` block.
-fn csolve(m: &[Mat; 2], g: &[f64; NMAX], n: usize) -> [[f64; NMAX]; 2] {
-    let (mut a, mut b) = (m[0], m[1]);
-    let (mut vr, mut vi) = (*g, [0.0; NMAX]);
-    for k in 0..n {
-        let p = (k..n)
-            .max_by(|&i, &j| {
-                libm::hypot(a[i][k], b[i][k]).total_cmp(&libm::hypot(a[j][k], b[j][k]))
-            })
-            .unwrap_or(k);
-        a.swap(k, p);
-        b.swap(k, p);
-        vr.swap(k, p);
-        vi.swap(k, p);
-        let den = a[k][k] * a[k][k] + b[k][k] * b[k][k];
-        for i in k + 1..n {
-            // f = m[i][k] / m[k][k]
-            let fr = (a[i][k] * a[k][k] + b[i][k] * b[k][k]) / den;
-            let fi = (b[i][k] * a[k][k] - a[i][k] * b[k][k]) / den;
-            for j in k..n {
-                let (pr, pi) = (a[k][j], b[k][j]);
-                a[i][j] -= fr * pr - fi * pi;
-                b[i][j] -= fr * pi + fi * pr;
-            }
-            let (pr, pi) = (vr[k], vi[k]);
-            vr[i] -= fr * pr - fi * pi;
-            vi[i] -= fr * pi + fi * pr;
-        }
-    }
-    let (mut xr, mut xi) = ([0.0; NMAX], [0.0; NMAX]);
-    for k in (0..n).rev() {
-        let (mut sr, mut si) = (vr[k], vi[k]);
-        for j in k + 1..n {
-            sr -= a[k][j] * xr[j] - b[k][j] * xi[j];
-            si -= a[k][j] * xi[j] + b[k][j] * xr[j];
-        }
-        let den = a[k][k] * a[k][k] + b[k][k] * b[k][k];
-        xr[k] = (sr * a[k][k] + si * b[k][k]) / den;
-        xi[k] = (si * a[k][k] - sr * b[k][k]) / den;
-    }
-    [xr, xi]
-}
-
-/// `e^M` of the leading `n x n` block by scaling and squaring with an 18-term Taylor
-/// series (`||M/2^s||_inf <= 0.5`: truncation below 1e-20 relative).
-fn expm(m: &Mat, n: usize) -> Mat {
-    let norm = m[..n]
-        .iter()
-        .map(|r| r[..n].iter().map(|x| libm::fabs(*x)).sum::<f64>())
-        .fold(0.0, f64::max);
-    let mut s = 0u32;
-    let mut scale = 1.0;
-    while norm * scale > 0.5 && s < 64 {
-        scale *= 0.5;
-        s += 1;
-    }
-    let mul = |x: &Mat, y: &Mat| {
-        let mut z = [[0.0; NMAX]; NMAX];
-        for i in 0..n {
-            for k in 0..n {
-                let xik = x[i][k];
-                if xik != 0.0 {
-                    for j in 0..n {
-                        z[i][j] += xik * y[k][j];
-                    }
-                }
-            }
-        }
-        z
-    };
-    let mut a = [[0.0; NMAX]; NMAX];
-    let mut sum = [[0.0; NMAX]; NMAX];
-    for i in 0..n {
-        for j in 0..n {
-            a[i][j] = m[i][j] * scale;
-        }
-        sum[i][i] = 1.0;
-    }
-    let mut term = sum;
-    for k in 1..=18 {
-        term = mul(&term, &a);
-        for (i, row) in term.iter_mut().enumerate().take(n) {
-            for (j, x) in row.iter_mut().enumerate().take(n) {
-                *x /= k as f64;
-                sum[i][j] += *x;
-            }
-        }
-    }
-    for _ in 0..s {
-        sum = mul(&sum, &sum);
-    }
-    sum
-}
-
-/// Bilinear transform with step `h` (prewarped): with `W = (I - A h/2)^-1`,
-/// `Phi = W (I + A h/2)`, `Gamma = W B h`, `C_d = C W`, `D_d = D + C W B h/2`.
-fn tustin(
-    a: &[[f64; 2]; 2],
-    b: &[f64; 2],
-    c: &[f64; 2],
-    d: f64,
-    h: f64,
-) -> ([[f64; 2]; 2], [f64; 2], [f64; 2], f64) {
-    let q = h / 2.0;
-    let m = [
-        [1.0 - a[0][0] * q, -a[0][1] * q],
-        [-a[1][0] * q, 1.0 - a[1][1] * q],
-    ];
-    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-    let w = [
-        [m[1][1] / det, -m[0][1] / det],
-        [-m[1][0] / det, m[0][0] / det],
-    ];
-    let p = [
-        [1.0 + a[0][0] * q, a[0][1] * q],
-        [a[1][0] * q, 1.0 + a[1][1] * q],
-    ];
-    let mut phi = [[0.0; 2]; 2];
-    for i in 0..2 {
-        for j in 0..2 {
-            phi[i][j] = w[i][0] * p[0][j] + w[i][1] * p[1][j];
-        }
-    }
-    let wb = [
-        w[0][0] * b[0] + w[0][1] * b[1],
-        w[1][0] * b[0] + w[1][1] * b[1],
-    ];
-    let gamma = [wb[0] * h, wb[1] * h];
-    let cd = [
-        c[0] * w[0][0] + c[1] * w[1][0],
-        c[0] * w[0][1] + c[1] * w[1][1],
-    ];
-    let dd = d + (c[0] * wb[0] + c[1] * wb[1]) * q;
-    (phi, gamma, cd, dd)
 }
 
 #[cfg(test)]
@@ -682,5 +615,134 @@ mod tests {
             let mag = (want.0 * want.0 + want.1 * want.1).sqrt();
             assert!(err < 2e-3 * mag, "{f} Hz: {got:?} vs {want:?}");
         }
+    }
+
+    #[test]
+    fn seed_004_model_with_right_half_plane_zeros() {
+        // 004 sec. 4.2, eq. (8): n = 4, m = 2, zeros at 49 +- 1151j rad/s.
+        let a = [5.421e12, 1.183e10, 1.046e7, 8.753e3, 1.0];
+        let b = [5.421e12, -4.002e8, 4.083e6];
+        let dt = 1e-4;
+        let lin = Linear::<f64, 2>::from_tf(&b, &a, dt, Discretisation::Zoh).unwrap();
+        let cont = |w: f64| {
+            let ev = |c: &[f64]| {
+                c.iter().rev().fold((0.0, 0.0), |acc, &ci| {
+                    let m = cmul(acc, (0.0, w));
+                    (m.0 + ci, m.1)
+                })
+            };
+            cdiv(ev(&b), ev(&a))
+        };
+        for f in [0.0, 1.0, 20.0, 100.0, 168.0, 183.2, 300.0, 1000.0] {
+            let w = 2.0 * PI * f;
+            let x = w * dt / 2.0;
+            let hold = if x == 0.0 {
+                (1.0, 0.0)
+            } else {
+                ((x.sin() / x) * x.cos(), -(x.sin() / x) * x.sin())
+            };
+            let want = cmul(cont(w), hold);
+            let got = lin.response(f, dt);
+            let err = ((got.0 - want.0).powi(2) + (got.1 - want.1).powi(2)).sqrt();
+            let mag = (want.0 * want.0 + want.1 * want.1).sqrt();
+            assert!(err < 0.02 * mag + 1e-3, "{f} Hz: {got:?} vs {want:?}");
+        }
+        // The notch of the zero pair: |G| at 183 Hz is far below its neighbours.
+        let mag = |f: f64| {
+            let (re, im) = lin.response(f, dt);
+            (re * re + im * im).sqrt()
+        };
+        assert!(
+            mag(183.2) < 0.2 * mag(120.0),
+            "{} {}",
+            mag(183.2),
+            mag(120.0)
+        );
+        // Simulated: the step response equals the continuous one at the sample instants
+        // (ZOH is exact for a held step; reference: RK4 on the controllable canonical form
+        // of eq. 8 with 1000 steps per sample) and settles at the DC gain b0/a0 = 1.
+        let mut x = [0.0f64; 4];
+        let f = |x: &[f64; 4]| {
+            let mut d = [x[1], x[2], x[3], 1.0];
+            for i in 0..4 {
+                d[3] -= a[i] * x[i];
+            }
+            d
+        };
+        let mut s = lin.init(0.0);
+        let mut worst = 0.0f64;
+        for _ in 0..300 {
+            let y = lin.step(&mut s, 1.0);
+            let yc = b[0] * x[0] + b[1] * x[1] + b[2] * x[2];
+            worst = worst.max((y - yc).abs());
+            let h = dt / 1000.0;
+            for _ in 0..1000 {
+                let k1 = f(&x);
+                let k2 = f(&core::array::from_fn(|i| x[i] + 0.5 * h * k1[i]));
+                let k3 = f(&core::array::from_fn(|i| x[i] + 0.5 * h * k2[i]));
+                let k4 = f(&core::array::from_fn(|i| x[i] + h * k3[i]));
+                for i in 0..4 {
+                    x[i] += h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+                }
+            }
+        }
+        assert!(worst < 1e-9, "{worst}");
+        let mut y = 0.0;
+        for _ in 0..2000 {
+            y = lin.step(&mut s, 1.0);
+        }
+        assert!((y - 1.0).abs() < 1e-6, "{y}");
+    }
+
+    #[test]
+    fn zeros_anywhere_in_sections() {
+        // A right-half-plane real zero: (1 - s/100) * 400/(s + 400), DC 1, and its step
+        // response starts the wrong way (non-minimum phase).
+        let lin = Linear::<f64, 1>::new(
+            1.0,
+            [Section::First {
+                w: 400.0,
+                wz: Some(-100.0),
+            }],
+            1e-5,
+            Discretisation::Zoh,
+        )
+        .unwrap();
+        let mut s = lin.init(0.0);
+        let y0 = lin.step(&mut s, 1.0);
+        assert!((y0 + 4.0).abs() < 1e-12, "{y0}"); // feedthrough -w/wz
+                                                   // Right-half-plane zero pair (zeta_z < 0) keeps |H| of its mirror image.
+        let mk = |zz: f64| {
+            Linear::<f64, 1>::new(
+                1.0,
+                [Section::Second {
+                    wn: 1000.0,
+                    zeta: 0.3,
+                    zero: Some((2000.0, zz)),
+                }],
+                1e-5,
+                Discretisation::Tustin,
+            )
+            .unwrap()
+        };
+        let (l, r) = (mk(0.2), mk(-0.2));
+        for f in [10.0, 200.0, 318.3, 1000.0] {
+            let (a, b) = (l.response(f, 1e-5), r.response(f, 1e-5));
+            let (ma, mb) = (
+                (a.0 * a.0 + a.1 * a.1).sqrt(),
+                (b.0 * b.0 + b.1 * b.1).sqrt(),
+            );
+            assert!((ma - mb).abs() < 1e-9 * ma, "{f}: {ma} {mb}");
+        }
+        assert!(Linear::<f64, 1>::new(
+            1.0,
+            [Section::Quadratic {
+                q: [0.0, 1e-6],
+                p: [1e-3, 0.0]
+            }],
+            1e-5,
+            Discretisation::Zoh
+        )
+        .is_err());
     }
 }

@@ -1,6 +1,6 @@
 //! The fused step of the firmware's main mode (`src/pipeline/fused.rs`) against the generic
 //! step (`Pipeline::step_generic`, the reference): two copies of the firmware's pipeline
-//! (configured by the firmware's own `control.rs`) get the same ADC codes and the same
+//! (configured by the firmware module of the library) get the same ADC codes and the same
 //! commands; one steps with `Pipeline::step` (fused where it applies), the other with
 //! `step_generic`. The fused step does the same arithmetic in the same order, so the DAC
 //! codes, the whole pipeline state (trace, counters, fault) and the laws' and compensators'
@@ -8,21 +8,18 @@
 //! out of the sensor window included), mode, law and compensator switches, faults, DAC
 //! write failures, waves whose derivatives overflow the input guard's bound or `f32`.
 
-#[path = "../src/bin/firmware/control.rs"]
-#[allow(dead_code)]
-mod control;
-
-use control::{c, Ctl, FFS, LAWS, SAMPLE_HZ};
-use piezo_core::feedforward::MultiFeedforward;
+use piezo_core::firmware::{self as control, c, Converters, SpiPair, FFS, LAWS, SAMPLE_HZ};
 use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
-use piezo_core::pipeline::{DacScale, Mode, Pipeline, Sensor, Wave};
+use piezo_core::pipeline::Wave;
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;
 
-/// Bits of the SPI converter pair (the QEMU board's; a host build of `control.rs` configures
-/// the on-chip 16/12-bit pair).
-const BITS: u32 = 20;
-const DAC_MAX: i32 = (1 << BITS) - 1;
+/// The QEMU board's control state, over the SPI converter pair.
+type Ctl = control::Ctl<SpiPair>;
+
+/// Bits of the SPI converter pair.
+const BITS: u32 = SpiPair::ADC_BITS;
+const DAC_MAX: i32 = SpiPair::DAC_FULL;
 
 /// The simulated stage of the firmware's QEMU board, in f64: CBW set 1, 500 Hz lag, the
 /// 20-bit SPI converters.
@@ -54,33 +51,10 @@ impl Stage {
     }
 }
 
-/// The firmware's main mode (ff+hgo-robust on ims-cbw, `control.rs`'s gains) on the QEMU
+/// The firmware's main mode (ff+hgo-robust on ims-cbw, the firmware's gains) on the QEMU
 /// board's 20-bit converters.
 fn main_mode() -> Ctl {
     let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
-    let mut cfg = control::converter_config(c(SAMPLE_HZ as f64));
-    let half = 1i32 << (BITS - 1);
-    cfg.axes[0].sensor = Sensor {
-        um_per_code: c(control::SPI_SPAN_UM / (2 * half) as f64),
-        offset_um: c(control::SPI_CENTER_UM),
-        code_min: -half + 1,
-        code_max: half - 2,
-    };
-    cfg.axes[0].dac = DacScale {
-        volts_per_code: c(150.0 / DAC_MAX as f64),
-        volts_at_zero: c(0.0),
-        code_min: 0,
-        code_max: DAC_MAX,
-    };
-    let fs = c(SAMPLE_HZ as f64);
-    ctl.lp.p = Pipeline::new(
-        cfg,
-        [Wave::Hold { y_um: c(0.0) }],
-        MultiFeedforward::PerAxis([control::ff_by_name("linear", fs).unwrap()]),
-        [control::law_by_name("open-loop", fs).unwrap()],
-    )
-    .unwrap();
-    ctl.lp.p.set_mode(Mode::OpenLoop);
     ctl.lp.set_ff("ims-cbw").unwrap();
     ctl.lp.set_law("ff+hgo-robust").unwrap();
     ctl.lp

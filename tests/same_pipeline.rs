@@ -1,19 +1,16 @@
 //! The firmware binary and hal-sim run the same pipeline type and the same converter
-//! drivers (issue #3). The firmware's board-independent module (`src/bin/firmware/control.rs`,
-//! which both boards build on) is compiled here as it is in the binary; its pipeline and
+//! drivers (issue #3). The firmware's board-independent module (`piezo_core::firmware`,
+//! which both boards build on) is used here as the binaries use it; its pipeline and
 //! driver types are compared by `TypeId` with the fields of the bench `piezo sim` runs. The
 //! machine-code side (the ELF holds the pipeline step and the driver code in the control
 //! interrupt) is checked by `.ci/test.d/20-firmware.sh`.
 
-#[path = "../src/bin/firmware/control.rs"]
-#[allow(dead_code)]
-mod control;
-
-use hal_sim::mock::{MockAdcSpi, MockCnv, MockDacSpi, MockLdac};
+use hal_sim::mock::{MockAdcSpi, MockCnv, MockDacSpi, MockDelay, MockLdac};
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::controllers::open_loop;
 use hal_sim::sim::{adc_config, calibrate, Bench, StageInfo};
 use piezo_core::drivers::{Ad4000, Ad5791};
+use piezo_core::firmware::{self as control, OnChip};
 use piezo_core::pipeline::Pipeline;
 use std::any::{Any, TypeId};
 
@@ -44,7 +41,7 @@ fn bench_xy() -> (Scenario, Bench<2>) {
 
 #[test]
 fn firmware_and_hal_sim_run_the_same_pipeline_type() {
-    let ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let ctl = control::Ctl::<OnChip>::new(control::c(control::SAMPLE_HZ as f64));
     let firmware = type_of(&ctl.lp.p);
     // The firmware's axis count (1, or 2 with `--features xy`) picks hal-sim's bench.
     let sim = if control::AXES == 2 {
@@ -85,8 +82,8 @@ fn firmware_and_hal_sim_run_the_same_converter_drivers() {
     let (sc, bench) = bench();
     // The firmware's driver aliases, on hal-sim's mock buses and pins, are the types of the
     // bench's drivers: the same generic driver code runs on the board's buses.
-    let adc = TypeId::of::<control::PositionAdc<MockAdcSpi, MockCnv>>();
-    let dac = TypeId::of::<control::ActuatorDac<MockDacSpi, MockLdac>>();
+    let adc = TypeId::of::<control::PositionAdc<MockAdcSpi, MockCnv, MockDelay>>();
+    let dac = TypeId::of::<control::ActuatorDac<MockDacSpi, MockLdac, MockDelay>>();
     assert_eq!(
         adc,
         type_of(&bench.adcs[0].driver),
@@ -97,8 +94,8 @@ fn firmware_and_hal_sim_run_the_same_converter_drivers() {
         type_of(&bench.dacs[0].driver),
         "DAC driver types differ"
     );
-    assert_eq!(adc, TypeId::of::<Ad4000<MockAdcSpi, MockCnv>>());
-    assert_eq!(dac, TypeId::of::<Ad5791<MockDacSpi, MockLdac>>());
+    assert_eq!(adc, TypeId::of::<Ad4000<MockAdcSpi, MockCnv, MockDelay>>());
+    assert_eq!(dac, TypeId::of::<Ad5791<MockDacSpi, MockLdac, MockDelay>>());
     assert_ne!(adc, dac);
     // ... configured as the mock chips are: the AD4020 of the default scenario, the AD5791
     // in the configuration the bench initialises.

@@ -1,10 +1,15 @@
-//! The firmware's command executor (`src/bin/firmware/control.rs`, as both boards build it)
-//! on the host: a sensor fault latches the safe state, `fault` reports it with its counters
-//! and `fault clear` leaves it.
+//! The firmware's command executor (`piezo_core::firmware`, as both boards use it) on the
+//! host: a sensor fault latches the safe state, `fault` reports it with its counters and
+//! `fault clear` leaves it.
 
-#[path = "../src/bin/firmware/control.rs"]
-#[allow(dead_code)]
-mod control;
+/// The firmware as the H743 builds it with its on-chip converters.
+mod control {
+    pub use piezo_core::firmware::*;
+    use piezo_core::firmware::{Converters, OnChip};
+    pub type Ctl = piezo_core::firmware::Ctl<OnChip>;
+    pub const ADC_BITS: u32 = OnChip::ADC_BITS;
+    pub const DAC_FULL: i32 = OnChip::DAC_FULL;
+}
 
 use piezo_core::command::{parse, Reply};
 

@@ -6,11 +6,21 @@
 # (feature xy: ADC1 + ADC2, DAC1 channels 1 + 2). Prints flash/RAM use of each and checks in
 # the ELF that the control interrupt runs the core's pipeline step (and, with SPI, both
 # drivers). xy with spi-converters must not compile (the SPI pair drives one axis).
+# First, clippy on the firmware's own targets (the host's clippy sees neither the boards nor
+# the Q16.16 build): both boards, every feature, both targets of the QEMU board.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
+for args in "--target thumbv7em-none-eabihf --bin h743 --bin qemu" \
+  "--target thumbv7em-none-eabihf --bin h743 --features spi-converters" \
+  "--target thumbv7em-none-eabihf --bin h743 --bin qemu --features xy" \
+  "--target thumbv7m-none-eabi --bin qemu" "--target thumbv7m-none-eabi --bin qemu --features xy"; do
+  # shellcheck disable=SC2086
+  cargo clippy -q --release -p piezo-core $args -- -D warnings
+done
+echo "firmware: clippy clean on both targets, both boards, every feature"
 size="$(rustc --print sysroot)/lib/rustlib/x86_64-unknown-linux-gnu/bin/llvm-size"
-elf=target/thumbv7em-none-eabihf/release/firmware
+elf=target/thumbv7em-none-eabihf/release/h743
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
@@ -18,7 +28,7 @@ trap 'rm -rf "$work"' EXIT
 build() {
   local name=$1
   shift
-  cargo build --release --target thumbv7em-none-eabihf --bin firmware "$@"
+  cargo build --release --target thumbv7em-none-eabihf --bin h743 "$@"
   cp "$elf" "$work/$name.elf"
   "$size" -A "$work/$name.elf" | grep -E '^(section|\.vector_table|\.text|\.rodata|\.data|\.bss|\.uninit)' || true
   "$size" -B "$work/$name.elf" | awk -v n="$name" 'NR==2 {printf "firmware (H743, %s): flash %d bytes (text+data), RAM %d bytes (data+bss, stack not included)\n", n, $1+$2, $2+$3}'
@@ -27,7 +37,7 @@ build() {
 build on-chip
 build spi-converters --features spi-converters
 build xy --features xy
-if cargo build --release --target thumbv7em-none-eabihf --bin firmware --features xy,spi-converters \
+if cargo build --release --target thumbv7em-none-eabihf --bin h743 --features xy,spi-converters \
   >"$work/xy-spi.log" 2>&1; then
   echo "firmware: xy with spi-converters built, expected a compile_error"
   exit 1

@@ -16,12 +16,11 @@ trap 'rm -rf "$work"' EXIT
 # run <name> <target> <qemu machine> <qemu cpu>
 run() {
   local name=$1 target=$2 machine=$3 cpu=$4 status periods
-  cargo build --release --target "$target" -p piezo-core --bin firmware \
-    --no-default-features --features board-qemu
+  cargo build --release --target "$target" -p piezo-core --bin qemu
   local dir="$work/$name" elf
   mkdir -p "$dir"
   elf="$dir/firmware.elf"
-  cp "target/$target/release/firmware" "$elf"
+  cp "target/$target/release/qemu" "$elf"
   mkfifo "$dir/uart.in" "$dir/uart.out"
   cat "$dir/uart.out" >"$dir/uart.txt" &
   local reader=$!
@@ -32,7 +31,7 @@ run() {
     -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$dir/defmt.bin" &
   local qemu=$!
-  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nexit\n' \
+  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nexit\n' \
     >"$dir/uart.in"
   wait $qemu
   status=$?
@@ -55,11 +54,49 @@ run() {
   periods=$(sed -n 's/^done periods \([0-9]*\) .*/\1/p' "$dir/uart.txt")
   [ -n "$periods" ] && [ "$periods" -ge 10000 ] || { echo "$name: too few control periods: '$periods'"; exit 1; }
   echo "=== $name: $periods control periods, commands answered"
+  # The strict mock chips (issue 15): no data-sheet rule broken by the drivers in the whole
+  # run; selftest read the DAC register back equal to the code written, the ADC code inside
+  # the sensor window, the amplifier enabled (no fault).
+  grep -q '^chips: 0 data-sheet rule violations' "$dir/uart.txt" || { echo "$name: the drivers broke a chip rule"; exit 1; }
+  grep -Eq '^ok selftest reset n/a dac (-?[0-9]+)/\1 ok adc -?[0-9]+ in amp on chips 0 none$' "$dir/uart.txt" ||
+    { echo "$name: selftest did not pass"; exit 1; }
   # The control interrupt runs the pipeline and both converter drivers (on the mock chips).
   python3 .ci/firmware-code.py "$elf" SysTick "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
-    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
+    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::Ad4000::convert|piezo_core::drivers::ad4000::decode" \
     piezo_core::drivers::ad5791::Ad5791::set_code
 }
 
+# panic_run <name> <target> <qemu machine> <qemu cpu>: the harness line `panic` (after
+# 10 000 periods, with the output driven away from the safe code by a 30 um sine) forces a
+# panic; the handler must leave the safe code in the DAC model, which prints its output code
+# before and after. Fails if the handler did not write it (the output would keep its code).
+panic_run() {
+  local name=$1 target=$2 machine=$3 cpu=$4 status line before after safe
+  local dir="$work/$name-panic" elf="$work/$name/firmware.elf"
+  mkdir -p "$dir"
+  mkfifo "$dir/uart.in" "$dir/uart.out"
+  cat "$dir/uart.out" >"$dir/uart.txt" &
+  local reader=$!
+  set +e
+  timeout 1800 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
+    -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
+    -semihosting-config enable=on,target=native -kernel "$elf" >/dev/null &
+  local qemu=$!
+  printf 'ping\nwave sine 5 100 30\npanic\n' >"$dir/uart.in"
+  wait $qemu
+  status=$?
+  set -e
+  wait $reader || true
+  echo "=== $name: forced panic"
+  grep -E '^(panic|ok|chips)' "$dir/uart.txt" || true
+  [ "$status" -eq 101 ] || { echo "$name: forced panic ended with status $status, not 101"; exit 1; }
+  line=$(grep -E '^panic: dac 0 out ' "$dir/uart.txt") || { echo "$name: no DAC report from the panic handler"; exit 1; }
+  read -r before after safe <<<"$(sed -E 's/^panic: dac 0 out (-?[0-9]+) -> (-?[0-9]+) safe (-?[0-9]+) amp off$/\1 \2 \3/' <<<"$line")"
+  [ "$before" != "$safe" ] || { echo "$name: the DAC was at the safe code before the panic: the check would prove nothing"; exit 1; }
+  [ "$after" = "$safe" ] || { echo "$name: after the panic the DAC model holds $after, not the safe code $safe"; exit 1; }
+  echo "=== $name: panic handler put the DAC from $before back to the safe code $safe, amplifier off"
+}
+
 run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4
+panic_run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4
 run m3-q16 thumbv7m-none-eabi mps2-an385 cortex-m3

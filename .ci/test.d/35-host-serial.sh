@@ -9,8 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
 target=thumbv7em-none-eabihf
-cargo build --release --target "$target" -p piezo-core --bin firmware \
-  --no-default-features --features board-qemu
+cargo build --release --target "$target" -p piezo-core --bin qemu
 . .ci/qemu-serial.sh
 piezo_cli
 work=$(mktemp -d)
@@ -19,7 +18,7 @@ fail() {
   echo "35-host-serial: FAIL: $*"
   exit 1
 }
-cp "target/$target/release/firmware" "$work/firmware.elf"
+cp "target/$target/release/qemu" "$work/firmware.elf"
 qemu_boot "$work/firmware.elf" mps2-an386 cortex-m4
 
 run() {

@@ -14,8 +14,8 @@ cd "$(dirname "$0")/../.."
 command -v flip-link >/dev/null 2>&1 || cargo install flip-link --locked
 cargo test -q -p piezo-core --features xy --test same_pipeline_executor --test same_pipeline
 for target in thumbv7m-none-eabi thumbv7em-none-eabihf; do
-  cargo build --release --target "$target" -p piezo-core --bin firmware \
-    --no-default-features --features board-qemu,xy
+  cargo build --release --target "$target" -p piezo-core --bin qemu \
+    --features xy
 done
 . .ci/qemu-serial.sh
 piezo_cli
@@ -73,11 +73,11 @@ session() {
   name=$1
   local target=$2 machine=$3 cpu=$4 dt_r=$5 every_r=$6 dt_l=$7 every_l=$8 bound=$9
   local elf="$work/$name.elf"
-  cp "target/$target/release/firmware" "$elf"
+  cp "target/$target/release/qemu" "$elf"
   # The control interrupt runs the pipeline and both drivers.
   python3 .ci/firmware-code.py "$elf" SysTick \
     "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
-    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode" \
+    "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::Ad4000::convert|piezo_core::drivers::ad4000::decode" \
     piezo_core::drivers::ad5791::Ad5791::set_code
   qemu_boot "$elf" "$machine" "$cpu"
   run() {

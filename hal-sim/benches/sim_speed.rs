@@ -72,11 +72,10 @@ fn breakdown(sc: &Scenario) {
         black_box(b.stage.position_um(0));
         b.stage.advance(&[volts[k as usize % per]]);
     });
-    let mut delay = hal_sim::mock::MockDelay(b.clock.clone());
     let adc = ns_per(n, |k| {
         let a = &mut b.adcs[0];
         a.chip.set_input_volts(black_box((k % 1000) as f64 * 1e-3));
-        black_box(a.driver.convert(&mut delay).ok());
+        black_box(a.driver.convert().ok());
     });
     let codes: Vec<i32> = (0..1000).map(|k| 1000 * k - 500_000).collect();
     let pipe = ns_per(n, |k| {
@@ -84,7 +83,7 @@ fn breakdown(sc: &Scenario) {
     });
     let dac = ns_per(n, |k| {
         let d = &mut b.dacs[0];
-        let _ = d.driver.set_code(black_box((k % 1000) as i32 * 1000));
+        black_box(d.driver.set_code(black_box((k % 1000) as i32 * 1000)).ok());
         black_box(d.chip.output_volts());
     });
     println!(

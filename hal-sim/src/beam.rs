@@ -12,16 +12,13 @@
 //! built on the first two modes and the nominal CBW (model truncation and parameter error
 //! are both real here). Sensor at the tip, objective at `x_c != L`.
 
-use std::path::Path;
-
 use anyhow::Result;
 use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 use piezo_core::manipulation::beam::ModalModel;
 use piezo_core::manipulation::{Hgo, Nno, NnoConfig, VoltageInput};
 use serde::Serialize;
 
-use crate::object::{Gauss, ManipRow};
-use crate::plot::{write_grid, Plot};
+use crate::numeric::Rng;
 
 /// Modes of the simulated beam.
 pub const SIM_MODES: usize = 4;
@@ -300,7 +297,7 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
     let mut hs = hgo.init(0.0);
     let mut ns = nno.init(0.0);
     let mut ls = lue.init(0.0);
-    let mut rng = Gauss::new(cfg.seed);
+    let mut rng = Rng::new(cfg.seed);
     let n = (cfg.duration_s * cfg.rate_hz) as usize;
     let mut run = BeamRun {
         skip: (0.3 * cfg.rate_hz) as usize,
@@ -311,8 +308,8 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
         let u = beam_input(t);
         plant.step(&mut ps, u, dt);
         let y_tip = plant.deflection(&ps, 1.0);
-        let y_meas = y_tip + rng.sample(cfg.noise_y_um);
-        let u_meas = u + rng.sample(cfg.noise_u_volts);
+        let y_meas = y_tip + rng.normal(cfg.noise_y_um);
+        let u_meas = u + rng.normal(cfg.noise_u_volts);
         run.t.push(t);
         run.y_c.push(plant.deflection(&ps, cfg.x_c));
         run.y_tip.push(y_tip);
@@ -321,60 +318,6 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
         run.luenberger.push(lue.update(&mut ls, y_meas, u_meas));
     }
     Ok(run)
-}
-
-/// Runs the beam scenario (with and without CBW mismatch), writes plots, returns rows.
-pub fn run_scenarios(cfg: &BeamConfig, out: Option<&Path>) -> Result<Vec<ManipRow>> {
-    let mut rows = Vec::new();
-    let mut plots = Vec::new();
-    for mismatch in [true, false] {
-        let c = BeamConfig { mismatch, ..*cfg };
-        let run = run_beam(&c)?;
-        let tag = if mismatch {
-            "beam-x0.5-cbw-mismatch"
-        } else {
-            "beam-x0.5-cbw-exact"
-        };
-        let r = &run.y_c[run.skip..];
-        let range = r.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-            - r.iter().copied().fold(f64::INFINITY, f64::min);
-        for (name, est) in [
-            ("hgo", &run.hgo),
-            ("nno", &run.nno),
-            ("luenberger(nno,eta=0)", &run.luenberger),
-        ] {
-            let (rms, max) = est_errors(&run, est);
-            let mut row = ManipRow::new(tag, name);
-            row.rmse_um = rms;
-            row.rmse_pct = 100.0 * rms / range.max(1e-12);
-            row.max_err_pct = 100.0 * max / range.max(1e-12);
-            rows.push(row);
-        }
-        let s = run.skip;
-        let err = |e: &[f64]| -> Vec<f64> {
-            e[s..]
-                .iter()
-                .zip(&run.y_c[s..])
-                .map(|(a, b)| a - b)
-                .collect()
-        };
-        plots.push(
-            Plot::new(&format!("{tag}: y(x_c)"), "t [s]", "y [um]")
-                .line("true y(x_c)", &run.t, &run.y_c)
-                .line("HGO", &run.t, &run.hgo)
-                .line("NNO", &run.t, &run.nno),
-        );
-        plots.push(
-            Plot::new(&format!("{tag}: estimation error"), "t [s]", "error [um]")
-                .line("HGO", &run.t[s..], &err(&run.hgo))
-                .line("NNO", &run.t[s..], &err(&run.nno))
-                .line("Luenberger (no NN)", &run.t[s..], &err(&run.luenberger)),
-        );
-    }
-    if let Some(out) = out {
-        write_grid(out.join("beam_observers.svg"), &plots, 2)?;
-    }
-    Ok(rows)
 }
 
 #[cfg(test)]

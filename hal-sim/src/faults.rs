@@ -16,10 +16,10 @@ use piezo_core::recorder::{Recorder, Signal, Trigger};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::numeric::Rng;
 use crate::scenario::Scenario;
 use crate::sim::controllers::{registry, Entry, R};
 use crate::sim::{calibrate, Bench, Inject, StageInfo};
-use crate::stage::Rng;
 
 /// Every fault of the campaign.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -3,5 +3,6 @@ pub mod diagnose;
 pub mod fast;
 pub mod fit;
 pub mod generate;
+pub mod multibw;
 pub mod optim;
 pub mod ss;

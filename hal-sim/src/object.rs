@@ -1,6 +1,6 @@
-//! Deformable object pushed by the stage, and the manipulation scenarios that use it
-//! (000 Part V): force estimation without a force sensor, object characterisation, and
-//! barrier-Lyapunov force control.
+//! Deformable object pushed by the stage (000 Part V), and the runs on it: force estimation
+//! without a force sensor, object identification, and barrier-Lyapunov force control (their
+//! `piezo sim` scenarios are in [`crate::manipulation`]).
 //!
 //! Object: nonlinear viscoelastic, a cubic spring in parallel with a damper, in contact only
 //! beyond a gap: with `delta = y - gap`,
@@ -10,48 +10,12 @@
 //! Stage: CBW hysteresis (000 eq. 1) and second-order mechanics loaded by the object,
 //! `m y'' + c_s y' + k y = k (d u - h) - F`, integrated with RK4 on sub-steps.
 
-use std::path::Path;
-
 use anyhow::Result;
 use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 use piezo_core::manipulation::{BlfForce, ForceEso, StageDynamics, VoltageInput};
 use serde::Serialize;
 
-use crate::plot::{write_grid, Plot};
-
-/// Gaussian noise from a seeded xorshift64* generator (Box-Muller); reproducible runs.
-#[derive(Debug, Clone)]
-pub struct Gauss {
-    s: u64,
-    spare: Option<f64>,
-}
-
-impl Gauss {
-    pub fn new(seed: u64) -> Self {
-        Self {
-            s: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
-            spare: None,
-        }
-    }
-    fn uniform(&mut self) -> f64 {
-        self.s ^= self.s >> 12;
-        self.s ^= self.s << 25;
-        self.s ^= self.s >> 27;
-        let r = self.s.wrapping_mul(0x2545_F491_4F6C_DD1D);
-        ((r >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    /// One sample of N(0, sigma^2).
-    pub fn sample(&mut self, sigma: f64) -> f64 {
-        if let Some(z) = self.spare.take() {
-            return sigma * z;
-        }
-        let (u1, u2) = (self.uniform(), self.uniform());
-        let r = (-2.0 * u1.ln()).sqrt();
-        let a = 2.0 * std::f64::consts::PI * u2;
-        self.spare = Some(r * a.sin());
-        sigma * r * a.cos()
-    }
-}
+use crate::numeric::{lowpass, lowpass_n, rms, Rng};
 
 /// Nonlinear viscoelastic object.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -230,82 +194,6 @@ impl ManipConfig {
     }
 }
 
-/// One row of the scenario table (same leading fields as `piezo sim`).
-#[derive(Debug, Clone, Serialize)]
-pub struct ManipRow {
-    pub scenario: String,
-    pub controller: String,
-    pub rmse_um: f64,
-    pub rmse_pct: f64,
-    pub max_err_pct: f64,
-    pub saturated_samples: usize,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub force_err_rms_mn: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub force_err_max_mn: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub force_peak_mn: Option<f64>,
-    /// BLF: largest `|F_fed_back - F_d|` (the error the barrier acts on), mN.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub force_fb_err_max_mn: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub kb_mn: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub identified: Option<ObjectFit>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub truth: Option<Object>,
-}
-
-impl ManipRow {
-    /// One line in the `piezo sim` table layout, extra fields at the end.
-    pub fn table_line(&self) -> String {
-        let mut extra = String::new();
-        if let (Some(r), Some(m)) = (self.force_err_rms_mn, self.force_err_max_mn) {
-            extra += &format!("  force err rms {r:.2} mN max {m:.2} mN");
-        }
-        if let Some(fb) = self.force_fb_err_max_mn {
-            extra += &format!(", fed-back max {fb:.2} mN");
-        }
-        if let Some(kb) = self.kb_mn {
-            extra += &format!(" (k_b {kb} mN)");
-        }
-        if let (Some(f), Some(t)) = (self.identified, self.truth) {
-            extra += &format!(
-                "  k1 {:.2}/{} k3 {:.3}/{} c {:.4}/{} gap {:.3}/{}",
-                f.k1, t.k1, f.k3, t.k3, f.c, t.c, f.gap_um, t.gap_um
-            );
-        }
-        format!(
-            "{:<16} {:<22} {:>10.4} {:>9.3} {:>11.3} {:>10} {:>7}{extra}",
-            self.scenario,
-            self.controller,
-            self.rmse_um,
-            self.rmse_pct,
-            self.max_err_pct,
-            self.saturated_samples,
-            0
-        )
-    }
-
-    pub fn new(scenario: &str, controller: &str) -> Self {
-        Self {
-            scenario: scenario.into(),
-            controller: controller.into(),
-            rmse_um: f64::NAN,
-            rmse_pct: f64::NAN,
-            max_err_pct: f64::NAN,
-            saturated_samples: 0,
-            force_err_rms_mn: None,
-            force_err_max_mn: None,
-            force_peak_mn: None,
-            force_fb_err_max_mn: None,
-            kb_mn: None,
-            identified: None,
-            truth: None,
-        }
-    }
-}
-
 /// Traces of one run (one entry per sample).
 #[derive(Debug, Clone, Default)]
 pub struct Traces {
@@ -402,7 +290,7 @@ pub fn indentation(cfg: &ManipConfig, duration_s: f64) -> Result<Traces> {
     let plant = &cfg.plant;
     let mut ps = plant.init();
     let mut es = eso.init(0.0, 0.0);
-    let mut rng = Gauss::new(cfg.seed);
+    let mut rng = Rng::new(cfg.seed);
     let mut pi = PositionPi {
         ff: piezo_core::feedforward::LinearFf {
             um_per_volt: plant.cbw.d(),
@@ -423,8 +311,8 @@ pub fn indentation(cfg: &ManipConfig, duration_s: f64) -> Result<Traces> {
         u = limit(cmd, u, cfg, &mut tr.saturated);
         pi.applied(u);
         plant.step(&mut ps, u, dt);
-        y_meas = ps.y + rng.sample(cfg.noise.y_um);
-        let u_meas = u + rng.sample(cfg.noise.u_volts);
+        y_meas = ps.y + rng.normal(cfg.noise.y_um);
+        let u_meas = u + rng.normal(cfg.noise.u_volts);
         let f_hat = eso.update(&mut es, y_meas, u_meas);
         tr.t.push(t);
         tr.y_ref.push(y_ref);
@@ -438,15 +326,6 @@ pub fn indentation(cfg: &ManipConfig, duration_s: f64) -> Result<Traces> {
     Ok(tr)
 }
 
-fn rms(v: impl Iterator<Item = f64>) -> f64 {
-    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
-    if n == 0 {
-        f64::NAN
-    } else {
-        (s / n as f64).sqrt()
-    }
-}
-
 /// Identified object (least squares, linear in `k1, k3, c`; the gap by a 1-D search).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ObjectFit {
@@ -458,42 +337,13 @@ pub struct ObjectFit {
     pub residual_rms_mn: f64,
 }
 
-/// Triple first-order low-pass at `w` (rad/s): the transfer `w^3/(s+w)^3` from the true force
-/// to the ESO estimate, applied to the regressors so the fit is not biased by the lag.
-fn lowpass3(x: &[f64], w: f64, dt: f64) -> Vec<f64> {
-    let mut s = [x.first().copied().unwrap_or(0.0); 3];
-    x.iter()
-        .map(|&xi| {
-            let f = |z: [f64; 3]| [w * (xi - z[0]), w * (z[0] - z[1]), w * (z[1] - z[2])];
-            let k1 = f(s);
-            let a = |z: [f64; 3], k: [f64; 3], h: f64| {
-                [z[0] + h * k[0], z[1] + h * k[1], z[2] + h * k[2]]
-            };
-            let k2 = f(a(s, k1, dt / 2.0));
-            let k3 = f(a(s, k2, dt / 2.0));
-            let k4 = f(a(s, k3, dt));
-            for i in 0..3 {
-                s[i] += dt / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
-            }
-            s[2]
-        })
-        .collect()
-}
-
 /// Zero-phase one-pole smoothing (forward then backward), cutoff `fc` Hz.
 fn smooth(x: &[f64], fc: f64, dt: f64) -> Vec<f64> {
-    let a = 1.0 - (-std::f64::consts::TAU * fc * dt).exp();
-    let mut y: Vec<f64> = Vec::with_capacity(x.len());
-    let mut s = x.first().copied().unwrap_or(0.0);
-    for &xi in x {
-        s += a * (xi - s);
-        y.push(s);
-    }
-    let mut s = y.last().copied().unwrap_or(0.0);
-    for yi in y.iter_mut().rev() {
-        s += a * (*yi - s);
-        *yi = s;
-    }
+    let tau_s = 1.0 / (std::f64::consts::TAU * fc);
+    let mut y = lowpass(x, tau_s, dt);
+    y.reverse();
+    let mut y = lowpass(&y, tau_s, dt);
+    y.reverse();
     y
 }
 
@@ -507,7 +357,9 @@ pub fn identify(tr: &Traces, observer_hz: f64, rate_hz: f64, skip: usize) -> Res
         skip + 100
     );
     let dt = 1.0 / rate_hz;
-    let w = std::f64::consts::TAU * observer_hz;
+    // G = w^3/(s+w)^3, the ESO's force transfer, applied to the regressors so the fit is
+    // not biased by the lag.
+    let g = |x: &[f64]| lowpass_n(x, 1.0 / (std::f64::consts::TAU * observer_hz), dt, 3);
     let y = smooth(&tr.y_meas, 500.0, dt);
     let mut v = vec![0.0; n];
     for i in 1..n - 1 {
@@ -516,16 +368,13 @@ pub fn identify(tr: &Traces, observer_hz: f64, rate_hz: f64, skip: usize) -> Res
     let target = &tr.force_hat[skip..];
     let fit_at = |gap: f64| -> Option<(f64, [f64; 3])> {
         let d: Vec<f64> = y.iter().map(|y| (y - gap).max(0.0)).collect();
-        let r1 = lowpass3(&d, w, dt);
-        let r3 = lowpass3(&d.iter().map(|d| d * d * d).collect::<Vec<_>>(), w, dt);
-        let rc = lowpass3(
-            &d.iter()
-                .zip(&v)
-                .map(|(d, v)| if *d > 0.0 { *v } else { 0.0 })
-                .collect::<Vec<_>>(),
-            w,
-            dt,
-        );
+        let r1 = g(&d);
+        let r3 = g(&d.iter().map(|d| d * d * d).collect::<Vec<_>>());
+        let rc = g(&d
+            .iter()
+            .zip(&v)
+            .map(|(d, v)| if *d > 0.0 { *v } else { 0.0 })
+            .collect::<Vec<_>>());
         let cols = [&r1[skip..], &r3[skip..], &rc[skip..]];
         let mut ata = [[0.0; 3]; 3];
         let mut atb = [0.0; 3];
@@ -656,7 +505,7 @@ pub fn blf_force(
     let plant = &cfg.plant;
     let mut ps = plant.init();
     let mut es = eso.init(0.0, 0.0);
-    let mut rng = Gauss::new(cfg.seed.wrapping_add(17));
+    let mut rng = Rng::new(cfg.seed.wrapping_add(17));
     let mut tr = Traces::default();
     let mut u = 0.0;
     let mut f_fb = 0.0;
@@ -687,9 +536,9 @@ pub fn blf_force(
         };
         u = limit(cmd, u, cfg, &mut tr.saturated);
         plant.step(&mut ps, u, dt);
-        let y_meas = ps.y + rng.sample(cfg.noise.y_um);
-        let u_meas = u + rng.sample(cfg.noise.u_volts);
-        let f_meas = ps.force + rng.sample(cfg.noise.f_mn);
+        let y_meas = ps.y + rng.normal(cfg.noise.y_um);
+        let u_meas = u + rng.normal(cfg.noise.u_volts);
+        let f_meas = ps.force + rng.normal(cfg.noise.f_mn);
         let f_hat = eso.update(&mut es, y_meas, u_meas);
         f_fb = if estimated { f_hat } else { f_meas };
         tr.t.push(t);
@@ -732,192 +581,6 @@ pub fn force_errors(tr: &Traces, skip: usize) -> (f64, f64, f64) {
     (rms_e, max_e, peak)
 }
 
-/// Position tracking errors: (rmse um, rmse %, max %) of the range of the reference.
-fn tracking(tr: &Traces, skip: usize) -> (f64, f64, f64) {
-    let r = &tr.y_ref[skip..];
-    let lo = r.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let range = (hi - lo).max(1e-12);
-    let e = || tr.y[skip..].iter().zip(r).map(|(y, r)| y - r);
-    let rmse = rms(e());
-    let max = e().map(f64::abs).fold(0.0, f64::max);
-    (rmse, 100.0 * rmse / range, 100.0 * max / range)
-}
-
-/// Names of the manipulation scenarios of `piezo sim` (000 Part V).
-pub const SCENARIOS: [&str; 3] = ["object-characterisation", "blf-force", "beam"];
-
-/// Runs the named manipulation scenarios (all of [`SCENARIOS`] if `names` is empty); plots
-/// go into `out` when given.
-pub fn run_manipulation(names: &[String], out: Option<&Path>) -> Result<Vec<ManipRow>> {
-    for n in names {
-        anyhow::ensure!(
-            SCENARIOS.contains(&n.as_str()),
-            "no manipulation scenario {n} (known: {})",
-            SCENARIOS.join(", ")
-        );
-    }
-    let want = |n: &str| names.is_empty() || names.iter().any(|x| x == n);
-    let cfg = ManipConfig::default();
-    let mut rows = Vec::new();
-    if want(SCENARIOS[0]) {
-        rows.extend(characterisation_scenario(&cfg, out)?);
-    }
-    if want(SCENARIOS[1]) {
-        rows.extend(blf_scenario(&cfg, out)?);
-    }
-    if want(SCENARIOS[2]) {
-        rows.extend(crate::beam::run_scenarios(
-            &crate::beam::BeamConfig::default(),
-            out,
-        )?);
-    }
-    Ok(rows)
-}
-
-/// Force estimation + characterisation: one row, plots into `out`.
-pub fn characterisation_scenario(cfg: &ManipConfig, out: Option<&Path>) -> Result<Vec<ManipRow>> {
-    let mut rows = Vec::new();
-    let skip = (0.05 * cfg.rate_hz) as usize;
-    // 1 + 2 + 3: indentation, force estimation, identification.
-    let tr = indentation(cfg, 2.0)?;
-    let (f_rms, f_max, f_peak) = force_errors(&tr, skip);
-    let (rmse, rmse_pct, max_pct) = tracking(&tr, (0.4 * cfg.rate_hz) as usize);
-    let fit = identify(&tr, cfg.observer_hz, cfg.rate_hz, skip)?;
-    let mut row = ManipRow::new("object-characterisation", "pi+force-eso");
-    row.rmse_um = rmse;
-    row.rmse_pct = rmse_pct;
-    row.max_err_pct = max_pct;
-    row.saturated_samples = tr.saturated;
-    row.force_err_rms_mn = Some(f_rms);
-    row.force_err_max_mn = Some(f_max);
-    row.force_peak_mn = Some(f_peak);
-    row.identified = Some(fit);
-    row.truth = Some(cfg.plant.object);
-    rows.push(row);
-    let o = cfg.plant.object;
-    let dgrid: Vec<f64> = (0..=100)
-        .map(|i| o.gap_um + 3.6 * i as f64 / 100.0)
-        .collect();
-    let curve = |g: f64, k1: f64, k3: f64| -> Vec<f64> {
-        dgrid
-            .iter()
-            .map(|y| {
-                let d = (y - g).max(0.0);
-                k1 * d + k3 * d * d * d
-            })
-            .collect()
-    };
-    let plots = vec![
-        Plot::new("indentation: force (no force sensor)", "t [s]", "F [mN]")
-            .line("true F", &tr.t, &tr.force)
-            .line("ESO estimate", &tr.t, &tr.force_hat),
-        Plot::new("force-deformation curve", "y [um]", "F [mN]")
-            .points(
-                "estimate vs measured y",
-                &tr.y_meas[skip..],
-                &tr.force_hat[skip..],
-            )
-            .line("true static psi", &dgrid, &curve(o.gap_um, o.k1, o.k3))
-            .line(
-                "identified static psi",
-                &dgrid,
-                &curve(fit.gap_um, fit.k1, fit.k3),
-            ),
-        Plot::new("position tracking", "t [s]", "y [um]")
-            .line("reference", &tr.t, &tr.y_ref)
-            .line("y", &tr.t, &tr.y),
-        Plot::new("force estimation error", "t [s]", "F^ - F [mN]").line(
-            "error",
-            &tr.t[skip..],
-            &tr.force_hat[skip..]
-                .iter()
-                .zip(&tr.force[skip..])
-                .map(|(h, f)| h - f)
-                .collect::<Vec<_>>(),
-        ),
-    ];
-    if let Some(out) = out {
-        write_grid(out.join("object_characterisation.svg"), &plots, 2)?;
-    }
-    Ok(rows)
-}
-
-/// BLF force control with the force sensor and with the ESO estimate: two rows.
-pub fn blf_scenario(cfg: &ManipConfig, out: Option<&Path>) -> Result<Vec<ManipRow>> {
-    let mut rows = Vec::new();
-    let bcfg = BlfConfig::default();
-    let mut plots = Vec::new();
-    // The same law without a barrier (k_b huge: factor ~ 1) is the baseline.
-    let variants = [
-        (false, bcfg, "blf+force-sensor"),
-        (true, bcfg, "blf+force-eso"),
-        (
-            false,
-            BlfConfig { kb_mn: 1e6, ..bcfg },
-            "no-barrier+force-sensor",
-        ),
-    ];
-    for (estimated, bcfg, name) in variants {
-        let tr = blf_force(cfg, &bcfg, estimated, 1.5)?;
-        let (max_true, max_fb, rms_true) = blf_errors(&tr);
-        let mut row = ManipRow::new("blf-force", name);
-        let fr: Vec<f64> = tr
-            .force_ref
-            .iter()
-            .copied()
-            .filter(|f| f.is_finite())
-            .collect();
-        let span = fr.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-            - fr.iter().copied().fold(f64::INFINITY, f64::min);
-        row.saturated_samples = tr.saturated;
-        row.force_err_rms_mn = Some(rms_true);
-        row.force_err_max_mn = Some(max_true);
-        row.kb_mn = (bcfg.kb_mn < 1e3).then_some(bcfg.kb_mn);
-        row.force_fb_err_max_mn = Some(max_fb);
-        row.rmse_pct = 100.0 * rms_true / span.max(1e-12);
-        row.max_err_pct = 100.0 * max_true / span.max(1e-12);
-        rows.push(row);
-        let e_fb: Vec<f64> = tr
-            .force_hat
-            .iter()
-            .zip(&tr.force_ref)
-            .map(|(f, r)| f - r)
-            .collect();
-        let e_true: Vec<f64> = tr
-            .force
-            .iter()
-            .zip(&tr.force_ref)
-            .map(|(f, r)| f - r)
-            .collect();
-        // The baseline is drawn against the BLF's bound.
-        let kb_line = if bcfg.kb_mn < 1e3 {
-            bcfg.kb_mn
-        } else {
-            BlfConfig::default().kb_mn
-        };
-        let kb = vec![kb_line; tr.t.len()];
-        let nkb = vec![-kb_line; tr.t.len()];
-        plots.push(
-            Plot::new(&format!("{name}: force"), "t [s]", "F [mN]")
-                .line("F_d", &tr.t, &tr.force_ref)
-                .line("true F", &tr.t, &tr.force)
-                .line("fed back", &tr.t, &tr.force_hat),
-        );
-        plots.push(
-            Plot::new(&format!("{name}: force error"), "t [s]", "e_F [mN]")
-                .line("fed back - F_d", &tr.t, &e_fb)
-                .line("true F - F_d", &tr.t, &e_true)
-                .line("+k_b", &tr.t, &kb)
-                .line("-k_b", &tr.t, &nkb),
-        );
-    }
-    if let Some(out) = out {
-        write_grid(out.join("blf_force.svg"), &plots, 2)?;
-    }
-    Ok(rows)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -928,15 +591,6 @@ mod tests {
         assert_eq!(o.force(3.0, 100.0), 0.0);
         assert!((o.force(5.0, 0.0) - 44.0).abs() < 1e-12);
         assert_eq!(o.force(4.1, -1e6), 0.0);
-    }
-
-    #[test]
-    fn gauss_has_unit_variance() {
-        let mut g = Gauss::new(3);
-        let v: Vec<f64> = (0..20_000).map(|_| g.sample(2.0)).collect();
-        let m = v.iter().sum::<f64>() / v.len() as f64;
-        let s = (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64).sqrt();
-        assert!(m.abs() < 0.05 && (s - 2.0).abs() < 0.05, "{m} {s}");
     }
 
     #[test]

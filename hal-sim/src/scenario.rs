@@ -25,7 +25,7 @@ freq_hz = 50.0
 amplitude_um = 40.0
 offset_um = 50.0
 [stage.hysteresis]
-model = "cbw"          # cbw | gbw | dahl | none
+model = "cbw"          # cbw | gbw | dahl | mbw002 | none
 [stage.creep]
 enabled = true
 gains = [0.01, 0.01, 0.015]
@@ -242,6 +242,8 @@ pub enum HysteresisModel {
     Cbw,
     Gbw,
     Dahl,
+    /// The modified Bouc-Wen of 002 (eq. 4-5): ABW with `delta*|u'|` plus `p*u' + q*u'^3`.
+    Mbw002,
 }
 
 /// Static part of the Hammerstein chain: `y = model(u) + asym_um_per_v2 * u^2`.
@@ -253,12 +255,20 @@ pub struct HysteresisCfg {
     pub d: f64,
     /// CBW/GBW `alpha`, Dahl `sigma0` (um/V).
     pub alpha: f64,
-    /// CBW `beta`; GBW `B`.
+    /// CBW `beta`; GBW `B` (the `B*sgn(u')` asymmetry term of 000 eq. 3).
     pub beta: f64,
     /// CBW `gamma`; GBW `G`.
     pub gamma: f64,
     /// GBW `A`.
     pub a: f64,
+    /// GBW `B_h`, the CBW term `B_h*sgn(u'*h)` (0: eq. 3 as printed, whose loop does not
+    /// last; see `piezo_core::hysteresis::Gbw`).
+    pub beta_h: f64,
+    /// 002 MBW (piezo form): asymmetry `delta` of `delta*|u'|` (um/V), rate terms `p`
+    /// (um s/V) and `q` (um s^3/V^3) of `p*u' + q*u'^3`; `alpha, beta, gamma` as CBW.
+    pub delta: f64,
+    pub p: f64,
+    pub q: f64,
     /// Bouc-Wen exponent `n`; Dahl exponent `i`.
     pub n: f64,
     /// Dahl saturation `hc` (um).
@@ -280,6 +290,10 @@ impl Default for HysteresisCfg {
             beta: 0.012,
             gamma: 0.004,
             a: 1.0,
+            beta_h: 0.0,
+            delta: 0.0,
+            p: 0.0,
+            q: 0.0,
             n: 1.0,
             hc: 15.0,
             asym_um_per_v2: -4.0e-4,
@@ -567,6 +581,10 @@ impl Scenario {
             (h.beta, "beta"),
             (h.gamma, "gamma"),
             (h.a, "a"),
+            (h.beta_h, "beta_h"),
+            (h.delta, "delta"),
+            (h.p, "p"),
+            (h.q, "q"),
             (h.n, "n"),
             (h.hc, "hc"),
             (h.asym_um_per_v2, "asym_um_per_v2"),

@@ -105,6 +105,7 @@ pub fn adc_config(sc: &Scenario) -> Ad4000Config {
         format: CodeFormat::TwosComplement,
         turbo: true,
         high_z: false,
+        ..Ad4000Config::AD4020
     }
 }
 
@@ -190,9 +191,9 @@ pub fn waves<const N: usize>(sc: &Scenario) -> [Wave<R>; N] {
 }
 
 /// The firmware's ADC driver on the mock SPI bus.
-pub type SimAdc = FirmwareAdc<MockAdcSpi, MockCnv>;
+pub type SimAdc = FirmwareAdc<MockAdcSpi, MockCnv, MockDelay>;
 /// The firmware's DAC driver on the mock SPI bus.
-pub type SimDac = FirmwareDac<MockDacSpi, MockLdac>;
+pub type SimDac = FirmwareDac<MockDacSpi, MockLdac, MockDelay>;
 
 /// One position channel: mock chip + the firmware's driver.
 pub struct AdcChannel {
@@ -227,20 +228,27 @@ pub fn converters(
                 noise_lsb: cv.adc_noise_lsb,
                 t_conv_ns: 290,
                 seed: sc.run.seed.wrapping_add(100 + i as u64),
+                ..AdcSpec::default()
             },
             clock.clone(),
         );
-        let mut driver =
-            SimAdc::new(chip.spi(), chip.cnv(), acfg).map_err(|e| anyhow!("ADC {i}: {e}"))?;
+        let delay = MockDelay(clock.clone());
+        let mut driver = SimAdc::new(chip.spi(), chip.cnv(), delay, acfg)
+            .map_err(|e| anyhow!("ADC {i}: {e}"))?;
         driver.init().map_err(|e| anyhow!("ADC {i} init: {e}"))?;
         adcs.push(AdcChannel { chip, driver });
-        let chip = MockDac::new(DacSpec {
-            vrefp: cv.dac_vrefp,
-            vrefn: cv.dac_vrefn,
-            offset_lsb: cv.dac_offset_lsb,
-            gain_error: cv.dac_gain_error,
-        });
-        let mut driver = SimDac::new(chip.spi(), chip.ldac(), Ad5791Config::DEFAULT)
+        let chip = MockDac::new(
+            DacSpec {
+                vrefp: cv.dac_vrefp,
+                vrefn: cv.dac_vrefn,
+                offset_lsb: cv.dac_offset_lsb,
+                gain_error: cv.dac_gain_error,
+                ..DacSpec::default()
+            },
+            clock.clone(),
+        );
+        let delay = MockDelay(clock.clone());
+        let mut driver = SimDac::new(chip.spi(), chip.ldac(), delay, Ad5791Config::DEFAULT)
             .map_err(|e| anyhow!("DAC {i}: {e}"))?;
         driver
             .init(initial_codes.get(i).copied().unwrap_or(0))
@@ -257,7 +265,6 @@ pub struct Bench<const N: usize> {
     pub dacs: Vec<DacChannel>,
     pub stage: Stage,
     pub clock: MockClock,
-    delay: MockDelay,
     sensor_volts_per_um: f64,
     sensor_center_um: f64,
     period_ns: f64,
@@ -309,7 +316,6 @@ impl<const N: usize> Bench<N> {
             adcs,
             dacs,
             stage,
-            delay: MockDelay(clock.clone()),
             clock,
             sensor_volts_per_um: sc.converters.sensor_volts_per_um,
             sensor_center_um: sc.converters.sensor_center_um,
@@ -321,6 +327,14 @@ impl<const N: usize> Bench<N> {
             dac_codes: pipeline_codes,
             bus_errors: 0,
         })
+    }
+
+    /// Data-sheet rules the converter drivers broke on the mock chips (all channels; 0 in
+    /// every scenario the tests run).
+    pub fn chip_violations(&self) -> u64 {
+        let adc: u64 = self.adcs.iter().map(|a| a.chip.violations().count).sum();
+        let dac: u64 = self.dacs.iter().map(|d| d.chip.violations().count).sum();
+        adc + dac
     }
 
     /// The code each DAC holds now (the last successful write).
@@ -348,7 +362,7 @@ impl<const N: usize> Bench<N> {
             let y = self.stage.sensor_um(i);
             adc.chip
                 .set_input_volts((y - self.sensor_center_um) * self.sensor_volts_per_um);
-            match adc.driver.convert(&mut self.delay) {
+            match adc.driver.convert() {
                 Ok(c) => *code = c,
                 Err(_) => self.bus_errors += 1, // i32::MIN: out of range, pipeline faults
             }
@@ -366,10 +380,12 @@ impl<const N: usize> Bench<N> {
             {
                 if inject.dac_write_fails(k, i) {
                     self.pipeline.dac_write_failed(i, *held);
-                } else {
-                    // The DAC mock is infallible.
-                    let _ = dac.driver.set_code(code);
+                } else if dac.driver.set_code(code).is_ok() {
                     *held = code;
+                } else {
+                    // A broken data-sheet rule (the mock records it): the held code stays.
+                    self.bus_errors += 1;
+                    self.pipeline.dac_write_failed(i, *held);
                 }
             }
         }
@@ -446,6 +462,24 @@ pub struct Record {
 
 /// Rows kept in a [`Record`].
 pub const MAX_ROWS: usize = 50_000;
+
+impl Record {
+    /// The run as a `piezo fit` record: `t`, the applied piezo voltage in (V), the measured
+    /// position out (um); axis `Some(i)` only, or every axis (`u1.., y1..`).
+    pub fn fit_record(&self, axis: Option<usize>) -> Result<crate::record::Record> {
+        let axes: Vec<usize> = match axis {
+            Some(i) => vec![i],
+            None => (0..self.volts.len()).collect(),
+        };
+        let pick = |v: &Vec<Vec<f64>>| -> Result<Vec<Vec<f64>>> {
+            axes.iter()
+                .map(|&i| v.get(i).cloned().ok_or_else(|| anyhow!("no axis {i}")))
+                .collect()
+        };
+        crate::record::Record::new(self.t.clone(), pick(&self.volts)?, pick(&self.measured)?)
+            .map_err(|e| anyhow!("{e}"))
+    }
+}
 
 /// Runs `sc` with the controller `entry`; records the time series if `record`.
 pub fn run(sc: &Scenario, entry: &Entry, record: bool) -> Result<(RunResult, Option<Record>)> {
@@ -533,6 +567,16 @@ fn run_bench<const N: usize>(
             eprintln!("  {} / {controller}: {} %", sc.name, 100 * k / n);
         }
     }
+    // Every run doubles as a check of the drivers against the data sheets' rules.
+    anyhow::ensure!(
+        bench.chip_violations() == 0,
+        "{controller} on {}: the converter drivers broke {} data-sheet rule(s) on the mock \
+         chips (ADC {:?}, DAC {:?})",
+        sc.name,
+        bench.chip_violations(),
+        bench.adcs.first().map(|a| a.chip.violations().first),
+        bench.dacs.first().map(|d| d.chip.violations().first),
+    );
     let stroke = (0..N).map(|i| rmax[i] - rmin[i]).fold(0.0, f64::max);
     let rmse = (se / cnt.max(1) as f64).sqrt();
     // A hold reference has no stroke: report against the stage's 100 um nominal range.
@@ -643,6 +687,26 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
         s.stage.hysteresis.model_error = -0.2
     });
     add("sine-10hz-noise10x", &|s| s.stage.noise.sigma_um *= 10.0);
+    // 000 Part IV: an asymmetric stage, GBW (eq. 3 with its CBW term, `Gbw::with_beta_h`)
+    // in place of the CBW and its quadratic term (the asymmetry is the GBW's alone). The
+    // CBW part is the default stage's, so the loop is as wide (14 um), but B = 0.006 puts h
+    // in -20.9..11.5 um instead of +-15.4 on a full sweep: the ascent saturates earlier than
+    // the descent.
+    add("gbw-asymmetric-10hz", &|s| {
+        let h = &mut s.stage.hysteresis;
+        h.model = HysteresisModel::Gbw;
+        (h.alpha, h.a, h.beta_h, h.beta, h.gamma) = (1.0, 0.3, 0.012, 0.006, 0.004);
+        h.asym_um_per_v2 = 0.0;
+    });
+    // 000 eq. (4) and its backup slide (Dahl + ADRC): the stage's hysteresis replaced by a
+    // Dahl model, sigma0 0.2 um/V, h_c 12 um, i = 1.5 (an 11.6 um loop; i = 1 would be the
+    // CBW with gamma = 0). After a reversal at saturation dh/du = sigma0 2^i = 0.57 um/V,
+    // below d: the position still rises with the voltage (a model-based IMS inverts it).
+    add("dahl-10hz", &|s| {
+        let h = &mut s.stage.hysteresis;
+        h.model = HysteresisModel::Dahl;
+        (h.alpha, h.hc, h.n) = (0.2, 12.0, 1.5);
+    });
     add("raster-xy", &|s| {
         s.stage.axes = 2;
         s.stage.coupling.enabled = true;
@@ -661,5 +725,6 @@ pub fn model_name(sc: &Scenario) -> &'static str {
         HysteresisModel::Cbw => "cbw",
         HysteresisModel::Gbw => "gbw",
         HysteresisModel::Dahl => "dahl",
+        HysteresisModel::Mbw002 => "mbw002",
     }
 }

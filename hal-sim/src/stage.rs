@@ -24,47 +24,12 @@ pub mod identified;
 
 use crate::scenario::{HysteresisModel, Scenario, StageConfig};
 use anyhow::{Context, Result};
-use piezo_core::hysteresis::{BwState, Cbw, Dahl, Gbw, Hysteresis};
+use piezo_core::hysteresis::{AbwAbs, BwState, Cbw, Dahl, Gbw, Hysteresis, Mbw002, MbwState};
 use std::f64::consts::PI;
 
 mod effects;
+use crate::numeric::Rng;
 use effects::{resonance_ad, AxisFx, Effects};
-
-/// Small, fast, seedable generator (xorshift64*) with a cheap near-Gaussian sample.
-#[derive(Debug, Clone)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-    }
-
-    #[inline]
-    pub fn next_u64(&mut self) -> u64 {
-        let mut x = self.0;
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        self.0 = x;
-        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    /// Uniform in `[0, 1)`.
-    #[inline]
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-
-    /// Zero-mean, unit-variance noise: the sum of four 16-bit uniforms (Irwin-Hall), which
-    /// is Gaussian to within a few percent out to 3 sigma and bounded at +-3.46.
-    #[inline]
-    pub fn gauss(&mut self) -> f64 {
-        let r = self.next_u64();
-        let s = (r & 0xFFFF) + ((r >> 16) & 0xFFFF) + ((r >> 32) & 0xFFFF) + (r >> 48);
-        // mean 4 * 32767.5, variance 4 * (65536^2 - 1) / 12
-        (s as f64 - 131_070.0) * (3.0f64.sqrt() / 65_536.0)
-    }
-}
 
 /// The static (rate-independent) part of one axis.
 #[derive(Debug, Clone)]
@@ -78,6 +43,8 @@ enum Static {
     Cbw(Cbw<f64>, BwState<f64>),
     Gbw(Gbw<f64>, BwState<f64>),
     Dahl(Dahl<f64>, BwState<f64>),
+    /// Rate dependent: `dt` is the loop period (the model's `u'` over one model step).
+    Mbw(Mbw002<f64>, MbwState<f64>),
 }
 
 impl Static {
@@ -92,6 +59,7 @@ impl Static {
             Static::Cbw(m, s) => m.step(s, u, dt),
             Static::Gbw(m, s) => m.step(s, u, dt),
             Static::Dahl(m, s) => m.step(s, u, dt),
+            Static::Mbw(m, s) => m.step(s, u, dt),
         }
     }
 }
@@ -421,14 +389,21 @@ impl Stage {
                     }
                 }
                 HysteresisModel::Gbw => {
-                    let m = Gbw::new(hy.d, hy.alpha, hy.a, hy.beta, hy.gamma, hy.n)
-                        .context("stage.hysteresis (gbw)")?;
+                    let m =
+                        Gbw::with_beta_h(hy.d, hy.alpha, hy.a, hy.beta_h, hy.beta, hy.gamma, hy.n)
+                            .context("stage.hysteresis (gbw)")?;
                     Static::Gbw(m, m.init(0.0))
                 }
                 HysteresisModel::Dahl => {
                     let m = Dahl::new(hy.d, hy.alpha, hy.hc, hy.n)
                         .context("stage.hysteresis (dahl)")?;
                     Static::Dahl(m, m.init(0.0))
+                }
+                HysteresisModel::Mbw002 => {
+                    let abw = AbwAbs::new(hy.d, hy.alpha, hy.beta, hy.gamma, hy.n, hy.delta);
+                    let m = Mbw002::new(abw.context("stage.hysteresis (mbw002)")?, hy.p, hy.q)
+                        .context("stage.hysteresis (mbw002)")?;
+                    Static::Mbw(m, m.init(0.0))
                 }
             };
             let (gains, taus) = if cfg.creep.enabled {

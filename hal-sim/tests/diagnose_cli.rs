@@ -4,6 +4,7 @@ mod diagnose_support;
 
 use diagnose_support::Plant;
 use hal_sim::ident::diagnose::{Cause, Signals};
+use hal_sim::numeric::rmse;
 use hal_sim::record::Record;
 use std::process::Command;
 
@@ -12,10 +13,6 @@ fn write(path: &std::path::Path, s: &Signals) {
         .unwrap()
         .write(path)
         .unwrap();
-}
-
-fn rmse(a: &[f64], b: &[f64]) -> f64 {
-    (a.iter().zip(b).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / a.len() as f64).sqrt()
 }
 
 #[test]

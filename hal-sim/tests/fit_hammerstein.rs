@@ -3,7 +3,7 @@
 
 use hal_sim::ident::fit::resample::Edge;
 use hal_sim::ident::fit::{apply_linear, fit_siso, metrics, models, FitOptions, Fitted};
-use hal_sim::ident::optim::Pcg32;
+use hal_sim::numeric::Rng;
 
 const FS: f64 = 2000.0;
 /// The true linear part: one section at 60 Hz, damping 0.3.
@@ -72,7 +72,7 @@ fn joint_fit_recovers_the_linear_section() {
 #[test]
 fn two_step_identifies_linear_part_from_prbs_then_hysteresis() {
     // Step 1 record: PRBS around 50 V, small amplitude (hysteresis nearly linear there).
-    let mut rng = Pcg32::new(5);
+    let mut rng = Rng::new(5);
     let mut level = 1.0;
     let prbs: Vec<f64> = (0..3000)
         .map(|i| {

@@ -1,13 +1,15 @@
-//! Two-step multivariable identification (003 sec. IV) on a synthetic 2-axis record:
-//! direct hysteresis first, then the couplings.
+//! Multi-axis identification: per-pair models (`identify_pairs`, for models without a
+//! multivariable form) on a record whose couplings have states of their own, and the
+//! multivariable Bouc-Wen of 003 (two steps, couplings driven by the direct states) in
+//! `fit_multibw.rs`.
 
-use hal_sim::cli::fit::identify;
+use hal_sim::cli::fit::identify_pairs;
 use hal_sim::ident::fit::resample::Edge;
 use hal_sim::ident::fit::{metrics, models, FitOptions, Fitted};
 use hal_sim::record::Record;
 
 #[test]
-fn finds_direct_and_coupling_hysteresis() {
+fn pairs_find_direct_and_coupling_hysteresis() {
     let fs = 200.0;
     let n = 2400;
     // Axis 1 driven in the first half, axis 2 in the second (003 sec. IV.A experiments).
@@ -41,7 +43,7 @@ fn finds_direct_and_coupling_hysteresis() {
         de_samples: 800,
         ..Default::default()
     };
-    let parts = identify(cbw, &rec, &opts).unwrap();
+    let parts = identify_pairs(cbw, &rec, &opts).unwrap();
     let kinds: Vec<_> = parts.iter().map(|p| (p.kind, p.input, p.output)).collect();
     assert!(kinds.contains(&("direct", 0, 0)) && kinds.contains(&("direct", 1, 1)));
     assert!(kinds.contains(&("coupling", 0, 1)), "{kinds:?}");

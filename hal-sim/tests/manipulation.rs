@@ -84,7 +84,7 @@ fn hgo_and_nno_track_the_control_point() {
 #[test]
 fn observers_work_in_f32() {
     use hal_sim::beam::{beam_input, nominal_cbw, observer_model, BeamConfig, BeamPlant};
-    use hal_sim::object::Gauss;
+    use hal_sim::numeric::Rng;
     use piezo_core::hysteresis::Cbw;
     use piezo_core::manipulation::beam::ModalModel;
     use piezo_core::manipulation::{ForceEso, Hgo, StageDynamics, VoltageInput};
@@ -130,13 +130,13 @@ fn observers_work_in_f32() {
     let plant = BeamPlant::new(&bc).unwrap();
     let mut ps = plant.init();
     let (mut s32, mut s64) = (h32.init(0.0), h64.init(0.0));
-    let mut g = Gauss::new(5);
+    let mut g = Rng::new(5);
     let mut worst: f64 = 0.0;
     for k in 0..8000 {
         let u = beam_input(k as f64 * 1e-4);
         plant.step(&mut ps, u, 1e-4);
-        let y = plant.deflection(&ps, 1.0) + g.sample(0.005);
-        let um = u + g.sample(0.02);
+        let y = plant.deflection(&ps, 1.0) + g.normal(0.005);
+        let um = u + g.normal(0.02);
         let a = h32.update(&mut s32, y as f32, um as f32) as f64;
         let b = h64.update(&mut s64, y, um);
         worst = worst.max((a - b).abs());

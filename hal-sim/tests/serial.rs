@@ -1,15 +1,16 @@
 //! `piezo serial` against a fake firmware in this process: a TCP listener thread runs the
-//! firmware's own board-independent executor (`src/bin/firmware/control.rs`, included by
-//! path: the same `Ctl::execute`, recorder and `stream_frames`) behind the firmware's line
-//! buffer and parser, with a first-order stage in place of the converters. On the host the
-//! executor builds with the Cortex-M3 number type (Q16.16, 16 384 Hz).
+//! firmware's own board-independent executor (`piezo_core::firmware`: the same
+//! `Ctl::execute`, recorder and `stream_frames`) behind the firmware's line buffer and
+//! parser, with a first-order stage in place of the H743's on-chip converters. On the host
+//! the executor builds with the f32 number type at 100 kHz.
 
-// The module names the firmware's board features, which this crate does not have.
-#![allow(unexpected_cfgs)]
-
-#[allow(dead_code, clippy::all)]
-#[path = "../../src/bin/firmware/control.rs"]
-mod control;
+/// The firmware as the H743 builds it with its on-chip converters.
+mod control {
+    pub use piezo_core::firmware::*;
+    use piezo_core::firmware::{Converters, OnChip};
+    pub type Ctl = piezo_core::firmware::Ctl<OnChip>;
+    pub const DAC_MAX: i32 = OnChip::DAC_MAX;
+}
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};

@@ -17,8 +17,8 @@ use piezo_core::feedback::{Feedback, Pid, PidConfig};
 use piezo_core::feedforward::{Feedforward, MultiFeedforward};
 use piezo_core::pipeline::{FirmwarePipeline, Mode};
 
-type Adc = FirmwareAdc<MockAdcSpi, MockCnv>;
-type Dac = FirmwareDac<MockDacSpi, MockLdac>;
+type Adc = FirmwareAdc<MockAdcSpi, MockCnv, MockDelay>;
+type Dac = FirmwareDac<MockDacSpi, MockLdac, MockDelay>;
 
 /// The bench of `piezo sim` holds the firmware types.
 #[allow(dead_code)]
@@ -48,7 +48,6 @@ fn run(mode: Mode) -> (f64, u32) {
     sc.run.duration_s = 0.2;
     let lin = calibrate(&sc).unwrap();
     let clock = MockClock::default();
-    let mut delay = MockDelay(clock.clone());
     let cv = &sc.converters;
     let adc_chip = MockAdc::new(
         AdcSpec {
@@ -61,16 +60,32 @@ fn run(mode: Mode) -> (f64, u32) {
         },
         clock.clone(),
     );
-    let mut adc: Adc = FirmwareAdc::new(adc_chip.spi(), adc_chip.cnv(), adc_config(&sc)).unwrap();
+    let delay = MockDelay(clock.clone());
+    let mut adc: Adc = FirmwareAdc::new(
+        adc_chip.spi(),
+        adc_chip.cnv(),
+        delay.clone(),
+        adc_config(&sc),
+    )
+    .unwrap();
     adc.init().unwrap();
-    let dac_chip = MockDac::new(DacSpec {
-        vrefp: cv.dac_vrefp,
-        vrefn: cv.dac_vrefn,
-        offset_lsb: cv.dac_offset_lsb,
-        gain_error: cv.dac_gain_error,
-    });
-    let mut dac: Dac =
-        FirmwareDac::new(dac_chip.spi(), dac_chip.ldac(), Ad5791Config::DEFAULT).unwrap();
+    let dac_chip = MockDac::new(
+        DacSpec {
+            vrefp: cv.dac_vrefp,
+            vrefn: cv.dac_vrefn,
+            offset_lsb: cv.dac_offset_lsb,
+            gain_error: cv.dac_gain_error,
+            ..DacSpec::default()
+        },
+        clock.clone(),
+    );
+    let mut dac: Dac = FirmwareDac::new(
+        dac_chip.spi(),
+        dac_chip.ldac(),
+        delay,
+        Ad5791Config::DEFAULT,
+    )
+    .unwrap();
     let info = StageInfo {
         scenario: &sc,
         linear: lin,
@@ -93,7 +108,7 @@ fn run(mode: Mode) -> (f64, u32) {
         let y = stage.sensor_um(0);
         let truth = stage.position_um(0);
         adc_chip.set_input_volts((y - cv.sensor_center_um) * cv.sensor_volts_per_um);
-        let code = adc.convert(&mut delay).unwrap();
+        let code = adc.convert().unwrap();
         let out = p.step([code]);
         dac.set_code(out[0]).unwrap();
         stage.advance(&[dac_chip.output_volts()]);
@@ -106,6 +121,18 @@ fn run(mode: Mode) -> (f64, u32) {
     }
     assert_eq!(adc_chip.stats().early_reads, 0);
     assert_eq!(dac_chip.stats().bad_frames, 0);
+    assert_eq!(
+        adc_chip.violations().count,
+        0,
+        "{:?}",
+        adc_chip.violations()
+    );
+    assert_eq!(
+        dac_chip.violations().count,
+        0,
+        "{:?}",
+        dac_chip.violations()
+    );
     assert_eq!(p.state().fault, None);
     ((se / m).sqrt(), p.state().counters.samples)
 }

@@ -1,8 +1,8 @@
 //! Subspace + output-error identification recovers a known multivariable system with a
 //! non-minimum-phase zero from periodic multisine records.
-use hal_sim::ident::optim::Pcg32;
 use hal_sim::ident::ss::model::{Block, Modal, C64};
 use hal_sim::ident::ss::{identify, SsOptions};
+use hal_sim::numeric::Rng;
 use hal_sim::record::Record;
 use nalgebra::DMatrix;
 
@@ -26,7 +26,7 @@ fn truth() -> Modal {
 /// Realization `r`: random-phase multisines on both inputs, two periods of steady state.
 fn record(sys: &Modal, r: u64, noise: f64) -> Record {
     let n = 256;
-    let mut rng = Pcg32::new(100 + r);
+    let mut rng = Rng::new(100 + r);
     let u: Vec<Vec<f64>> = (0..2)
         .map(|_| {
             let ph: Vec<f64> = (1..n / 2)

@@ -1,12 +1,18 @@
-//! AD4000-family SAR ADC (AD4000..AD4011, AD4020): CNV rising edge starts a conversion,
-//! the result is read MSB first after `t_CONV`. 16-bit parts use 2-byte frames, 18/20-bit
-//! parts 3-byte frames, the code left-aligned. Pseudo-differential parts (AD4000/2/6/8/10)
-//! deliver straight binary, fully differential ones (AD4001/3/5/7/11/20) two's complement.
+//! AD4000-family SAR ADC (AD4000..AD4011, AD4020) in 3-wire CS mode: CNV is both the
+//! conversion start and the chip select. A CNV rising edge samples the input and starts a
+//! conversion; the interface mode is latched from SDI at that edge (SDI high: CS mode, the
+//! one this driver runs; SDI low: daisy-chain mode). CNV stays high for `t_CONV`, then
+//! falls and the result is read MSB first. 16-bit parts use 2-byte frames, 18/20-bit parts
+//! 3-byte frames, the code left-aligned. Pseudo-differential parts (AD4000/2/6/8/10) deliver
+//! straight binary, fully differential ones (AD4001/3/5/7/11/20) two's complement.
 //!
 //! The configuration register is written with the command `0x14` and read with `0x54`,
-//! each followed by one data byte.
+//! each followed by one data byte, clocked in on SDI as the first bits of a CNV frame (after
+//! a CNV rising edge with SDI high and `t_CONV`): outside such a frame the part ignores them.
+//! SDI stays at the last bit the bus sent, so every frame here ends with SDI high (all-ones
+//! read words, a trailing 0xFF after a register write) and the next CNV edge finds CS mode.
 
-use super::Error;
+use super::{Error, SpiClock};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use embedded_hal::spi::{Operation, SpiDevice};
@@ -20,8 +26,11 @@ pub const REG_TURBO: u8 = 1 << 1;
 pub const REG_HIGHZ: u8 = 1 << 2;
 pub const REG_SPAN_COMPRESSION: u8 = 1 << 3;
 pub const REG_STATUS_BITS: u8 = 1 << 4;
-/// Conversion time, worst case over the family (ns).
+/// Conversion time, the datasheet maximum (AD4020 data sheet Rev. B, Table 3, `t_CONV`
+/// max 320 ns; the AD4000/AD4003 family's is the same): CNV must stay high this long.
 pub const T_CONV_NS: u32 = 320;
+/// Fastest SCK (AD4020 Rev. B, Table 3: `t_SCK` >= 9.8 ns with VIO above 2.7 V).
+pub const SCK_MAX_HZ: u32 = 102_040_816;
 
 /// How the part codes the result.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,15 +50,19 @@ pub struct Ad4000Config {
     pub turbo: bool,
     /// High-Z input mode.
     pub high_z: bool,
+    /// SCK rate the board runs the part at (Hz); the driver asks the bus for at most this
+    /// and at most [`SCK_MAX_HZ`].
+    pub sck_hz: u32,
 }
 
 impl Ad4000Config {
-    /// AD4020: 20 bit, two's complement, turbo.
+    /// AD4020: 20 bit, two's complement, turbo, 25 MHz SCK.
     pub const AD4020: Self = Self {
         bits: 20,
         format: CodeFormat::TwosComplement,
         turbo: true,
         high_z: false,
+        sck_hz: 25_000_000,
     };
 
     /// The configuration register value.
@@ -75,36 +88,59 @@ impl Ad4000Config {
     }
 }
 
-/// AD4000-family driver.
+/// All-ones words: a read that holds SDI high (no register command, CS mode at the next
+/// CNV edge).
+const ONES: [u8; 3] = [0xFF; 3];
+
+/// AD4000-family driver: the bus, the CNV pin (a GPIO while configuring; on a board whose
+/// timer drives CNV, a no-op pin afterwards) and a delay for `t_CONV`.
 #[derive(Debug)]
-pub struct Ad4000<SPI, CNV> {
+pub struct Ad4000<SPI, CNV, D> {
     spi: SPI,
     cnv: CNV,
+    delay: D,
     config: Ad4000Config,
 }
 
-impl<SPI: SpiDevice, CNV: OutputPin> Ad4000<SPI, CNV> {
-    /// Takes the bus and the CNV pin (driven low: idle).
+impl<SPI: SpiDevice + SpiClock, CNV: OutputPin, D: DelayNs> Ad4000<SPI, CNV, D> {
+    /// Takes the bus, the CNV pin (driven low: idle) and a delay.
     pub fn new(
         spi: SPI,
         mut cnv: CNV,
+        delay: D,
         config: Ad4000Config,
     ) -> Result<Self, Error<SPI::Error, CNV::Error>> {
         if !matches!(config.bits, 16 | 18 | 20) {
             return Err(Error::Config("ad4000.bits must be 16, 18 or 20"));
         }
+        if config.sck_hz == 0 {
+            return Err(Error::Config("ad4000.sck_hz must be above 0"));
+        }
         cnv.set_low().map_err(Error::Pin)?;
-        Ok(Self { spi, cnv, config })
+        Ok(Self {
+            spi,
+            cnv,
+            delay,
+            config,
+        })
     }
 
     pub fn config(&self) -> &Ad4000Config {
         &self.config
     }
 
-    /// Writes the configuration register and reads it back.
+    /// Writes the configuration register and reads it back, each in a CNV frame of its own
+    /// (CNV must be this driver's GPIO here). Leaves CNV low and SDI high.
     pub fn init(&mut self) -> Result<(), Error<SPI::Error, CNV::Error>> {
+        let hz = self.config.sck_hz.min(SCK_MAX_HZ);
+        if self.spi.set_sclk_max_hz(hz) == 0 {
+            return Err(Error::Config("ad4000: the bus cannot run SCK that slow"));
+        }
+        // SDI high before the first CNV edge: an all-ones read with CNV low (the part shifts
+        // out its last result; all-ones SDI is no command).
+        self.spi.write(&ONES[..1]).map_err(Error::Spi)?;
         let reg = self.config.register();
-        self.spi.write(&[CMD_WRITE, reg]).map_err(Error::Spi)?;
+        self.frame(&mut [0; 3], &[CMD_WRITE, reg, 0xFF])?;
         let read = self.read_register()?;
         // Bit 0 is the read-only over-voltage flag.
         if read & !1 != reg {
@@ -116,13 +152,23 @@ impl<SPI: SpiDevice, CNV: OutputPin> Ad4000<SPI, CNV> {
         Ok(())
     }
 
-    /// Reads the configuration register.
+    /// Reads the configuration register (in a CNV frame of its own: CNV must be this
+    /// driver's GPIO).
     pub fn read_register(&mut self) -> Result<u8, Error<SPI::Error, CNV::Error>> {
-        let mut buf = [0u8; 2];
-        self.spi
-            .transaction(&mut [Operation::Transfer(&mut buf, &[CMD_READ, 0xFF])])
-            .map_err(Error::Spi)?;
+        let mut buf = [0u8; 3];
+        self.frame(&mut buf, &[CMD_READ, 0xFF, 0xFF])?;
         Ok(buf[1])
+    }
+
+    /// One CNV frame: rising edge (SDI is high: CS mode), `t_CONV`, falling edge, then
+    /// `mosi` clocked in and the part's SDO into `miso`.
+    fn frame(&mut self, miso: &mut [u8], mosi: &[u8]) -> Result<(), Error<SPI::Error, CNV::Error>> {
+        self.cnv.set_high().map_err(Error::Pin)?;
+        self.delay.delay_ns(T_CONV_NS);
+        self.cnv.set_low().map_err(Error::Pin)?;
+        self.spi
+            .transaction(&mut [Operation::Transfer(miso, mosi)])
+            .map_err(Error::Spi)
     }
 
     /// CNV rising edge: the input is sampled now and the conversion starts.
@@ -131,25 +177,25 @@ impl<SPI: SpiDevice, CNV: OutputPin> Ad4000<SPI, CNV> {
         self.cnv.set_high().map_err(Error::Pin)
     }
 
-    /// Reads the result of the conversion started last (call `T_CONV_NS` after the start).
+    /// Reads the result of the conversion started last: CNV falls (call it [`T_CONV_NS`]
+    /// after the start) and the frame is clocked out with SDI held high.
     #[inline]
     pub fn read(&mut self) -> Result<i32, Error<SPI::Error, CNV::Error>> {
         self.cnv.set_low().map_err(Error::Pin)?;
         let mut buf = [0u8; 3];
         let n = self.config.frame_bytes();
         let frame = buf.get_mut(..n).unwrap_or(&mut []);
-        self.spi.read(frame).map_err(Error::Spi)?;
+        self.spi
+            .transaction(&mut [Operation::Transfer(frame, ONES.get(..n).unwrap_or(&ONES))])
+            .map_err(Error::Spi)?;
         Ok(decode(&self.config, buf))
     }
 
     /// Start, wait the conversion time, read.
     #[inline]
-    pub fn convert(
-        &mut self,
-        delay: &mut impl DelayNs,
-    ) -> Result<i32, Error<SPI::Error, CNV::Error>> {
+    pub fn convert(&mut self) -> Result<i32, Error<SPI::Error, CNV::Error>> {
         self.start_conversion()?;
-        delay.delay_ns(T_CONV_NS);
+        self.delay.delay_ns(T_CONV_NS);
         self.read()
     }
 
@@ -158,8 +204,8 @@ impl<SPI: SpiDevice, CNV: OutputPin> Ad4000<SPI, CNV> {
         &mut self.spi
     }
 
-    pub fn release(self) -> (SPI, CNV) {
-        (self.spi, self.cnv)
+    pub fn release(self) -> (SPI, CNV, D) {
+        (self.spi, self.cnv, self.delay)
     }
 }
 
@@ -206,6 +252,7 @@ mod tests {
                     format,
                     turbo: true,
                     high_z: false,
+                    sck_hz: 25_000_000,
                 };
                 let (lo, hi) = c.code_range();
                 for code in [lo, lo + 1, (-1).max(lo), 0, 1, hi / 3, hi - 1, hi] {

@@ -7,6 +7,13 @@
 //! inside `Delta` and `B u` outside; here `b u` is the known input channel and `Delta` the
 //! rest, which is what the ADRC law (11) divides by `b0 d_p` for.)
 //!
+//! As in the seed, the ESO (eq. 10) is the chain `y' = y', y'' = Delta + b u, Delta' = 0`
+//! when `a1 = a2 = 0` (the `adrc` of `piezo sim` and the firmware), and the law (eq. 11)
+//! `u = (y_d'' + lambda1 (y_d' - y'^) + lambda0 (y_d - y) - Delta^) / b` takes the measured
+//! `y` in its position term and the ESO's `y'^` and `Delta^`. With a known structure
+//! (`a1, a2 > 0`) the ESO estimates only the rest of `Delta` and the law adds the known part
+//! back, `+ a1 y'^ + a2 y`.
+//!
 //! # Discretisation (stable for every `eps > 0`)
 //! The chain `y, y', Delta` is discretised exactly (zero-order hold of `u`), and the
 //! correction is a current estimator with `y[k]` whose gains put all three poles of the
@@ -158,13 +165,12 @@ impl<T: Real> Adrc<T> {
         self.state.u_ff_prev = ff;
         let z = self.state.z;
         let sp = &io.setpoint;
-        // 000 eq. (11).
-        let u_fb = (sp.ddy
-            + self.lambda1 * (sp.dy - z[1])
-            + self.lambda0 * (sp.y_um - z[0])
+        // 000 eq. (11): the measured y in the position term, the ESO's y' and Delta (and,
+        // with a known linear structure, its part of Delta evaluated at the same signals).
+        let u_fb = (sp.ddy + self.lambda1 * (sp.dy - z[1]) + self.lambda0 * (sp.y_um - io.y_um)
+            - z[2]
             + self.cfg.a1 * z[1]
-            + self.cfg.a2 * z[0]
-            - z[2])
+            + self.cfg.a2 * io.y_um)
             / self.cfg.b;
         let u = ff + u_fb;
         if u.is_finite() && z.iter().all(|v| v.is_finite()) {
@@ -236,6 +242,40 @@ mod tests {
                 assert!((ci - wi).abs() < 1e-9, "eps {eps}: {c:?} vs {want:?}");
             }
         }
+    }
+
+    /// Eq. (11) takes the measured `y` in its position term (not the ESO's `y^`).
+    #[test]
+    fn law_uses_the_measured_position() {
+        let cfg = AdrcConfig {
+            b: 1e7,
+            a1: 0.0,
+            a2: 0.0,
+            eps_s: 2e-4,
+            omega_c: 1000.0,
+            feedforward: false,
+            dt_s: 1e-5,
+        };
+        let mut a = Adrc::new(cfg).unwrap();
+        let io = |y: f64| LoopSignals {
+            setpoint: crate::signals::Setpoint {
+                y_um: 5.0,
+                dy: 30.0,
+                ddy: 100.0,
+            },
+            y_um: y,
+            u_ff: 0.0,
+            u_applied: 1.0,
+        };
+        a.update(&io(4.0)); // primes
+        let u = a.update(&io(4.2));
+        let z = a.state.z;
+        assert!(
+            (z[0] - 4.2).abs() > 1e-3,
+            "the ESO does not jump to y: {z:?}"
+        );
+        let want = (100.0 + 2000.0 * (30.0 - z[1]) + 1e6 * (5.0 - 4.2) - z[2]) / 1e7;
+        assert!((u - want).abs() < 1e-12, "{u} vs {want}");
     }
 
     #[test]

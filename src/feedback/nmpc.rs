@@ -1,8 +1,8 @@
 //! Nonlinear MPC with the Bouc-Wen family (GBW by default) as prediction model, on the HGO's
 //! estimates (000 Part IV, "Model Predictive Control with Hysteresis").
 //!
-//! At every `decimation`-th sample it minimises, over a fixed horizon of [`HORIZON`] moves
-//! held for `decimation` samples each,
+//! At every `decimation`-th sample it minimises, over a fixed horizon of `H` moves
+//! ([`HORIZON`] = 8 in the firmware and `piezo sim`) held for `decimation` samples each,
 //! `sum_k (y[k+1] - y_d[k+1])^2 + r * sum_k (u[k] - u_ref[k])^2`
 //! where `u_ref` is the previous move (increment penalty) or, with `feedforward`, the
 //! feedforward voltage (the lecture's `R ||u_k||^2` measured from the feedforward, which
@@ -16,10 +16,11 @@
 //! local slope of every move (`dv/du = d_p - slope(h, s)`) propagated through the linear
 //! part, and drops the hysteresis memory (`d h[k] / d u[j]`, `k > j + 1`); the model
 //! prediction itself is exact. Moves are projected into `[u_min, u_max]`. Everything is
-//! fixed-size arrays: no allocation, bounded work (`iterations * (HORIZON model steps +
-//! HORIZON^3/6 Cholesky)`).
+//! fixed-size arrays: no allocation, bounded work (`iterations * (H model steps +
+//! H^3/6 Cholesky)`). [`Nmpc::cost`] evaluates that cost for any plan (the tests check the
+//! solver against an exhaustive search of it on short horizons).
 
-// Dense matrix code reads best with indices; every index is below the const HORIZON of
+// Dense matrix code reads best with indices; every index is below the const H of
 // fixed-size arrays, so none can go out of bounds.
 #![allow(clippy::needless_range_loop)]
 
@@ -29,7 +30,7 @@ use crate::hysteresis::{ensure, ensure_finite, ParamError};
 use crate::real::Real;
 use crate::signals::LoopSignals;
 
-/// Prediction horizon (moves).
+/// Prediction horizon (moves) of the firmware's and `piezo sim`'s NMPC (the default `H`).
 pub const HORIZON: usize = 8;
 /// Upper bound of Gauss-Newton iterations per solve.
 pub const MAX_ITERATIONS: usize = 4;
@@ -49,29 +50,43 @@ pub struct NmpcConfig<T> {
     pub feedforward: bool,
 }
 
+/// HGO + NMPC over a horizon of `H` moves.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Nmpc<T> {
+pub struct Nmpc<T, const H: usize = HORIZON> {
     hgo: Hgo<T>,
     cfg: NmpcConfig<T>,
     /// Linear part at the MPC period: `exp(-a M dt)`, `1 - exp(-a M dt)`.
     ad: T,
     gd: T,
     dt_mpc: T,
-    state: NmpcState<T>,
+    state: NmpcState<T, H>,
     pub(crate) guard: InputGuard<T>,
 }
 
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct NmpcState<T> {
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NmpcState<T, const H: usize = HORIZON> {
     pub obs: HgoState<T>,
-    pub plan: [T; HORIZON],
+    pub plan: [T; H],
     pub count: u32,
     pub u_hold: T,
     pub fresh: bool,
 }
 
-impl<T: Real> Nmpc<T> {
+impl<T: Real, const H: usize> Default for NmpcState<T, H> {
+    fn default() -> Self {
+        Self {
+            obs: HgoState::default(),
+            plan: [T::ZERO; H],
+            count: 0,
+            u_hold: T::ZERO,
+            fresh: false,
+        }
+    }
+}
+
+impl<T: Real, const H: usize> Nmpc<T, H> {
     pub fn new(hgo: Hgo<T>, cfg: NmpcConfig<T>) -> Result<Self, ParamError> {
+        ensure(H >= 2, "NMPC: horizon H >= 2")?;
         ensure_finite(&[cfg.r, cfg.u_min, cfg.u_max], "NMPC: finite parameters")?;
         ensure(cfg.decimation >= 1, "NMPC: decimation >= 1")?;
         ensure(cfg.r > T::ZERO, "NMPC: r > 0")?;
@@ -100,7 +115,7 @@ impl<T: Real> Nmpc<T> {
     pub fn config(&self) -> &NmpcConfig<T> {
         &self.cfg
     }
-    pub fn state(&self) -> &NmpcState<T> {
+    pub fn state(&self) -> &NmpcState<T, H> {
         &self.state
     }
     pub fn observer(&self) -> &Hgo<T> {
@@ -132,15 +147,15 @@ impl<T: Real> Nmpc<T> {
     /// Predicted outputs for `plan` from the current estimates; returns also the local
     /// `dv/du` of every move.
     #[inline]
-    fn rollout(&self, plan: &[T; HORIZON], u_prev: T) -> ([T; HORIZON], [T; HORIZON]) {
+    fn rollout(&self, plan: &[T; H], u_prev: T) -> ([T; H], [T; H]) {
         let m = self.hgo.model();
         let lo = m.d() / T::from_f64(20.0);
         let mut x = self.state.obs.x;
         let mut h = self.state.obs.h;
         let dist = self.state.obs.d;
         let mut u0 = u_prev;
-        let mut y = [T::ZERO; HORIZON];
-        let mut dvdu = [T::ZERO; HORIZON];
+        let mut y = [T::ZERO; H];
+        let mut dvdu = [T::ZERO; H];
         for ((yk, gk), &u) in y.iter_mut().zip(dvdu.iter_mut()).zip(plan.iter()) {
             let du = u - u0;
             h = m.advance_h(h, u0, du);
@@ -152,24 +167,50 @@ impl<T: Real> Nmpc<T> {
         (y, dvdu)
     }
 
+    /// The reference previewed over the horizon: `y_d + y_d' t + y_d'' t^2/2` at the end of
+    /// every move.
+    fn reference(&self, io: &LoopSignals<T>) -> [T; H] {
+        let sp = &io.setpoint;
+        let mut reference = [T::ZERO; H];
+        for (k, r) in reference.iter_mut().enumerate() {
+            let t = self.dt_mpc * T::from_usize(k + 1);
+            *r = sp.y_um + sp.dy * t + sp.ddy * t * t * T::HALF;
+        }
+        reference
+    }
+
+    /// The cost the solver minimises, for `plan` from the current estimates, with the
+    /// setpoint, feedforward and applied voltage of `io`:
+    /// `sum_k (y[k+1] - y_d[k+1])^2 + r * sum_k (u[k] - u_ref[k])^2`.
+    pub fn cost(&self, plan: &[T; H], io: &LoopSignals<T>) -> T {
+        let (y, _) = self.rollout(plan, io.u_applied);
+        let reference = self.reference(io);
+        let mut j = T::ZERO;
+        for (k, (yk, rk)) in y.iter().zip(reference.iter()).enumerate() {
+            let before = if k == 0 { io.u_applied } else { plan[k - 1] };
+            let du = if self.cfg.feedforward {
+                plan[k] - io.u_ff
+            } else {
+                plan[k] - before
+            };
+            j += (*yk - *rk) * (*yk - *rk) + self.cfg.r * du * du;
+        }
+        j
+    }
+
     fn solve(&mut self, io: &LoopSignals<T>) {
-        let n = HORIZON;
+        let n = H;
         let u_prev = io.u_applied;
         // Warm start: shift the previous plan.
         let mut plan = self.state.plan;
         plan.rotate_left(1);
         plan[n - 1] = plan[n - 2];
-        let sp = &io.setpoint;
-        let mut reference = [T::ZERO; HORIZON];
-        for (k, r) in reference.iter_mut().enumerate() {
-            let t = self.dt_mpc * T::from_usize(k + 1);
-            *r = sp.y_um + sp.dy * t + sp.ddy * t * t * T::HALF;
-        }
+        let reference = self.reference(io);
         let r_w = self.cfg.r;
         for _ in 0..self.cfg.iterations {
             let (y, g) = self.rollout(&plan, u_prev);
             // J[i][j] = gd * ad^(i-j) * g[j] for i >= j.
-            let mut jac = [[T::ZERO; HORIZON]; HORIZON];
+            let mut jac = [[T::ZERO; H]; H];
             for j in 0..n {
                 let mut c = self.gd * g[j];
                 for row in jac.iter_mut().skip(j) {
@@ -178,8 +219,8 @@ impl<T: Real> Nmpc<T> {
                 }
             }
             // Normal equations H d = -grad.
-            let mut hm = [[T::ZERO; HORIZON]; HORIZON];
-            let mut grad = [T::ZERO; HORIZON];
+            let mut hm = [[T::ZERO; H]; H];
+            let mut grad = [T::ZERO; H];
             for i in 0..n {
                 let res = y[i] - reference[i];
                 for j in 0..=i {
@@ -220,7 +261,7 @@ impl<T: Real> Nmpc<T> {
             self.state.plan = plan;
             self.state.u_hold = plan[0];
         } else {
-            self.state.plan = [u_prev; HORIZON];
+            self.state.plan = [u_prev; H];
             self.state.u_hold = u_prev;
         }
     }
@@ -229,7 +270,7 @@ impl<T: Real> Nmpc<T> {
         let u = io.u_applied;
         self.state = NmpcState {
             obs: self.hgo.init(io.y_um, u),
-            plan: [u; HORIZON],
+            plan: [u; H],
             count: 0,
             u_hold: u,
             fresh: false,
@@ -245,11 +286,8 @@ impl<T: Real> Nmpc<T> {
 
 /// Solves `H d = g` for symmetric positive definite `H` (Cholesky); `None` if a pivot is
 /// not positive.
-fn cholesky_solve<T: Real>(
-    mut a: [[T; HORIZON]; HORIZON],
-    g: [T; HORIZON],
-) -> Option<[T; HORIZON]> {
-    let n = HORIZON;
+fn cholesky_solve<T: Real, const H: usize>(mut a: [[T; H]; H], g: [T; H]) -> Option<[T; H]> {
+    let n = H;
     for j in 0..n {
         let mut d = a[j][j];
         for k in 0..j {

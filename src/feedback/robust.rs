@@ -59,9 +59,16 @@ pub fn finite_time_decay<T: Real>(e: T, k: T, alpha: T, dt: T) -> T {
 /// `slope = A_bw - (B_bw sgn(u') sgn(h) + G_bw)|h|`; solving for `u'` gives
 /// `u' = (v_d' + lambda2 (h_hat - h_d)) / (d_p - slope)`. Its denominator is `dv/du`, positive
 /// for a monotone actuator (`d_p > A_bw`); it is guarded into `[d_p/20, 2 d_p + A_bw]`
-/// (and `h_hat` bounded) so a bad estimate cannot blow the step up. Eq. (8) as printed has
-/// `A_bw - ...` alone in the denominator and `+lambda2`; with `h_d` depending on `u` that
-/// sign makes `e_h` grow, so the implicit form above is used (see the report).
+/// (and `h_hat` bounded) so a bad estimate cannot blow the step up.
+///
+/// Eq. (8) as printed, `u' = [h_d' + lambda2 (h_hat - h_d)] / slope`, differs in two
+/// independent ways:
+/// * the sign of `lambda2`: it makes `h_hat' = slope u' = h_d' + lambda2 e_h`, i.e.
+///   `e_h' = +lambda2 e_h`, which grows for every `lambda2 > 0` even if `h_d` did not depend
+///   on `u`; decay needs `h_d' - lambda2 e_h`;
+/// * the denominator: `h_d` of eq. (7) contains `d_p u`, so `h_d' = d_p u' - v_d'` contains
+///   `u'` and eq. (8) is implicit in `u'`. Solving `slope u' = d_p u' - v_d' - lambda2 e_h`
+///   gives the form above, denominator `d_p - slope` instead of `slope`.
 ///
 /// Discretely: the integral of eq. (8) runs from `io.u_applied` (saturation never winds it
 /// up), `lambda2` enters as the exact decay `c = 1 - exp(-lambda2 dt)` per sample.

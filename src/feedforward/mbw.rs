@@ -11,6 +11,9 @@ use crate::real::Real;
 /// is estimated from `v_r` instead of the applied voltage (eq. 9-10); the command is
 /// `v_c = k_p*v_r - w_hat/d` (eq. 12; `k_p = 1` is eq. 11). No model inversion and no
 /// algebraic loop; the price is the error between `w_hat(v_r)` and `w(v_c)`.
+///
+/// [`MbwFf::with_offset`] adds the output offset of an identified model (`piezo fit` fits
+/// `y = offset + M(u)`): `v_r = (y_r - offset)/d`. 002's stage is zeroed, so eq. (8) has none.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MbwFf<T> {
     model: Mbw002<T>,
@@ -18,6 +21,8 @@ pub struct MbwFf<T> {
     dt_s: T,
     volts_min: T,
     volts_max: T,
+    /// Output of the model at zero input (um).
+    offset_um: T,
     /// `h_hat` driven by `v_r` (eq. 10).
     h: T,
     v_r: T,
@@ -46,12 +51,24 @@ impl<T: Real> MbwFf<T> {
             dt_s,
             volts_min,
             volts_max,
+            offset_um: T::ZERO,
             h: T::ZERO,
             v_r: T::ZERO,
             u: T::ZERO,
         };
         s.reset(T::ZERO);
         Ok(s)
+    }
+
+    /// The same compensator for a model `y = offset_um + M(u)`.
+    pub fn with_offset(mut self, offset_um: T) -> Result<Self, FfError> {
+        super::ensure(
+            offset_um.is_finite(),
+            "MBW feedforward: offset_um must be finite",
+        )?;
+        self.offset_um = offset_um;
+        self.reset(offset_um);
+        Ok(self)
     }
 
     pub fn k_p(&self) -> T {
@@ -64,7 +81,7 @@ impl<T: Real> MbwFf<T> {
             return self.u;
         }
         let d = self.model.abw().d();
-        let v_r = y_ref_um / d; // eq. (8)
+        let v_r = (y_ref_um - self.offset_um) / d; // eq. (8)
         let dv = v_r - self.v_r;
         self.h = self.model.abw().advance_h(self.h, dv); // eq. (10)
         self.v_r = v_r;
@@ -92,7 +109,7 @@ impl<T: Real> MbwFf<T> {
     /// Restart at rest at `y_um`.
     pub fn reset(&mut self, y_um: T) {
         let y = if y_um.is_finite() { y_um } else { T::ZERO };
-        self.v_r = y / self.model.abw().d();
+        self.v_r = (y - self.offset_um) / self.model.abw().d();
         self.h = T::ZERO;
         self.u = (self.k_p * self.v_r).clamp_to(self.volts_min, self.volts_max);
     }
@@ -129,9 +146,12 @@ impl<T: Real> ImsModel<T> for Gbw<T> {
     fn d(&self) -> T {
         self.d()
     }
-    /// `dh/du = alpha*(A - (B*s + G)*|h|^n)` with `G > |B|` is at most `alpha*A` (at `h = 0`).
+    /// `dh/du = alpha*(A - (B_h*s*sgn(h) + B*s + G)*|h|^n)`: the coefficient of `|h|^n` is
+    /// at least `G - B_h - |B|` (`h` opposing the motion), so the slope is at most
+    /// `alpha*(A + max(0, B_h + |B| - G)*h_bound^n)`; `alpha*A` for eq. (3) as printed.
     fn max_h_slope(&self) -> T {
-        self.alpha() * self.a()
+        let k = (self.beta_h() + self.b().abs() - self.g()).max(T::ZERO);
+        self.alpha() * (self.a() + k * self.h_bound().abs_pow(self.n()))
     }
 }
 

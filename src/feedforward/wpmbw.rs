@@ -1,11 +1,32 @@
 //! Direct inverse of the WPMBW model with inverse linear dynamics and the full-pass
 //! prefilter (004 eq. 17, 18, 27, 28).
 
+use super::prefilter::FullPass;
+use super::zpetc::Zpetc;
 use super::{ensure, FfError};
 use crate::hysteresis::phi;
 use crate::hysteresis::{MbwRlm, Wpmbw};
 use crate::real::Real;
 use crate::signals::Setpoint;
+
+/// Largest polynomial order `L` of 004 eq. (7) the inverse takes.
+pub const MAX_POLY: usize = 4;
+
+/// Newton steps of the polynomial inverse for `L >= 3` (each halves the bracket at worst).
+const POLY_ITER: usize = 40;
+
+/// The inverse linear dynamics of 004 eq. (27).
+#[derive(Debug, Clone, PartialEq)]
+pub enum InverseDynamics<T> {
+    /// None (a static model).
+    Static,
+    /// `v = (a0*y + a1*y' + a2*y'')/b0` from the setpoint's derivatives: 004 eq. (27) with
+    /// `n = 2`, its zeros ignored as 004 does.
+    Derivatives(LinearPart<T>),
+    /// Stable inversion of a model of any order with zeros anywhere (ZPETC); the setpoint
+    /// must come [`Zpetc::preview`] samples ahead.
+    Zpetc(Zpetc<T>),
+}
 
 /// Second-order linear part `a2*y'' + a1*y' + a0*y = b0*v` (004 eq. 8 with `n = 2`,
 /// zeros ignored as in 004 eq. 27).
@@ -29,32 +50,10 @@ impl<T: Real> LinearPart<T> {
     }
 }
 
-/// Exact discretisation of the critically damped (`zeta = 1`) homogeneous error dynamics of
-/// the full-pass filter (004 eq. 28): `y_d = y_r + e`, `e'' + 2*wn*e' + wn^2*e = 0`, so
-/// `y_d` starts where the stage is and joins `y_r` without overshoot.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Prefilter<T> {
-    wn: T,
-    phi: [[T; 2]; 2],
-}
-
-impl<T: Real> Prefilter<T> {
-    fn new(wn: T, dt: T) -> Self {
-        let x = wn * dt;
-        let ex = (-x).exp();
-        Self {
-            wn,
-            phi: [
-                [ex * (T::ONE + x), ex * dt],
-                [-ex * wn * x, ex * (T::ONE - x)],
-            ],
-        }
-    }
-}
-
-/// Inverse WPMBW feedforward (004 eq. 27): `v_hat` from the inverse linear dynamics,
-/// `w_hat` from the inverse polynomial (eq. 17, `L <= 2`), `u` from the inverse MBW
-/// (eq. 18).
+/// Inverse WPMBW feedforward (004 eq. 27): `v_hat` from the inverse linear dynamics
+/// ([`InverseDynamics`]), `w_hat` from the inverse polynomial (eq. 17 for `L <= 2`; for
+/// `L >= 3`, which 004 leaves to Cardano or Newton, a safeguarded Newton iteration on the
+/// monotone branch through `w = 0`), `u` from the inverse MBW (eq. 18).
 ///
 /// Eq. (18) is, on a piece of fixed direction `s`, the linear ODE
 /// `du/dw = 1/rho - s*lambda*u + s*mu*w`; it is integrated exactly over each sample's
@@ -64,25 +63,25 @@ impl<T: Real> Prefilter<T> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct WpmbwInverse<T> {
     mbw: MbwRlm<T>,
-    c1: T,
-    c2: T,
-    linear: Option<LinearPart<T>>,
-    prefilter: Option<Prefilter<T>>,
+    /// `c_1..c_L`, zero beyond `L`.
+    c: [T; MAX_POLY],
+    order: usize,
+    /// `L >= 3`: the monotone branch through `w = 0` bracketed, `[w_lo, w_hi]` with
+    /// `v(w_lo), v(w_hi)`.
+    branch: [T; 4],
+    dynamics: InverseDynamics<T>,
+    prefilter: Option<FullPass<T>>,
     volts_min: T,
     volts_max: T,
     // state
     u: T,
     w: T,
-    e: T,
-    e_dot: T,
-    armed: bool,
-    y_start: T,
 }
 
 impl<T: Real> WpmbwInverse<T> {
-    /// `linear`: the identified linear dynamics to invert (None: static), `prefilter_wn`:
-    /// natural frequency (rad/s) of the eq. (28) filter (None: no prefilter), `dt_s` the
-    /// sample period. Starts at rest at 0 V.
+    /// `linear`: the identified second-order linear dynamics to invert from the setpoint's
+    /// derivatives (None: static), `prefilter_wn`: natural frequency (rad/s) of the eq. (28)
+    /// filter (None: no prefilter), `dt_s` the sample period. Starts at rest at 0 V.
     pub fn new<const L: usize>(
         model: &Wpmbw<T, L>,
         linear: Option<LinearPart<T>>,
@@ -91,69 +90,150 @@ impl<T: Real> WpmbwInverse<T> {
         volts_max: T,
         dt_s: T,
     ) -> Result<Self, FfError> {
-        super::check_range(volts_min, volts_max)?;
-        super::check_dt(dt_s)?;
-        ensure(
-            (1..=2).contains(&L),
-            "WPMBW inverse: polynomial order L = 1 or 2 (004 eq. 17)",
-        )?;
-        let c = model.coefficients();
-        let c1 = c.first().copied().unwrap_or(T::ZERO);
-        let c2 = c.get(1).copied().unwrap_or(T::ZERO);
-        ensure(
-            c1 > T::ZERO,
-            "WPMBW inverse: c1 > 0 (v increasing in w at w = 0)",
-        )?;
         if let Some(l) = linear {
             ensure(
                 [l.a0, l.a1, l.a2, l.b0].iter().all(|x| x.is_finite()) && l.b0 != T::ZERO,
                 "WPMBW inverse: linear coefficients finite and b0 != 0",
             )?;
         }
-        let prefilter = match prefilter_wn {
-            Some(wn) => {
-                ensure(
-                    wn.is_finite() && wn > T::ZERO,
-                    "WPMBW inverse: prefilter wn finite and > 0 (004 eq. 28)",
-                )?;
-                Some(Prefilter::new(wn, dt_s))
-            }
-            None => None,
+        let dynamics = match linear {
+            Some(l) => InverseDynamics::Derivatives(l),
+            None => InverseDynamics::Static,
+        };
+        let prefilter = prefilter_wn
+            .map(|wn| FullPass::eq28(wn, dt_s))
+            .transpose()?;
+        Self::with_dynamics(model, dynamics, prefilter, volts_min, volts_max, dt_s)
+    }
+
+    /// As [`WpmbwInverse::new`] with any [`InverseDynamics`], e.g. the ZPETC of 004's
+    /// identified `n = 4, m = 2` model with its right-half-plane zeros, and any
+    /// [`FullPass`] prefilter (eq. 28 or a smoother order for a high-order inverse).
+    pub fn with_dynamics<const L: usize>(
+        model: &Wpmbw<T, L>,
+        dynamics: InverseDynamics<T>,
+        prefilter: Option<FullPass<T>>,
+        volts_min: T,
+        volts_max: T,
+        dt_s: T,
+    ) -> Result<Self, FfError> {
+        super::check_range(volts_min, volts_max)?;
+        super::check_dt(dt_s)?;
+        ensure(
+            (1..=MAX_POLY).contains(&L),
+            "WPMBW inverse: polynomial order L = 1 ..= MAX_POLY",
+        )?;
+        let mut c = [T::ZERO; MAX_POLY];
+        c[..L].copy_from_slice(model.coefficients());
+        ensure(
+            c[0] > T::ZERO,
+            "WPMBW inverse: c1 > 0 (v increasing in w at w = 0)",
+        )?;
+        ensure(
+            c.iter().all(|x| x.is_finite()),
+            "WPMBW inverse: coefficients must be finite",
+        )?;
+        // Trailing zero coefficients do not count (a fitted c_3 = 0 is order 2).
+        let order = c.iter().rposition(|x| *x != T::ZERO).map_or(1, |i| i + 1);
+        let mbw = *model.mbw();
+        let branch = if order >= 3 {
+            monotone_branch(&c[..order], &mbw, volts_min, volts_max)?
+        } else {
+            [T::ZERO; 4]
         };
         let mut s = Self {
-            mbw: *model.mbw(),
-            c1,
-            c2,
-            linear,
+            mbw,
+            c,
+            order,
+            branch,
+            dynamics,
             prefilter,
             volts_min,
             volts_max,
             u: T::ZERO,
             w: T::ZERO,
-            e: T::ZERO,
-            e_dot: T::ZERO,
-            armed: false,
-            y_start: T::ZERO,
         };
         s.reset_volts(T::ZERO);
         Ok(s)
     }
 
+    /// Samples the setpoint must come ahead of the sample it is for (ZPETC's preview).
+    pub fn preview(&self) -> usize {
+        match &self.dynamics {
+            InverseDynamics::Zpetc(z) => z.preview(),
+            _ => 0,
+        }
+    }
+
+    /// `v = sum c_i w^i` (004 eq. 7).
+    #[inline]
+    fn poly(&self, w: T) -> T {
+        self.c
+            .iter()
+            .take(self.order)
+            .rev()
+            .fold(T::ZERO, |acc, &c| (acc + c) * w)
+    }
+
     /// 004 eq. (17), cancellation free; outside the invertible range (past the vertex of
-    /// the parabola) the vertex.
+    /// the parabola) the vertex. For `L >= 3` the root on the monotone branch through
+    /// `w = 0` (bracketed at construction), by Newton steps kept inside the bracket,
+    /// warm-started from the last `w`; outside the branch its end.
     #[inline]
     pub fn poly_inverse(&self, v: T) -> T {
-        if self.c2 == T::ZERO {
-            return v / self.c1;
+        let (c1, c2) = (self.c[0], self.c[1]);
+        if self.order >= 3 {
+            return self.poly_newton(v);
         }
-        let vertex = -self.c1 * self.c1 / (T::from_f64(4.0) * self.c2);
-        let v = if self.c2 > T::ZERO {
+        if c2 == T::ZERO {
+            return v / c1;
+        }
+        let vertex = -c1 * c1 / (T::from_f64(4.0) * c2);
+        let v = if c2 > T::ZERO {
             v.max(vertex)
         } else {
             v.min(vertex)
         };
-        let disc = (self.c1 * self.c1 + T::from_f64(4.0) * self.c2 * v).max(T::ZERO);
-        T::TWO * v / (self.c1 + disc.sqrt())
+        let disc = (c1 * c1 + T::from_f64(4.0) * c2 * v).max(T::ZERO);
+        T::TWO * v / (c1 + disc.sqrt())
+    }
+
+    fn poly_newton(&self, v: T) -> T {
+        let [mut lo, mut hi, v_lo, v_hi] = self.branch;
+        if !(v > v_lo) {
+            return lo;
+        }
+        if !(v < v_hi) {
+            return hi;
+        }
+        let tol = T::EPSILON * T::from_f64(8.0) * (v.abs() + T::ONE);
+        let mut w = self.w.clamp_to(lo, hi);
+        for _ in 0..POLY_ITER {
+            let f = self.poly(w) - v;
+            if f.abs() <= tol {
+                break;
+            }
+            if f > T::ZERO {
+                hi = w;
+            } else {
+                lo = w;
+            }
+            let slope = self
+                .c
+                .iter()
+                .take(self.order)
+                .enumerate()
+                .rev()
+                .fold(T::ZERO, |acc, (i, &c)| acc * w + T::from_usize(i + 1) * c);
+            let step = w - f / slope;
+            // Newton inside the bracket, else bisection.
+            w = if step > lo && step < hi {
+                step
+            } else {
+                T::HALF * (lo + hi)
+            };
+        }
+        w
     }
 
     /// 004 eq. (18) integrated exactly from `(u, w)` over `dw`.
@@ -176,28 +256,16 @@ impl<T: Real> WpmbwInverse<T> {
             return self.u;
         }
         let fin = |x: T| if x.is_finite() { x } else { T::ZERO };
-        let (dy_r, ddy_r) = (fin(sp.dy), fin(sp.ddy));
         // 004 eq. (28): y_d = y_r + e.
-        let (mut y_d, mut dy_d, mut ddy_d) = (y_r, dy_r, ddy_r);
-        if let Some(f) = &self.prefilter {
-            if !self.armed {
-                self.e = self.y_start - y_r;
-                self.e_dot = -dy_r;
-                self.armed = true;
-            } else {
-                let (e, ed) = (self.e, self.e_dot);
-                self.e = f.phi[0][0] * e + f.phi[0][1] * ed;
-                self.e_dot = f.phi[1][0] * e + f.phi[1][1] * ed;
-            }
-            let e_ddot = -T::TWO * f.wn * self.e_dot - f.wn * f.wn * self.e;
-            y_d += self.e;
-            dy_d += self.e_dot;
-            ddy_d += e_ddot;
-        }
-        // 004 eq. (27), third line (zeros ignored).
-        let v = match &self.linear {
-            Some(l) => (l.a0 * y_d + l.a1 * dy_d + l.a2 * ddy_d) / l.b0,
-            None => y_d,
+        let (y_d, dy_d, ddy_d) = match &mut self.prefilter {
+            Some(f) => f.apply(sp),
+            None => (y_r, fin(sp.dy), fin(sp.ddy)),
+        };
+        // 004 eq. (27), third line.
+        let v = match &mut self.dynamics {
+            InverseDynamics::Static => y_d,
+            InverseDynamics::Derivatives(l) => (l.a0 * y_d + l.a1 * dy_d + l.a2 * ddy_d) / l.b0,
+            InverseDynamics::Zpetc(z) => z.command(y_d),
         };
         let w = self.poly_inverse(v);
         let u = self.inverse_mbw_step(self.u, self.w, w - self.w);
@@ -226,28 +294,72 @@ impl<T: Real> WpmbwInverse<T> {
         let u0 = if u0.is_finite() { u0 } else { T::ZERO };
         self.u = u0.clamp_to(self.volts_min, self.volts_max);
         self.w = T::ZERO;
-        self.e = T::ZERO;
-        self.e_dot = T::ZERO;
-        self.armed = false;
-        self.y_start = T::ZERO;
+        if let InverseDynamics::Zpetc(z) = &mut self.dynamics {
+            z.reset(T::ZERO);
+        }
+        if let Some(f) = &mut self.prefilter {
+            f.restart(T::ZERO);
+        }
     }
 
     /// Restart at the setpoint: the stage is assumed at rest there (`w` from eq. 17, `u`
     /// on the band centre `mu/lambda*w`), and the prefilter starts on the reference.
     pub fn reset(&mut self, y_um: T) {
         let y = if y_um.is_finite() { y_um } else { T::ZERO };
-        let v = match &self.linear {
-            Some(l) if l.a0 != T::ZERO => l.a0 * y / l.b0,
+        let v = match &mut self.dynamics {
+            InverseDynamics::Derivatives(l) if l.a0 != T::ZERO => l.a0 * y / l.b0,
+            InverseDynamics::Zpetc(z) => {
+                z.reset(y);
+                z.dc_input(y)
+            }
             _ => y,
         };
         self.w = self.poly_inverse(v);
         self.u =
             (self.mbw.mu() / self.mbw.lambda() * self.w).clamp_to(self.volts_min, self.volts_max);
-        self.e = T::ZERO;
-        self.e_dot = T::ZERO;
-        self.armed = false;
-        self.y_start = y;
+        if let Some(f) = &mut self.prefilter {
+            f.restart(y);
+        }
     }
+}
+
+/// The monotone branch of `v(w) = sum c_i w^i` through `w = 0` (between the nearest real
+/// roots of `v'`), limited to twice the MBW output bound over the voltage range (004
+/// eq. 16), as `[w_lo, w_hi, v(w_lo), v(w_hi)]`. Construction time, f64.
+fn monotone_branch<T: Real>(
+    c: &[T],
+    mbw: &MbwRlm<T>,
+    volts_min: T,
+    volts_max: T,
+) -> Result<[T; 4], FfError> {
+    use crate::linear::poly::{roots, Complex, MAX_DEGREE};
+    let mut dc = [0.0f64; MAX_POLY];
+    for (i, ci) in c.iter().enumerate() {
+        dc[i] = (i + 1) as f64 * ci.to_f64();
+    }
+    let mut r = [Complex::default(); MAX_DEGREE];
+    let nr = roots(&dc[..c.len()], &mut r)?;
+    let (rho, lambda, mu) = (mbw.rho().to_f64(), mbw.lambda().to_f64(), mbw.mu().to_f64());
+    let umax = libm::fmax(
+        libm::fabs(volts_min.to_f64()),
+        libm::fabs(volts_max.to_f64()),
+    );
+    let wb = 2.0 * (lambda / mu * umax + libm::fabs((lambda - rho * mu) / (rho * mu * lambda)));
+    let (mut lo, mut hi) = (-wb, wb);
+    for z in r[..nr].iter().filter(|z| z.im == 0.0) {
+        if z.re > 0.0 {
+            hi = libm::fmin(hi, z.re);
+        } else if z.re < 0.0 {
+            lo = libm::fmax(lo, z.re);
+        }
+    }
+    let poly = |w: f64| c.iter().rev().fold(0.0, |acc, ci| (acc + ci.to_f64()) * w);
+    let out = [lo, hi, poly(lo), poly(hi)];
+    ensure(
+        lo < 0.0 && hi > 0.0 && out.iter().all(|x| x.is_finite()),
+        "WPMBW inverse: no monotone branch of the polynomial through w = 0",
+    )?;
+    Ok(out.map(T::from_f64))
 }
 
 #[cfg(test)]
@@ -371,12 +483,41 @@ mod tests {
     }
 
     #[test]
-    fn rejects_cubic_and_bad_filter() {
-        let m3 = Wpmbw::new(MbwRlm::new(0.6, 0.7, 0.8).unwrap(), [0.8, 0.02, 0.001]).unwrap();
-        assert!(WpmbwInverse::new(&m3, None, None, 0.0, 1.0, 1e-3)
+    fn inverts_any_fitted_order_and_rejects_bad_filter() {
+        // The fit's WPMBW is cubic (004 eq. 7 with L = 3); L = 4 too; a cubic with a
+        // negative c3 has a bounded monotone branch.
+        let mbw = MbwRlm::new(0.6, 0.7, 0.8).unwrap();
+        let dt = 1e-3;
+        for c in [
+            [0.8, 0.02, 0.001, 0.0],
+            [0.8, -0.02, 0.004, 1e-4],
+            [0.9, 0.01, -0.002, 0.0],
+        ] {
+            let m4 = Wpmbw::new(mbw, c).unwrap();
+            let mut inv = WpmbwInverse::new(&m4, None, None, -20.0, 20.0, dt).unwrap();
+            for &w in &[-3.0, -0.5, 1e-6, 0.7, 4.0] {
+                let back = inv.poly_inverse(m4.poly(w));
+                assert!(
+                    (back - w).abs() < 1e-12 * w.abs().max(1.0),
+                    "{c:?} {w} {back}"
+                );
+            }
+            // The whole inverse tracks the exact model.
+            let mut s = m4.init(0.0);
+            let mut worst = 0.0f64;
+            for k in 1..5000 {
+                let t = k as f64 * dt;
+                let sp = Setpoint::hold(4.0 * (2.0 * PI * t).sin() + 2.0 * (7.0 * t).sin());
+                let u = inv.compensate(&sp);
+                worst = worst.max((m4.step(&mut s, u, dt) - sp.y_um).abs());
+            }
+            assert!(worst < 1e-6, "{c:?}: {worst}");
+        }
+        let m5 = Wpmbw::new(mbw, [0.8, 0.02, 0.001, 0.0, 1e-5]).unwrap();
+        assert!(WpmbwInverse::new(&m5, None, None, 0.0, 1.0, 1e-3)
             .unwrap_err()
             .0
-            .contains("L = 1 or 2"));
+            .contains("MAX_POLY"));
         assert!(WpmbwInverse::new(&model(), None, Some(-1.0), 0.0, 1.0, 1e-3).is_err());
     }
 }

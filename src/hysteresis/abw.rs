@@ -1,10 +1,16 @@
 //! Asymmetric Bouc-Wen models (001 eq. 3, 002 eq. 3) and the MBW of 002 (eq. 4-5), all in
 //! piezo form `y = d*u - h`.
 //!
-//! Mapping from the `y = k*v + h` form of 001/002: `d = k`, `alpha -> -alpha`,
-//! `gamma -> -gamma`, `delta -> -delta`, `beta, n, p, q` unchanged. E.g. the MBW of
-//! 002 table 1 (`alpha = -0.0656, beta = 0.3922, gamma = -0.15, delta = -0.011`) is
-//! `alpha = 0.0656, beta = 0.3922, gamma = 0.15, delta = 0.011` here.
+//! Mapping from the `y = k*v + h` form of 001/002 (`h_piezo = -h`): `d = k`,
+//! `alpha -> -alpha`, `gamma -> -gamma`, `beta, n, p, q` unchanged, and `delta` by form:
+//! * 002 eq. (3), `+delta*|v'|`: the piezo form [`AbwAbs`] keeps `+delta*|u'|`, so
+//!   `delta -> -delta` ([`AbwAbs::from_002`]). E.g. the MBW of 002 table 1 (`alpha =
+//!   -0.0656, beta = 0.3922, gamma = -0.15, delta = -0.011`) is `alpha = 0.0656, beta =
+//!   0.3922, gamma = 0.15, delta = 0.011` here.
+//! * 001 eq. (3), `+delta*u*sgn(u')`: the piezo form [`AbwU`] writes `-delta*u*sgn(u')`
+//!   (as 004 eq. 21), so `delta` keeps its sign ([`AbwU::from_001`]). E.g. 001's ABW at
+//!   140 V (`[alpha, beta, gamma, delta] = [-0.3, 0.0025, 0.002, 0.18]`) is `alpha = 0.3,
+//!   beta = 0.0025, gamma = -0.002, delta = 0.18` here.
 
 use super::{
     ensure, ensure_finite, rk4_kinked, sane_input, step_piecewise_affine, substeps, BwState,
@@ -98,6 +104,12 @@ impl<T: Real> AbwU<T> {
             delta,
             max_du,
         })
+    }
+
+    /// 001's `y = k*v + h` parameters (eq. 3 order) mapped to the piezo form: `alpha` and
+    /// `gamma` change sign, `delta` does not (see the module doc).
+    pub fn from_001(k: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
+        Self::new(k, -alpha, beta, -gamma, n, delta)
     }
 
     pub fn d(&self) -> T {
@@ -481,6 +493,41 @@ mod tests {
             u = un;
         }
         assert!((s.h - h_ref).abs() < 1e-6, "{} vs {h_ref}", s.h);
+    }
+
+    /// 001 eq. (3) integrated as printed (`y = k*u + h`, fine RK4 in time) against
+    /// `AbwU::from_001`: the mapping (delta keeps its sign) gives the same output.
+    #[test]
+    fn from_001_reproduces_the_seed_form() {
+        // 001 sec. IV's ABW at 140 V: [alpha, beta, gamma, delta] = [-0.3, 0.0025, 0.002, 0.18].
+        let (k, al, be, ga, de) = (0.2, -0.3, 0.0025, 0.002, 0.18);
+        let m = AbwU::from_001(k, al, be, ga, 1.0, de).unwrap();
+        let dt = 1e-2;
+        let (mut s, mut h, mut u) = (m.init(0.0), 0.0f64, 0.0);
+        let mut worst = 0.0f64;
+        for j in 1..300 {
+            let un = 70.0 * (1.0 - (j as f64 * dt * std::f64::consts::TAU).cos());
+            let y = m.step(&mut s, un, dt);
+            let rate = (un - u) / dt;
+            // 001 eq. (3) with n = 1: h' = alpha u' - beta |u'| h - gamma u' |h| + delta u sgn(u').
+            let f = |h: f64, t: f64| {
+                al * rate - be * rate.abs() * h - ga * rate * h.abs()
+                    + de * (u + rate * t) * rate.signum()
+            };
+            let n = 400;
+            let d = dt / n as f64;
+            for i in 0..n {
+                let t = i as f64 * d;
+                let k1 = f(h, t);
+                let k2 = f(h + 0.5 * d * k1, t + 0.5 * d);
+                let k3 = f(h + 0.5 * d * k2, t + 0.5 * d);
+                let k4 = f(h + d * k3, t + d);
+                h += d / 6.0 * (k1 + 2.0 * (k2 + k3) + k4);
+            }
+            u = un;
+            worst = worst.max((y - (k * un + h)).abs());
+        }
+        assert!(worst < 1e-6 * (k * 140.0), "largest difference {worst}");
     }
 
     #[test]

@@ -8,8 +8,14 @@ use crate::real::Real;
 
 /// Classical Bouc-Wen, piezo form: `y = d*u - h` (000 eq. 2, 003 eq. 2, 004 eq. 1) with
 /// `dh/dt = alpha*du/dt - beta*|du/dt|*|h|^(n-1)*h - gamma*du/dt*|h|^n`
-/// (000 eq. 1 with the exponent `n` of 001 eq. 2; `alpha, beta, gamma` are the lecture's
+/// (000 eq. 1 with an exponent `n`; `alpha, beta, gamma` are the lecture's
 /// `A_bw, B_bw, G_bw`).
+///
+/// Exponent form: 001 eq. (2) (and 002 eq. 2) print the `beta` term as
+/// `beta*|v'|*|h|^n*h`, i.e. `|h|^(n+1)` against the `gamma` term's `|h|^n`. Their own
+/// eq. (3) and 002 eq. (7) (`n = 1`: `beta*|v'|*h`) use `|h|^(n-1)*h`, the usual Bouc-Wen
+/// form; that is what is implemented here, so both terms scale as `|h|^n` and `n = 1` is
+/// the lecture's eq. (1). The `n` of 001's comparison (`piezo fit --model cbw-n`) is this one.
 ///
 /// Parameters are accepted only when the loops are bounded (004 eq. 3):
 /// `alpha > 0`, `beta + gamma > 0`, `beta - gamma >= 0`, and `n >= 1`.

@@ -7,29 +7,39 @@ use super::{
 use crate::real::Real;
 
 /// Generalized Bouc-Wen, piezo form `y = d*u - h` with
-/// `dh/dt = alpha*[du/dt*(A - (B*sgn(du/dt) + G)*|h|^n)]` (000 eq. 3).
+/// `dh/dt = alpha*[du/dt*(A - (B_h*sgn(du/dt*h) + B*sgn(du/dt) + G)*|h|^n)]`:
+/// 000 eq. (3) plus the term `B_h*sgn(u'*h)` (`beta_h`) that eq. (3) needs to nest CBW.
 ///
-/// Unlike CBW the `B` term multiplies `|h|^n`, not `|h|^(n-1)*h`: moving up, `h` settles at
+/// With `B_h = 0` this is eq. (3) as printed ([`Gbw::new`]). Unlike CBW its `B` term
+/// multiplies `|h|^n`, not `|h|^(n-1)*h`: moving up, `h` settles at
 /// `h_up = (A/(B+G))^(1/n)`, moving down at `-h_down = -(A/(G-B))^(1/n)`, so `B != 0` makes
-/// the loop asymmetric.
+/// the loop asymmetric. But eq. (3) as printed is not bounded for `B != 0`: with `B > 0`, a
+/// long descent takes `h` below `-h_up`, where the slope on the next ascent is negative and
+/// `h` runs away (and symmetrically for `B < 0`). The model therefore keeps `dh/du >= 0` (`h`
+/// never moves against the input, as in CBW inside its bounds): in the run-away region `h`
+/// holds. This bounds `-h_down <= h <= h_up` ([`Gbw::h_bound`]), but a periodic input still
+/// ratchets `h` toward the larger equilibrium, where the guard freezes it: after a few
+/// full-stroke cycles the printed eq. (3) has no loop left (test
+/// `printed_form_loses_its_loop`). And with `B = 0` it has none to begin with
+/// (`dh/du = alpha*(A - G*|h|^n)` in both directions). So eq. (3) as printed neither nests
+/// CBW (the lecture's claim for `alpha = n = 1`) nor keeps an asymmetric loop.
 ///
-/// Taken literally eq. (3) is not bounded for `B != 0`: with `B > 0`, a long descent takes
-/// `h` below `-h_up`, where the slope on the next ascent is negative and `h` runs away
-/// (and symmetrically for `B < 0`). The model therefore keeps `dh/du >= 0` (`h`
-/// never moves against the input, as in CBW inside its bounds): in the run-away region
-/// `h` holds. This changes nothing for sweeps that stay out of that region and bounds
-/// `-h_down <= h <= h_up` ([`Gbw::h_bound`]).
+/// The lecture's nesting claim holds with the CBW term `B_h*sgn(u'*h)*|h|^n`
+/// (`= beta*|u'|*|h|^(n-1)*h` of 000 eq. 1): `alpha = n = 1`, `B = 0` is CBW exactly
+/// ([`Gbw::with_beta_h`]; test `nests_cbw`), and `B` then only tilts the loop. For
+/// `B_h >= G + |B|` no run-away region exists (the slope toward `h = 0` is at least
+/// `alpha*A`), and a periodic input settles on an asymmetric loop between
+/// `-(A/(B_h - B + G))^(1/n)` and `(A/(B_h + B + G))^(1/n)`.
 ///
-/// Because the rise settles at `h_up` and the fall at `-h_down`, a zero-mean periodic input
-/// ratchets `h` toward the larger equilibrium: the loops drift until they sit against it
-/// (visible in `piezo demo`); this is eq. (3)'s own behaviour, not a discretisation effect.
-///
-/// Accepted when `alpha > 0`, `A > 0`, `G > |B|` (both equilibria exist), `n >= 1`.
+/// Accepted when `alpha > 0`, `A > 0`, `B_h >= 0`, `B_h + G > |B|` (both equilibria exist),
+/// `n >= 1`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gbw<T> {
     d: T,
     alpha: T,
     a: T,
+    /// `B_h`, the CBW term (0 in eq. 3 as printed).
+    bh: T,
     b: T,
     g: T,
     n: T,
@@ -41,19 +51,39 @@ pub struct Gbw<T> {
 }
 
 impl<T: Real> Gbw<T> {
-    /// `d` piezo coefficient (um/V), `alpha` (scale), `a, b, g` (the lecture's
-    /// `A_bw, B_bw, G_bw`), exponent `n`.
+    /// 000 eq. (3) as printed: `d` piezo coefficient (um/V), `alpha` (scale), `a, b, g` (the
+    /// lecture's `A_bw, B_bw, G_bw`), exponent `n`.
     pub fn new(d: T, alpha: T, a: T, b: T, g: T, n: T) -> Result<Self, ParamError> {
+        Self::with_beta_h(d, alpha, a, T::ZERO, b, g, n)
+    }
+
+    /// Eq. (3) with the CBW term `beta_h*sgn(u'*h)*|h|^n` (see the type's doc); `beta_h = 0`
+    /// is [`Gbw::new`].
+    pub fn with_beta_h(
+        d: T,
+        alpha: T,
+        a: T,
+        beta_h: T,
+        b: T,
+        g: T,
+        n: T,
+    ) -> Result<Self, ParamError> {
         ensure_finite(
-            &[d, alpha, a, b, g, n],
+            &[d, alpha, a, beta_h, b, g, n],
             "GBW: all parameters must be finite",
         )?;
         ensure(alpha > T::ZERO, "GBW: alpha > 0")?;
         ensure(a > T::ZERO, "GBW: A > 0")?;
-        ensure(g > b.abs(), "GBW: G > |B| (bounded up and down equilibria)")?;
+        ensure(beta_h >= T::ZERO, "GBW: B_h >= 0")?;
+        ensure(
+            beta_h + g > b.abs(),
+            "GBW: B_h + G > |B| (bounded up and down equilibria)",
+        )?;
         ensure(n >= T::ONE, "GBW: n >= 1")?;
-        let h_max = (a / (g - b.abs())).powf(T::ONE / n);
-        let lipschitz = alpha * n * (b.abs() + g) * h_max.abs_pow(n - T::ONE);
+        let h_hi = (a / (beta_h + g + b)).powf(T::ONE / n);
+        let h_down = (a / (beta_h + g - b)).powf(T::ONE / n);
+        let h_max = h_hi.max(h_down);
+        let lipschitz = alpha * n * (beta_h + b.abs() + g.abs()) * h_max.abs_pow(n - T::ONE);
         let max_du = T::from_f64(0.1) / lipschitz;
         ensure(
             max_du.is_finite() && max_du > T::ZERO && h_max.is_finite(),
@@ -63,12 +93,13 @@ impl<T: Real> Gbw<T> {
             d,
             alpha,
             a,
+            bh: beta_h,
             b,
             g,
             n,
             max_du,
-            h_lo: -(a / (g - b)).powf(T::ONE / n),
-            h_hi: (a / (g + b)).powf(T::ONE / n),
+            h_lo: -h_down,
+            h_hi,
         })
     }
 
@@ -82,6 +113,10 @@ impl<T: Real> Gbw<T> {
     pub fn a(&self) -> T {
         self.a
     }
+    /// `B_h`, the CBW term (0 for eq. 3 as printed).
+    pub fn beta_h(&self) -> T {
+        self.bh
+    }
     /// `B_bw`.
     pub fn b(&self) -> T {
         self.b
@@ -94,14 +129,14 @@ impl<T: Real> Gbw<T> {
         self.n
     }
 
-    /// Equilibrium of `h` for a long rise: `(A/(B+G))^(1/n)`.
+    /// Equilibrium of `h` for a long rise: `(A/(B_h+B+G))^(1/n)`.
     pub fn h_up(&self) -> T {
-        (self.a / (self.b + self.g)).powf(T::ONE / self.n)
+        self.h_hi
     }
 
-    /// Magnitude of the equilibrium of `h` for a long fall: `(A/(G-B))^(1/n)`.
+    /// Magnitude of the equilibrium of `h` for a long fall: `(A/(B_h+G-B))^(1/n)`.
     pub fn h_down(&self) -> T {
-        (self.a / (self.g - self.b)).powf(T::ONE / self.n)
+        -self.h_lo
     }
 
     /// Bound of `|h|`: `max(h_up, h_down)`.
@@ -113,7 +148,8 @@ impl<T: Real> Gbw<T> {
     /// run-away guard.
     #[inline]
     pub fn slope_raw(&self, h: T, s: T) -> T {
-        self.alpha * (self.a - (self.b * s + self.g) * h.abs_pow(self.n))
+        let k = self.bh * s * h.sgn() + self.b * s + self.g;
+        self.alpha * (self.a - k * h.abs_pow(self.n))
     }
 
     /// `dh/du` of the model (eq. 3 with the guard `dh/du >= 0`).
@@ -135,9 +171,10 @@ impl<T: Real> Gbw<T> {
             return h;
         }
         if self.n == T::ONE {
-            // |h| = sigma*h: dh/du = alpha*A - alpha*(B*s + G)*sigma*h.
+            // |h| = sigma*h, sgn(h) = sigma:
+            // dh/du = alpha*A - alpha*(B_h*s + (B*s + G)*sigma)*h.
             step_piecewise_affine(h, du, self.alpha * self.a, |sigma| {
-                self.alpha * (self.b * s + self.g) * sigma
+                self.alpha * (self.bh * s + (self.b * s + self.g) * sigma)
             })
         } else {
             rk4_input(h, u0, du, self.max_du, |h, _| self.slope(h, s))
@@ -177,7 +214,7 @@ mod tests {
     fn rejects_unbounded_parameters() {
         assert_eq!(
             Gbw::new(0.16, 1.0, 0.07, 0.03, 0.02, 1.0).unwrap_err().0,
-            "GBW: G > |B| (bounded up and down equilibria)"
+            "GBW: B_h + G > |B| (bounded up and down equilibria)"
         );
         assert_eq!(
             Gbw::new(0.16, 0.0, 0.07, 0.0, 0.02, 1.0).unwrap_err().0,
@@ -241,6 +278,86 @@ mod tests {
             s.h,
             h_ref
         );
+    }
+
+    /// `alpha = n = 1`, `B = 0`: the same loop as CBW (the lecture's nesting claim).
+    #[test]
+    fn nests_cbw() {
+        use crate::hysteresis::Cbw;
+        let c = Cbw::with_n1(0.16, 0.07, 0.02, 0.01).unwrap();
+        let g = Gbw::with_beta_h(0.16, 1.0, 0.07, 0.02, 0.0, 0.01, 1.0).unwrap();
+        let (mut sc, mut sg) = (c.init(0.0), g.init(0.0));
+        for k in 1..4000 {
+            let u = 90.0 * (k as f64 * 0.003).sin() * (-(k as f64) * 3e-4).exp();
+            let (yc, yg) = (c.step(&mut sc, u, 1e-3), g.step(&mut sg, u, 1e-3));
+            assert!((yc - yg).abs() < 1e-12, "{k}: {yc} vs {yg}");
+        }
+        assert!((g.h_bound() - c.h_bound()).abs() < 1e-12);
+    }
+
+    /// Loop width (largest |h_up - h_down| at equal input) of the last of `cycles`
+    /// full-stroke cycles, and the range of `h` in it.
+    fn last_loop(m: &Gbw<f64>, cycles: usize) -> (f64, f64, f64) {
+        let n = 400;
+        let mut s = m.init(0.0);
+        let (mut up, mut dn) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for c in 0..cycles {
+            for k in 0..2 * n {
+                let ph = k as f64 / (2 * n) as f64 * std::f64::consts::TAU;
+                let u = 75.0 - 75.0 * ph.cos();
+                m.step(&mut s, u, 1e-4);
+                if c + 1 == cycles {
+                    let i = if k < n { k } else { 2 * n - 1 - k };
+                    if k < n {
+                        up[i] = s.h
+                    } else {
+                        dn[i] = s.h
+                    }
+                    lo = lo.min(s.h);
+                    hi = hi.max(s.h);
+                }
+            }
+        }
+        let w = up
+            .iter()
+            .zip(&dn)
+            .filter(|(a, b)| a.is_finite() && b.is_finite())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        (w, lo, hi)
+    }
+
+    /// Eq. (3) as printed, `B != 0`: the loop ratchets to the guard and vanishes; with the CBW
+    /// term it stays, asymmetric.
+    #[test]
+    fn printed_form_loses_its_loop() {
+        let printed = Gbw::new(0.93, 1.0, 0.3, 0.004, 0.008, 1.0).unwrap();
+        let (w_first, ..) = last_loop(&printed, 1);
+        let (w, ..) = last_loop(&printed, 20);
+        std::eprintln!("printed eq. (3): loop {w_first} um in cycle 1, {w} um in cycle 20");
+        assert!(w_first > 5.0 && w < 0.01 * w_first, "{w_first} -> {w}");
+        let full = Gbw::with_beta_h(0.93, 1.0, 0.3, 0.012, 0.006, 0.004, 1.0).unwrap();
+        let (w1, lo1, hi1) = last_loop(&full, 19);
+        let (w2, lo2, hi2) = last_loop(&full, 20);
+        assert!(w2 > 10.0 && (w2 - w1).abs() < 1e-6 * w2, "{w1} {w2}");
+        assert!((lo2 - lo1).abs() < 1e-9 && (hi2 - hi1).abs() < 1e-9);
+        assert!(-lo2 > 1.5 * hi2, "asymmetric: {lo2}..{hi2}");
+    }
+
+    #[test]
+    fn with_beta_h_closed_form_equals_fine_rk4() {
+        let m = Gbw::with_beta_h(0.93, 1.1, 0.3, 0.012, -0.005, 0.004, 1.0).unwrap();
+        let (mut h, mut h_ref, mut u) = (0.0, 0.0, 0.0);
+        for k in 1..3000 {
+            let un = 75.0 - 75.0 * (k as f64 * 0.01).cos();
+            let du = un - u;
+            h = m.advance_h(h, u, du);
+            h_ref = rk4_input(h_ref, u, du, 1e-3, |h, _| m.slope(h, du.signum()));
+            u = un;
+            assert!(h <= m.h_up() + 1e-12 && h >= -m.h_down() - 1e-12);
+        }
+        assert!((h - h_ref).abs() < 1e-6, "{h} vs {h_ref}");
     }
 
     #[test]

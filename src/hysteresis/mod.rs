@@ -18,7 +18,9 @@
 //!
 //! Sign convention: the Bouc-Wen family uses the piezo form `y = d*u - h` of 000 eq. (2),
 //! 003 eq. (2) and 004 eq. (1). Seeds 001 and 002 write `y = k*v + h`; their parameters map
-//! by `alpha -> -alpha`, `gamma -> -gamma`, `delta -> -delta` (k, beta, p, q unchanged).
+//! by `alpha -> -alpha`, `gamma -> -gamma` (k, beta, n, p, q unchanged) and, for `delta`,
+//! as the form says: `delta -> -delta` for 002's `+delta*|v'|`, `delta -> delta` for 001's
+//! `+delta*u*sgn(u')` (the piezo form writes that term with a minus; see [`abw`]).
 
 pub mod abw;
 pub mod cbw;

@@ -21,13 +21,27 @@ pub struct Args {
     pub rate_hz: f64,
 }
 
-/// A decaying sine from 0: `u(t) = amp * e^(-t/tau) * sin(2 pi f t)`, 1 Hz, 6 s.
+/// Length of the fade-in of [`decaying_sine`] (s): its first quarter period.
+const FADE_IN_S: f64 = 0.25;
+
+/// A decaying sine from rest: `u(t) = amp * w(t) * e^(-t/tau) * sin(2 pi f t)`, 1 Hz, 6 s,
+/// with the fade-in `w = sin^2(pi t / (2 T))` over the first quarter period `T`, so that
+/// both the input and its rate start at 0 (the models start at rest). Without it the rate
+/// steps from 0 to `2 pi amp` V/s at `t = 0`, and a rate-dependent model answers that step
+/// with a step of its own: the 002 MBW's `p*u' + q*u'^3` jumped by 1.48 um at u = 0.
 pub fn decaying_sine(amp: f64, rate_hz: f64) -> (Vec<f64>, Vec<f64>) {
     let n = (6.0 * rate_hz) as usize;
     let t: Vec<f64> = (0..n).map(|k| k as f64 / rate_hz).collect();
     let u = t
         .iter()
-        .map(|t| amp * (-t / 2.5).exp() * (2.0 * std::f64::consts::PI * t).sin())
+        .map(|&t| {
+            let w = if t < FADE_IN_S {
+                (std::f64::consts::FRAC_PI_2 * t / FADE_IN_S).sin().powi(2)
+            } else {
+                1.0
+            };
+            amp * w * (-t / 2.5).exp() * (2.0 * std::f64::consts::PI * t).sin()
+        })
         .collect();
     (t, u)
 }
@@ -90,6 +104,25 @@ fn write_csv(path: &Path, t: &[f64], l: &Loop) -> Result<()> {
     }
     f.flush()?;
     Ok(())
+}
+
+/// 002 table 1, MBW column, driven by `u` from rest.
+fn mbw_002_loop(u: &[f64], dt: f64) -> Result<Loop> {
+    let mbw = Mbw002::from_002(1.0998, -0.0656, 0.3922, -0.15, 1.0, -0.011, 0.0108, 3.68e-5)?;
+    let mut s = mbw.init(0.0);
+    let (mut y, mut h, mut rate) = (Vec::new(), Vec::new(), Vec::new());
+    for &u in u {
+        y.push(mbw.step(&mut s, u, dt));
+        h.push(s.h);
+        rate.push(s.du_dt);
+    }
+    Ok(Loop {
+        name: "mbw_002",
+        ylabel: "y [um]",
+        u: u.to_vec(),
+        y,
+        extra: vec![("h", h), ("du_dt", rate)],
+    })
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -195,22 +228,7 @@ pub fn run(args: Args) -> Result<()> {
         extra: vec![("h", h)],
     });
 
-    // 002 table 1, MBW column.
-    let mbw = Mbw002::from_002(1.0998, -0.0656, 0.3922, -0.15, 1.0, -0.011, 0.0108, 3.68e-5)?;
-    let mut s = mbw.init(0.0);
-    let (mut y, mut h, mut rate) = (Vec::new(), Vec::new(), Vec::new());
-    for &u in &u5 {
-        y.push(mbw.step(&mut s, u, dt));
-        h.push(s.h);
-        rate.push(s.du_dt);
-    }
-    loops.push(Loop {
-        name: "mbw_002",
-        ylabel: "y [um]",
-        u: u5.clone(),
-        y,
-        extra: vec![("h", h), ("du_dt", rate)],
-    });
+    loops.push(mbw_002_loop(&u5, dt)?);
 
     // 004 fig. 5b (rho 0.5, lambda 0.4, mu 0.45) and the identified WPMBW, 004 eq. (19) input.
     let rlm = MbwRlm::new(0.5, 0.4, 0.45)?;
@@ -330,4 +348,52 @@ pub fn run(args: Args) -> Result<()> {
     write_grid(&svg, &plots, 4).with_context(|| format!("cannot write {}", svg.display()))?;
     println!("plot: {}", svg.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The largest change of the MBW output between two samples, and the loop's height.
+    fn mbw_steps(rate_hz: f64) -> (f64, f64) {
+        let (_, u) = decaying_sine(5.0, rate_hz);
+        let l = mbw_002_loop(&u, 1.0 / rate_hz).unwrap();
+        let jump =
+            l.y.windows(2)
+                .map(|w| (w[1] - w[0]).abs())
+                .fold(0.0, f64::max);
+        let (lo, hi) =
+            l.y.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| {
+                    (a.min(y), b.max(y))
+                });
+        (jump, hi - lo)
+    }
+
+    /// The demo's input is continuous and so is its rate; then the MBW loop is continuous:
+    /// its largest sample-to-sample step shrinks with the sample period (a jump would not).
+    #[test]
+    fn mbw_loop_is_continuous() {
+        let (j10k, height) = mbw_steps(10_000.0);
+        let (j100k, _) = mbw_steps(100_000.0);
+        eprintln!(
+            "largest step {j10k:.2e} um at 10 kHz, {j100k:.2e} um at 100 kHz ({height:.2} um loop)"
+        );
+        assert!(j10k < 2e-3 * height, "step {j10k} um of a {height} um loop");
+        assert!(
+            j100k < 0.2 * j10k,
+            "{j100k} um at 100 kHz vs {j10k} um at 10 kHz"
+        );
+    }
+
+    #[test]
+    fn decaying_sine_starts_at_rest() {
+        let (_, u) = decaying_sine(5.0, 10_000.0);
+        assert_eq!(u[0], 0.0);
+        assert!(
+            (u[1] - u[0]).abs() * 10_000.0 < 1e-3,
+            "rate {}",
+            (u[1] - u[0]) * 1e4
+        );
+    }
 }

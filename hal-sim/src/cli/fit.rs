@@ -1,6 +1,8 @@
 //! `piezo fit`: identify a model of the core from a CSV record.
 use crate::ident::fit::resample::Edge;
 use crate::ident::fit::{fit_siso, metrics, models, FitOptions, Fitted, Metrics};
+use crate::ident::multibw::{self, MultiBwFit};
+use crate::ident::optim::Optimizer;
 use crate::plot::{write_grid, Plot};
 use crate::record::Record;
 use anyhow::{Context, Result};
@@ -60,10 +62,13 @@ pub struct Args {
     /// Folder for plots (loops, time series, residuals) and fit.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Differential-evolution generations of the global search (0: LM only).
+    /// Global search: differential evolution or particle swarm (002 sec. 3).
+    #[arg(long, value_enum, default_value_t = Optimizer::De)]
+    pub optimizer: Optimizer,
+    /// Generations (DE) / iterations (PSO) of the global search (0: LM only).
     #[arg(long, default_value_t = 300)]
     pub generations: usize,
-    /// DE population (0: 10 per parameter).
+    /// DE population / PSO swarm size (0: 10 per parameter).
     #[arg(long, default_value_t = 0)]
     pub population: usize,
     #[arg(long, default_value_t = 1)]
@@ -119,6 +124,10 @@ pub struct Report {
     /// Two-step Hammerstein: the linear part identified first.
     pub linear_step: Option<Fitted>,
     pub parts: Vec<Part>,
+    /// `--model cbw` on a multi-axis record: the multivariable Bouc-Wen of 003 (its direct
+    /// transfers are also in `parts`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub multibw: Option<MultiBwFit>,
     pub train_metrics: Vec<ChannelMetrics>,
     pub valid_metrics: Vec<ChannelMetrics>,
     /// With `--valid-periodic`: the same validation record simulated from rest, for
@@ -135,7 +144,25 @@ fn name_channel(base: char, i: usize, n: usize) -> String {
     }
 }
 
-/// Simulates every output of `rec` with the identified parts.
+/// What [`identify`] found.
+#[derive(Debug)]
+pub struct Identified {
+    pub parts: Vec<Part>,
+    /// The multivariable Bouc-Wen of 003; when present it is the model (`parts` then hold
+    /// its direct transfers of step 1 for the report).
+    pub multibw: Option<MultiBwFit>,
+}
+
+/// Simulates every output of `rec` with the identified model (`periodic`: as
+/// [`simulate`]).
+fn simulate_identified(id: &Identified, rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
+    match &id.multibw {
+        Some(m) => m.simulate_periodic(&rec.u, periodic),
+        None => simulate(&id.parts, rec, periodic),
+    }
+}
+
+/// Simulates every output of `rec` with the identified parts (summed per output).
 pub fn simulate(parts: &[Part], rec: &Record, periodic: usize) -> Result<Vec<Vec<f64>>> {
     let mut out = vec![vec![0.0; rec.len()]; rec.y.len()];
     for p in parts {
@@ -177,12 +204,46 @@ fn all_metrics(rec: &Record, sim: &[Vec<f64>]) -> Vec<ChannelMetrics> {
         .collect()
 }
 
-/// Identifies `def` on `train`: one SISO fit, or the two-step multivariable procedure of
-/// 003 sec. IV for multi-axis records (direct pairs first, then couplings on what the
-/// direct models leave, kept where they lower the RMSE by more than 1 %). The coupling
-/// models are driven by their own input (a model of the class of `def` per pair), not by
-/// the direct state `h_j` as in 003 eq. (12).
+/// Identifies `def` on `train`: one SISO fit; for `cbw` on a multi-axis record the
+/// multivariable Bouc-Wen of 003 in its two steps (sec. IV: direct transfers, then
+/// couplings driven by the direct states `h_j`, eq. 12-13; [`multibw`]); for any other model
+/// on a multi-axis record, [`identify_pairs`].
 pub fn identify(
+    def: &'static models::ModelDef,
+    train: &Record,
+    opts: &FitOptions,
+) -> Result<Identified> {
+    let multi = train.u.len() > 1 || train.y.len() > 1;
+    if !(multi && def.name == "cbw") {
+        return Ok(Identified {
+            parts: identify_pairs(def, train, opts)?,
+            multibw: None,
+        });
+    }
+    let m = multibw::identify(train, opts)?;
+    let parts = m
+        .direct
+        .iter()
+        .enumerate()
+        .map(|(j, f)| Part {
+            kind: "direct",
+            input: j,
+            output: j,
+            fit: f.clone(),
+        })
+        .collect();
+    Ok(Identified {
+        parts,
+        multibw: Some(m),
+    })
+}
+
+/// One SISO fit, or for multi-axis records a model of the class of `def` per input-output
+/// pair, each with its own state: direct pairs first, then couplings `u_j -> y_i` fitted on
+/// what the direct models leave (kept where they lower the RMSE by more than 1 %), two
+/// rounds. This is not 003's coupling structure (there a coupling is driven by the direct
+/// state `h_j`, eq. 12); it serves the models that have no multivariable form.
+pub fn identify_pairs(
     def: &'static models::ModelDef,
     train: &Record,
     opts: &FitOptions,
@@ -306,6 +367,7 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     let mut opts = FitOptions {
+        optimizer: args.optimizer,
         generations: args.generations,
         population: args.population,
         seed: args.seed,
@@ -342,14 +404,14 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         None
     };
-    let parts = identify(def, &train, &opts)?;
-    let train_sim = simulate(&parts, &train, 0)?;
+    let id = identify(def, &train, &opts)?;
+    let train_sim = simulate_identified(&id, &train, 0)?;
     let valid_sim = valid
         .as_ref()
-        .map(|v| simulate(&parts, v, args.valid_periodic))
+        .map(|v| simulate_identified(&id, v, args.valid_periodic))
         .transpose()?;
     let valid_rest_sim = match &valid {
-        Some(v) if args.valid_periodic > 0 => Some(simulate(&parts, v, 0)?),
+        Some(v) if args.valid_periodic > 0 => Some(simulate_identified(&id, v, 0)?),
         _ => None,
     };
     let report = Report {
@@ -372,7 +434,8 @@ pub fn run(args: Args) -> Result<()> {
             (Some(v), Some(s)) => all_metrics(v, s),
             _ => Vec::new(),
         },
-        parts,
+        parts: id.parts,
+        multibw: id.multibw,
         seconds: t0.elapsed().as_secs_f64(),
     };
     if let Some(path) = &args.predict {
@@ -478,20 +541,63 @@ fn print_report(r: &Report) {
         );
     }
     for p in &r.parts {
+        let step1 = if r.multibw.is_some() {
+            " (003 step 1)"
+        } else {
+            ""
+        };
         println!(
-            "{} u{} -> y{}: sign {:+}, offset {:.6e}",
+            "{}{step1} u{} -> y{}: sign {:+}, offset {:.6e}",
             p.kind,
             p.input + 1,
             p.output + 1,
             p.fit.sign,
             p.fit.offset
         );
+        if let Some(g) = &p.fit.search {
+            println!(
+                "  global search {:?}: RMSE {:.6e} after {} evaluations ({} iterations, {:.2} s)",
+                g.optimizer, g.rmse, g.evals, g.iterations, g.seconds
+            );
+        }
         for (name, v) in &p.fit.params {
             println!("  {name:<16} {v:.6e}");
         }
         for (k, (f, z)) in p.fit.linear.iter().enumerate() {
             println!("  linear {}: f = {f:.4} Hz, zeta = {z:.4}", k + 1);
         }
+    }
+    if let Some(m) = &r.multibw {
+        println!(
+            "multivariable Bouc-Wen (003 eq. 4-7), {} outputs x {} inputs, rows = outputs:",
+            m.outputs, m.inputs
+        );
+        for (name, mat) in [("D", &m.d), ("A", &m.a), ("B", &m.b), ("Gamma", &m.gamma)] {
+            for (i, row) in mat.iter().enumerate() {
+                let cells: Vec<String> = row.iter().map(|v| format!("{v:>13.5e}")).collect();
+                let label = if i == 0 { name } else { "" };
+                println!("  {label:<6}{}", cells.join(" "));
+            }
+        }
+        let offs: Vec<String> = m.offset.iter().map(|v| format!("{v:.5e}")).collect();
+        println!("  offsets {}", offs.join(" "));
+        let list = |v: &[f64]| {
+            v.iter()
+                .map(|x| format!("{x:.4e}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        println!(
+            "  training RMSE after the two steps of 003: {}",
+            list(&m.two_step_rmse)
+        );
+        if !m.joint_rmse.is_empty() {
+            println!(
+                "  after the joint refinement (not in 003):  {}",
+                list(&m.joint_rmse)
+            );
+        }
+        println!("  multivariable IMS (003 eq. 16-19): {}", m.ims);
     }
     let show = |what: &str, ms: &[ChannelMetrics]| {
         for m in ms {

@@ -1,8 +1,10 @@
 //! `piezo predict`: simulate a saved `fit.json` from rest on an input record.
 use super::fit::{simulate, Part};
 use crate::ident::fit::{models, Fitted};
+use crate::ident::multibw::MultiBwFit;
 use crate::ident::ss::frf::detect_period;
 use crate::ident::ss::saved::SsJson;
+use crate::numeric::rmse;
 use crate::record::Record;
 use anyhow::{Context, Result};
 use serde_json::Value;
@@ -25,6 +27,8 @@ pub struct Args {
 #[derive(Debug)]
 pub enum Loaded {
     Ss(Box<SsJson>),
+    /// The multivariable Bouc-Wen of 003 (`piezo fit --model cbw` on several axes).
+    MultiBw(Box<MultiBwFit>),
     /// The per-channel models of the classic fits (cbw, structural-bw, ...).
     Parts {
         parts: Vec<Part>,
@@ -113,6 +117,13 @@ impl Loaded {
             s.to_model().with_context(|| p.clone())?;
             return Ok(Self::Ss(Box::new(s)));
         }
+        if let Some(m) = v.get("multibw").filter(|m| !m.is_null()) {
+            let m: MultiBwFit = serde_json::from_value(m.clone())
+                .with_context(|| format!("{p}: `multibw` is not a multivariable Bouc-Wen"))?;
+            m.simulate(&vec![vec![0.0; 2]; m.inputs])
+                .with_context(|| p.clone())?;
+            return Ok(Self::MultiBw(Box::new(m)));
+        }
         let parts = field(&v, "parts", &p)?
             .as_array()
             .with_context(|| format!("{p}: `parts` is not a list"))?
@@ -127,6 +138,7 @@ impl Loaded {
     pub fn inputs(&self) -> usize {
         match self {
             Self::Ss(s) => s.inputs,
+            Self::MultiBw(m) => m.inputs,
             Self::Parts { parts, .. } => parts.iter().map(|x| x.input + 1).max().unwrap_or(1),
         }
     }
@@ -134,6 +146,7 @@ impl Loaded {
     pub fn outputs(&self) -> usize {
         match self {
             Self::Ss(s) => s.outputs,
+            Self::MultiBw(m) => m.outputs,
             Self::Parts { outputs, .. } => *outputs,
         }
     }
@@ -157,6 +170,7 @@ impl Loaded {
                 );
                 s.simulate(&rec.u, rec.dt())
             }
+            Self::MultiBw(m) => m.simulate(&rec.u),
             Self::Parts { parts, outputs } => {
                 let shaped = Record {
                     y: vec![vec![0.0; rec.len()]; *outputs],
@@ -177,14 +191,7 @@ pub fn score_last_period(rec: &Record, sim: &[Vec<f64>]) -> (Vec<f64>, f64) {
         .y
         .iter()
         .zip(sim)
-        .map(|(y, s)| {
-            let se: f64 = y[start..]
-                .iter()
-                .zip(&s[start..])
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum();
-            (se / n as f64).sqrt()
-        })
+        .map(|(y, s)| rmse(&y[start..], &s[start..]))
         .collect();
     let mean = per.iter().sum::<f64>() / per.len().max(1) as f64;
     (per, mean)

@@ -1,5 +1,7 @@
 //! `piezo sim`: runs scenarios x controllers on the simulated stage and prints tracking
-//! metrics; `--json` for machines, `--out DIR` for CSV time series and SVG plots.
+//! metrics; `--json` for machines, `--out DIR` for CSV time series, SVG plots and each run
+//! as a `piezo fit` record (`<scenario>_<controller>_record.csv`: t, u = applied volts,
+//! y = measured um).
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::io::Write;
@@ -124,7 +126,7 @@ pub fn run(args: Args) -> Result<()> {
         .scenarios
         .iter()
         .cloned()
-        .partition(|s| crate::object::SCENARIOS.contains(&s.as_str()));
+        .partition(|s| crate::manipulation::SCENARIOS.contains(&s.as_str()));
     let only_manip = !manip.is_empty() && rest.is_empty();
     let run_manip = !manip.is_empty() || (args.scenarios.is_empty() && args.controllers.is_empty());
     let args = Args {
@@ -150,7 +152,7 @@ pub fn run(args: Args) -> Result<()> {
             println!("  {:<16} {}", c.name, c.about);
         }
         println!("manipulation scenarios (own observers and laws):");
-        for s in crate::object::SCENARIOS {
+        for s in crate::manipulation::SCENARIOS {
             println!("  {s}");
         }
         return Ok(());
@@ -196,7 +198,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let runs: Vec<&RunResult> = results.iter().map(|(r, _)| r).collect();
     let manip_rows = if run_manip {
-        crate::object::run_manipulation(&manip, args.out.as_deref())?
+        crate::manipulation::run_manipulation(&manip, args.out.as_deref())?
     } else {
         Vec::new()
     };
@@ -251,7 +253,7 @@ struct Runs<'a> {
 #[serde(untagged)]
 enum Row<'a> {
     Tracking(&'a RunResult),
-    Manipulation(&'a crate::object::ManipRow),
+    Manipulation(&'a crate::manipulation::ManipRow),
 }
 
 fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {
@@ -282,6 +284,10 @@ fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {
         writeln!(f)?;
     }
     f.flush()?;
+    // The same run as a `piezo fit` record (t, u = applied volts, y = measured um).
+    let path = dir.join(format!("{stem}_record.csv"));
+    std::fs::write(&path, rec.fit_record(None)?.to_csv())
+        .with_context(|| format!("cannot write {}", path.display()))?;
     let mut plots = Vec::new();
     for i in 0..n_ax {
         let err: Vec<f64> = rec.reference[i]

@@ -22,8 +22,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::{json, Value};
 
+use crate::numeric::rmse_all;
 pub use evidence::Evidence;
-use model::{creep_taus, fit_linear, rmse, Coords};
+use model::{creep_taus, fit_linear, Coords};
 pub use model::{Cause, Causes, OutputModel, Scales, Shape};
 
 /// Smallest relative gain on the validation record that counts as real.
@@ -267,21 +268,6 @@ impl Fitted {
             })
             .collect();
         Value::Array(per)
-    }
-}
-
-/// RMSE over all outputs together.
-pub fn rmse_all(y: &[Vec<f64>], y_model: &[Vec<f64>]) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for (a, b) in y.iter().zip(y_model) {
-        let e = rmse(a, b);
-        s += e * e * a.len() as f64;
-        n += a.len();
-    }
-    if n == 0 {
-        f64::NAN
-    } else {
-        (s / n as f64).sqrt()
     }
 }
 

@@ -1,9 +1,10 @@
 //! Model fitting from records (`piezo fit`): model registry, global search then local
 //! refinement, metrics.
 //!
-//! Procedure (002 sec. 3 uses PSO on the RMSE of 002 eq. (6)-(7); here differential
-//! evolution plays that part, then Levenberg-Marquardt polishes):
-//! 1. global search by DE over data-scaled boxes (log space for scales), on a decimated
+//! Procedure (002 sec. 3 uses PSO on the RMSE of 002 eq. (6)-(7); differential evolution,
+//! the default, or PSO ([`FitOptions::optimizer`]) plays that part, then Levenberg-Marquardt
+//! polishes):
+//! 1. global search by DE or PSO over data-scaled boxes (log space for scales), on a decimated
 //!    copy of the record for static (rate-independent) models, or on its first samples at a
 //!    coarse integration rate for dynamic ones;
 //! 2. LM on the full record (dynamic models: input upsampled by a band-limited
@@ -18,7 +19,7 @@
 pub mod models;
 pub mod resample;
 
-use crate::ident::optim::{differential_evolution, levenberg_marquardt, DeConfig, LmConfig};
+use crate::ident::optim::{global_search, levenberg_marquardt, LmConfig, Optimizer, SearchConfig};
 use models::{ModelDef, ParamSpec, Scales};
 use piezo_core::hysteresis::ParamError;
 use resample::{upsample, Edge};
@@ -64,9 +65,12 @@ pub fn metrics(measured: &[f64], model: &[f64]) -> Metrics {
 /// Settings of one fit.
 #[derive(Debug, Clone)]
 pub struct FitOptions {
-    /// DE generations (0: skip the global search and start LM from the box centres).
+    /// Global search: differential evolution or particle swarm (002 sec. 3).
+    pub optimizer: Optimizer,
+    /// DE generations / PSO iterations (0: skip the global search and start LM from the
+    /// box centres).
     pub generations: usize,
-    /// DE population (0: 10 per parameter, at least 15).
+    /// DE population / PSO swarm (0: 10 per parameter, at least 15).
     pub population: usize,
     pub seed: u64,
     /// Static models: the global search runs on at most this many samples (decimated).
@@ -91,6 +95,7 @@ pub struct FitOptions {
 impl Default for FitOptions {
     fn default() -> Self {
         Self {
+            optimizer: Optimizer::De,
             generations: 300,
             population: 0,
             seed: 1,
@@ -120,8 +125,24 @@ pub struct Fitted {
     pub upsample: usize,
     /// Hammerstein linear part: `(f_hz, zeta)` per second-order section (unity DC gain).
     pub linear: Vec<(f64, f64)>,
+    /// The global search that started the local refinement (None: none ran).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub search: Option<SearchReport>,
     #[serde(skip)]
     def: &'static ModelDef,
+}
+
+/// What the global search of a fit reached (its RMSE on the reduced problem it searched).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SearchReport {
+    pub optimizer: Optimizer,
+    /// Fitness 002 eq. (6): RMSE on the search's reduced record.
+    pub rmse: f64,
+    pub evals: usize,
+    /// Generations / iterations run.
+    pub iterations: usize,
+    /// Wall-clock time of the search.
+    pub seconds: f64,
 }
 
 /// Search-space coordinate to parameter value.
@@ -314,21 +335,30 @@ pub fn fit_siso(
         }
     };
     let centre: Vec<f64> = lo.iter().zip(&hi).map(|(a, b)| 0.5 * (a + b)).collect();
+    let mut search = None;
     let z0 = if opts.generations > 0 {
-        let de = DeConfig {
+        let cfg = SearchConfig {
+            optimizer: opts.optimizer,
             population: opts.population,
             generations: opts.generations,
             seed: opts.seed,
             progress: label.clone(),
-            ..Default::default()
         };
-        let best = differential_evolution(|z| coarse.cost(z), &lo, &hi, &[centre], &de)?;
+        let t_search = std::time::Instant::now();
+        let best = global_search(|z| coarse.cost(z), &lo, &hi, &[centre], &cfg)?;
         if let Some(l) = &label {
             eprintln!(
-                "{l}: global search RMSE {:.4e} after {} evaluations",
-                best.cost, best.evals
+                "{l}: global search ({:?}) RMSE {:.4e} after {} evaluations",
+                opts.optimizer, best.cost, best.evals
             );
         }
+        search = Some(SearchReport {
+            optimizer: opts.optimizer,
+            rmse: best.cost,
+            evals: best.evals,
+            iterations: best.iterations,
+            seconds: t_search.elapsed().as_secs_f64(),
+        });
         best.x
     } else {
         centre
@@ -406,6 +436,7 @@ pub fn fit_siso(
         offset,
         upsample: if def.dynamic { opts.upsample.max(1) } else { 1 },
         linear: full.linear(&p),
+        search,
         def,
     })
 }
@@ -438,6 +469,7 @@ impl Fitted {
             offset,
             upsample: upsample.max(1),
             linear: Vec::new(),
+            search: None,
             def,
         })
     }
@@ -541,6 +573,32 @@ mod tests {
             assert!((got - want).abs() < 1e-4 * want.abs().max(1.0), "{f:?}");
         }
         assert!((f.offset - 3.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn pso_alone_recovers_cbw_parameters() {
+        // 002 sec. 3: particle swarm on the RMSE fitness (eq. 6), no LM polish.
+        let fs = 200.0;
+        let u = sine_input(2000, fs);
+        let truth = models::find("cbw").unwrap();
+        let want = [0.16, 0.07, 0.02, 0.5];
+        let gen = Fitted::from_params(truth, &want, 1.0, 3.0, 1).unwrap();
+        let y = gen.simulate(&u, 1.0 / fs, Edge::Hold).unwrap();
+        let opts = FitOptions {
+            optimizer: Optimizer::Pso,
+            generations: 300,
+            lm_iterations: 0,
+            ..Default::default()
+        };
+        let f = fit_siso(truth, &u, &y, 1.0 / fs, &opts).unwrap();
+        let g = f.search.unwrap();
+        assert_eq!(g.optimizer, Optimizer::Pso);
+        let m = metrics(&y, &f.simulate(&u, 1.0 / fs, Edge::Hold).unwrap());
+        eprintln!("PSO: {m:?} {f:?}");
+        assert!(m.rmse < 1e-4 * 20.0, "{m:?} {f:?}");
+        for (got, want) in f.values().iter().zip(want) {
+            assert!((got - want).abs() < 1e-3 * want, "{f:?}");
+        }
     }
 
     #[test]

@@ -24,6 +24,7 @@
 use anyhow::Result;
 
 use super::diagnose::{Cause, Signals};
+use crate::numeric::Rng;
 use crate::record::Record;
 use crate::scenario::Scenario;
 use crate::stage::Stage;
@@ -34,45 +35,6 @@ pub const DURATION_S: f64 = 2.0;
 
 /// Nominal stroke (um) the drift is scaled by.
 const STROKE_UM: f64 = 100.0;
-
-/// SplitMix64: small and seedable.
-#[derive(Debug, Clone)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed ^ 0x9E37_79B9_7F4A_7C15)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Standard normal (Box-Muller).
-    pub fn normal(&mut self) -> f64 {
-        let a = self.uniform(1e-12, 1.0);
-        let b = self.uniform(0.0, 1.0);
-        (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
-    }
-    /// Log-uniform in `[lo, hi)`.
-    pub fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.uniform(lo.ln(), hi.ln()).exp()
-    }
-    /// +1 or -1.
-    pub fn sign(&mut self) -> f64 {
-        if self.next_u64() & 1 == 0 {
-            1.0
-        } else {
-            -1.0
-        }
-    }
-}
 
 /// A stage with hidden causes and the excitation seeds of its records.
 #[derive(Debug, Clone)]
@@ -117,10 +79,10 @@ impl Hidden {
         st.axes = if has(Cause::CrossCoupling) { 2 } else { 1 };
         st.zero_um = 0.0;
         let h = &mut st.hysteresis;
-        h.d = r.uniform(0.85, 1.0);
-        h.alpha = 0.3 * r.uniform(0.8, 1.2);
-        h.beta = 0.012 * r.uniform(0.8, 1.2);
-        h.gamma = 0.004 * r.uniform(0.5, 1.5);
+        h.d = r.range(0.85, 1.0);
+        h.alpha = 0.3 * r.range(0.8, 1.2);
+        h.beta = 0.012 * r.range(0.8, 1.2);
+        h.gamma = 0.004 * r.range(0.5, 1.5);
         h.asym_um_per_v2 = 0.0;
         // An ideal amplifier (its 1.6 us lag is below the noise at these rates).
         st.amplifier.bandwidth_hz = 1e5;
@@ -134,27 +96,27 @@ impl Hidden {
         st.coupling.enabled = false;
         st.force.enabled = false;
         st.noise.enabled = true;
-        st.noise.sigma_um = r.uniform(0.005, 0.02);
+        st.noise.sigma_um = r.range(0.005, 0.02);
         let mut sizes = Vec::new();
         // Every size is drawn whether used or not, so a cause's size does not depend on the
         // other causes of the case.
         let wn_hz = r.log_uniform(80.0, 400.0);
-        let zeta = r.uniform(0.05, 0.3);
-        let asym = r.uniform(1.5e-4, 4e-4) * r.sign();
+        let zeta = r.range(0.05, 0.3);
+        let asym = r.range(1.5e-4, 4e-4) * r.sign();
         let n_creep = 1 + (r.next_u64() % 2) as usize;
         let creep: Vec<(f64, f64)> = (0..2)
-            .map(|_| (r.uniform(0.01, 0.03), r.log_uniform(0.05, 1.0)))
+            .map(|_| (r.range(0.01, 0.03), r.log_uniform(0.05, 1.0)))
             .collect();
-        let delay_samples = r.uniform(1.0, 6.0);
-        let rail_frac = r.uniform(0.85, 0.95);
-        let slew = r.uniform(1000.0, 3000.0);
+        let delay_samples = r.range(1.0, 6.0);
+        let rail_frac = r.range(0.85, 0.95);
+        let slew = r.range(1000.0, 3000.0);
         let coupling = [
-            r.uniform(0.02, 0.06) * r.sign(),
-            r.uniform(0.02, 0.06) * r.sign(),
+            r.range(0.02, 0.06) * r.sign(),
+            r.range(0.02, 0.06) * r.sign(),
         ];
-        let drift_um = r.uniform(0.01, 0.04) * STROKE_UM * r.sign();
-        let drift_exp = r.uniform(0.0, 0.6);
-        let drift_tau = r.uniform(2.0, 6.0) * duration_s;
+        let drift_um = r.range(0.01, 0.04) * STROKE_UM * r.sign();
+        let drift_exp = r.range(0.0, 0.6);
+        let drift_tau = r.range(2.0, 6.0) * duration_s;
         let mut hidden = Self {
             seed,
             causes: causes.to_vec(),
@@ -319,16 +281,16 @@ impl Hidden {
 /// 0..150 V.
 pub fn excitation(t: &[f64], r: &mut Rng) -> Vec<f64> {
     let tau = 2.0 * std::f64::consts::PI;
-    let (f1, f2) = (r.uniform(0.7, 2.0), r.uniform(2.5, 6.0));
-    let (p1, p2) = (r.uniform(0.0, tau), r.uniform(0.0, tau));
-    let (a1, a2) = (r.uniform(25.0, 35.0), r.uniform(6.0, 12.0));
-    let ramp = r.uniform(3e-3, 6e-3);
+    let (f1, f2) = (r.range(0.7, 2.0), r.range(2.5, 6.0));
+    let (p1, p2) = (r.range(0.0, tau), r.range(0.0, tau));
+    let (a1, a2) = (r.range(25.0, 35.0), r.range(6.0, 12.0));
+    let ramp = r.range(3e-3, 6e-3);
     let end = t.last().copied().unwrap_or(0.0);
     let mut levels = Vec::new();
     let mut at = 0.0;
     while at <= end {
-        levels.push((at, r.uniform(-15.0, 15.0)));
-        at += r.uniform(0.15, 0.4);
+        levels.push((at, r.range(-15.0, 15.0)));
+        at += r.range(0.15, 0.4);
     }
     let mut k = 0;
     let (mut prev, mut level) = (0.0, 0.0);

@@ -1,8 +1,9 @@
-//! Global (differential evolution) and local (Levenberg-Marquardt) optimisers for identification.
+//! Global (differential evolution, particle swarm) and local (Levenberg-Marquardt) optimisers
+//! for identification.
 //!
-//! Both work inside a box `lo <= x <= hi`. DE is the global search (002 uses PSO with an
-//! RMSE fitness, 002 eq. (6)-(7); DE plays the same role and needs fewer settings); LM then
-//! polishes on the residual vector (the RMSE of 004 eq. (23) is its norm). Costs and
+//! All work inside a box `lo <= x <= hi`. DE or PSO ([`Optimizer`]) is the global search
+//! (002 uses PSO with an RMSE fitness, 002 eq. (6)-(7); [`pso`]); LM then polishes on the
+//! residual vector (the RMSE of 004 eq. (23) is its norm). Costs and
 //! residuals are plain closures; the population and the Jacobian columns are evaluated in
 //! parallel with rayon. Runs are reproducible for a given seed (the random numbers are drawn
 //! serially, only the evaluations are parallel).
@@ -12,44 +13,68 @@
 
 use rayon::prelude::*;
 
-/// Small, fast, seeded PRNG (PCG-XSH-RR 64/32, O'Neill 2014).
-#[derive(Debug, Clone)]
-pub struct Pcg32 {
-    state: u64,
-    inc: u64,
+use crate::numeric::{solve_spd, Rng};
+
+pub mod pso;
+pub use pso::{particle_swarm, PsoConfig};
+
+/// The global search of a fit (`piezo fit --optimizer`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// Differential evolution ([`differential_evolution`]).
+    #[default]
+    De,
+    /// Particle swarm, the method of 002 sec. 3 ([`particle_swarm`]).
+    Pso,
 }
 
-impl Pcg32 {
-    const MUL: u64 = 6364136223846793005;
+/// Settings of a global search, shared by DE and PSO.
+#[derive(Debug, Clone, Default)]
+pub struct SearchConfig {
+    pub optimizer: Optimizer,
+    /// DE population / PSO swarm size (0: `max(15, 10 * dim)` for both).
+    pub population: usize,
+    /// DE generations / PSO iterations: with equal sizes, the same evaluation budget.
+    pub generations: usize,
+    pub seed: u64,
+    /// Label for progress lines on stderr (None: silent).
+    pub progress: Option<String>,
+}
 
-    pub fn new(seed: u64) -> Self {
-        let mut r = Self {
-            state: 0,
-            inc: (seed.rotate_left(17) ^ 0xda3e_39cb_94b9_5bdb) << 1 | 1,
-        };
-        r.next_u32();
-        r.state = r.state.wrapping_add(seed);
-        r.next_u32();
-        r
-    }
-
-    pub fn next_u32(&mut self) -> u32 {
-        let old = self.state;
-        self.state = old.wrapping_mul(Self::MUL).wrapping_add(self.inc);
-        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
-        xorshifted.rotate_right((old >> 59) as u32)
-    }
-
-    /// Uniform in `[0, 1)` with 53 random bits.
-    pub fn uniform(&mut self) -> f64 {
-        let hi = (self.next_u32() as u64) << 21;
-        let lo = (self.next_u32() >> 11) as u64;
-        ((hi | lo) as f64) * (1.0 / (1u64 << 53) as f64)
-    }
-
-    /// Uniform integer in `0..n` (`n > 0`).
-    pub fn below(&mut self, n: usize) -> usize {
-        ((self.uniform() * n as f64) as usize).min(n.saturating_sub(1))
+/// Runs the chosen global search over the box (see [`differential_evolution`] and
+/// [`particle_swarm`]; each keeps its other settings at their defaults).
+pub fn global_search<F>(
+    cost: F,
+    lo: &[f64],
+    hi: &[f64],
+    seeds: &[Vec<f64>],
+    cfg: &SearchConfig,
+) -> anyhow::Result<Optimum>
+where
+    F: Fn(&[f64]) -> f64 + Sync,
+{
+    match cfg.optimizer {
+        Optimizer::De => {
+            let de = DeConfig {
+                population: cfg.population,
+                generations: cfg.generations,
+                seed: cfg.seed,
+                progress: cfg.progress.clone(),
+                ..Default::default()
+            };
+            differential_evolution(cost, lo, hi, seeds, &de)
+        }
+        Optimizer::Pso => {
+            let pso = PsoConfig {
+                particles: cfg.population,
+                iterations: cfg.generations,
+                seed: cfg.seed,
+                progress: cfg.progress.clone(),
+                ..Default::default()
+            };
+            particle_swarm(cost, lo, hi, seeds, &pso)
+        }
     }
 }
 
@@ -146,7 +171,7 @@ where
     } else {
         cfg.population.max(4)
     };
-    let mut rng = Pcg32::new(cfg.seed);
+    let mut rng = Rng::new(cfg.seed);
     let mut pop: Vec<Vec<f64>> = (0..np)
         .map(|i| match seeds.get(i) {
             Some(s) if s.len() == dim => clamp(s, lo, hi),
@@ -234,7 +259,7 @@ fn argmin(c: &[f64]) -> usize {
     k
 }
 
-fn three_others(rng: &mut Pcg32, n: usize, i: usize) -> (usize, usize, usize) {
+fn three_others(rng: &mut Rng, n: usize, i: usize) -> (usize, usize, usize) {
     let mut pick = |not: &[usize]| loop {
         let k = rng.below(n);
         if !not.contains(&k) {
@@ -394,7 +419,7 @@ where
                 let d = a[i * n + i];
                 damped[i * n + i] = d + lambda * d.max(1e-12 * (1.0 + d));
             }
-            let Some(dx) = cholesky_solve(&damped, &g, n) else {
+            let Some(dx) = solve_spd(&damped, &g, n) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -444,38 +469,6 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// Solves `A x = b` for symmetric positive definite `A` (row-major `n x n`).
-fn cholesky_solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; n * n];
-    for i in 0..n {
-        for j in 0..=i {
-            let mut s = a[i * n + j];
-            for k in 0..j {
-                s -= l[i * n + k] * l[j * n + k];
-            }
-            if i == j {
-                if !(s > 0.0) {
-                    return None;
-                }
-                l[i * n + i] = s.sqrt();
-            } else {
-                l[i * n + j] = s / l[j * n + j];
-            }
-        }
-    }
-    let mut y = vec![0.0; n];
-    for i in 0..n {
-        let s = b[i] - (0..i).map(|k| l[i * n + k] * y[k]).sum::<f64>();
-        y[i] = s / l[i * n + i];
-    }
-    let mut x = vec![0.0; n];
-    for i in (0..n).rev() {
-        let s = y[i] - (i + 1..n).map(|k| l[k * n + i] * x[k]).sum::<f64>();
-        x[i] = s / l[i * n + i];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -484,20 +477,6 @@ mod tests {
         x.windows(2)
             .map(|w| 100.0 * (w[1] - w[0] * w[0]).powi(2) + (1.0 - w[0]).powi(2))
             .sum()
-    }
-
-    #[test]
-    fn pcg_is_uniform_and_reproducible() {
-        let mut a = Pcg32::new(7);
-        let mut b = Pcg32::new(7);
-        let mut c = Pcg32::new(8);
-        let xs: Vec<f64> = (0..10_000).map(|_| a.uniform()).collect();
-        assert!(xs.iter().all(|v| (0.0..1.0).contains(v)));
-        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
-        assert!((mean - 0.5).abs() < 0.01, "{mean}");
-        assert_eq!(b.uniform(), xs[0]);
-        assert_ne!(c.uniform(), xs[0]);
-        assert!((0..1000).all(|_| a.below(3) < 3));
     }
 
     #[test]

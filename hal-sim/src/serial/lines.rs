@@ -95,6 +95,7 @@ pub fn format_command(cmd: &Command<'_>) -> String {
         Command::Fault => "fault".into(),
         Command::FaultClear => "fault clear".into(),
         Command::Bench => "bench".into(),
+        Command::Selftest => "selftest".into(),
     }
 }
 
@@ -264,7 +265,7 @@ mod tests {
         /// parser (or the host refuses it before sending).
         #[test]
         fn every_built_command_round_trips(
-            which in 0usize..31, a in finite(), b in finite(), d in finite(),
+            which in 0usize..32, a in finite(), b in finite(), d in finite(),
             n in name(), i in 0usize..5000, k in 0usize..5000,
         ) {
             let shape = [Shape::Sine, Shape::Triangle, Shape::Square][which % 3];
@@ -312,6 +313,7 @@ mod tests {
                 27 => Command::Axis(None),
                 28 => Command::Rec(RecCmd::Divider([None, Some(k)][i % 2])),
                 29 => Command::Cbw([a, b, d, -a]),
+                30 => Command::Selftest,
                 _ => Command::Bench,
             };
             let line = format_command(&cmd);

@@ -7,9 +7,12 @@
 //! linear calibration measured on the stage.
 
 mod feedforward;
+pub mod identified;
+pub mod models;
 
 use super::StageInfo;
 use anyhow::Result;
+use models::Family;
 use piezo_core::feedback::Feedback;
 use piezo_core::feedforward::{Feedforward, LinearFf, MultiFeedforward};
 use piezo_core::pipeline::Mode;
@@ -78,27 +81,45 @@ pub fn registry() -> Vec<Entry> {
         },
         Entry {
             name: "fts",
-            about: "HGO + finite-time virtual-hysteresis law (000 Part IV), stage's BW model (GBW on GBW stages)",
+            about: "HGO + finite-time virtual-hysteresis law (000 Part IV), CBW prediction model",
             one_axis: |s| fb::robust::<1>(s, false, true),
             two_axis: Some(|s| fb::robust::<2>(s, false, true)),
         },
         Entry {
+            name: "fts-gbw",
+            about: "the finite-time law with the GBW (000 eq. 3) as observer and law model",
+            one_axis: |s| fb::robust_with::<1>(s, false, true, Family::Gbw),
+            two_axis: Some(|s| fb::robust_with::<2>(s, false, true, Family::Gbw)),
+        },
+        Entry {
             name: "adrc",
-            about: "extended-state observer + ADRC (000 eq. 10-11) on the second-order structure",
-            one_axis: |s| fb::adrc::<1>(s, false),
-            two_axis: Some(|s| fb::adrc::<2>(s, false)),
+            about: "extended-state observer + ADRC as 000 eq. 10-11 (Delta holds the whole linear part; measured y in the law)",
+            one_axis: |s| fb::adrc::<1>(s, false, false),
+            two_axis: Some(|s| fb::adrc::<2>(s, false, false)),
         },
         Entry {
             name: "ff+adrc",
-            about: "linear feedforward + ESO/ADRC on what it leaves",
-            one_axis: |s| fb::adrc::<1>(s, true),
-            two_axis: Some(|s| fb::adrc::<2>(s, true)),
+            about: "linear feedforward + the same ESO/ADRC on what it leaves",
+            one_axis: |s| fb::adrc::<1>(s, true, false),
+            two_axis: Some(|s| fb::adrc::<2>(s, true, false)),
+        },
+        Entry {
+            name: "adrc-lin",
+            about: "ESO/ADRC with the structure's a1, a2 known: the ESO estimates only -b0 h + delta_y",
+            one_axis: |s| fb::adrc::<1>(s, false, true),
+            two_axis: Some(|s| fb::adrc::<2>(s, false, true)),
         },
         Entry {
             name: "nmpc",
-            about: "HGO + NMPC, hysteresis model as predictor (000 Part IV), 10 kHz, horizon 8",
-            one_axis: |s| fb::nmpc::<1>(s, false),
-            two_axis: Some(|s| fb::nmpc::<2>(s, false)),
+            about: "HGO + NMPC with a CBW prediction model (000 Part IV), 10 kHz, horizon 8",
+            one_axis: |s| fb::nmpc::<1>(s, false, Family::Cbw),
+            two_axis: Some(|s| fb::nmpc::<2>(s, false, Family::Cbw)),
+        },
+        Entry {
+            name: "nmpc-gbw",
+            about: "HGO + NMPC with the GBW (000 eq. 3) as prediction model, as 000 Part IV",
+            one_axis: |s| fb::nmpc::<1>(s, false, Family::Gbw),
+            two_axis: Some(|s| fb::nmpc::<2>(s, false, Family::Gbw)),
         },
     ];
     v.extend(feedforward::entries());
@@ -134,16 +155,16 @@ pub fn open_loop<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
 /// delay, sensor noise); the constants below were chosen on `sine-10hz` at 30 um amplitude
 /// (see the FEEDBACK report) and are the same for every scenario.
 pub mod fb {
+    use super::models::{prediction, Family};
     use super::{linear_ff, Controller, R};
-    use crate::scenario::HysteresisModel;
     use crate::sim::StageInfo;
     use anyhow::{anyhow, Result};
     use piezo_core::feedback::{
-        Adrc, AdrcConfig, Biquad, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
-        PidConfig, Robust, RobustConfig,
+        Adrc, AdrcConfig, Biquad, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, Pid, PidConfig,
+        Robust, RobustConfig,
     };
     use piezo_core::feedforward::MultiFeedforward;
-    use piezo_core::hysteresis::{Cbw, Dahl, Gbw, ParamError};
+    use piezo_core::hysteresis::ParamError;
     use piezo_core::pipeline::Mode;
     use std::f64::consts::PI;
 
@@ -165,33 +186,6 @@ pub mod fb {
 
     fn perr(p: ParamError) -> anyhow::Error {
         anyhow!("{p}")
-    }
-
-    /// The controllers' hysteresis model: the stage's family and parameters, with the
-    /// scenario's `model_error`; `gbw` asks for a GBW when the stage family allows it.
-    pub fn model(s: &StageInfo) -> Result<ObserverModel<R>> {
-        let h = s.hysteresis();
-        let k = 1.0 + h.model_error;
-        let (d, al, be, ga, n) = (
-            h.d as R,
-            (h.alpha * k) as R,
-            (h.beta * k) as R,
-            (h.gamma * k) as R,
-            h.n as R,
-        );
-        Ok(match h.model {
-            HysteresisModel::Cbw => ObserverModel::Cbw(Cbw::new(d, al, be, ga, n).map_err(perr)?),
-            HysteresisModel::Gbw => {
-                ObserverModel::Gbw(Gbw::new(d, al, (h.a * k) as R, be, ga, n).map_err(perr)?)
-            }
-            HysteresisModel::Dahl => {
-                ObserverModel::Dahl(Dahl::new(d, al, h.hc as R, n).map_err(perr)?)
-            }
-            // No hysteresis: a CBW with a negligible loop.
-            HysteresisModel::None => {
-                ObserverModel::Cbw(Cbw::new(d, 1e-6, 1e-3, 0.0, 1.0).map_err(perr)?)
-            }
-        })
     }
 
     /// First-order pole (1/s) with the low-frequency lag of amplifier, structure,
@@ -242,10 +236,10 @@ pub mod fb {
         1.0 / s.loop_hz()
     }
 
-    /// The HGO with `eps` from the sensor noise ([`Hgo::epsilon_for`]) and the budget of
-    /// `h_hat` noise (um).
-    pub fn hgo(s: &StageInfo, budget_um: f64) -> Result<Hgo<R>> {
-        let m = model(s)?;
+    /// The HGO on the `family` prediction model ([`prediction`]) with `eps` from the sensor
+    /// noise ([`Hgo::epsilon_for`]) and the budget of `h_hat` noise (um).
+    pub fn hgo(s: &StageInfo, budget_um: f64, family: Family) -> Result<Hgo<R>> {
+        let m = prediction(s, family)?;
         let a = pole(s) as R;
         let eps =
             Hgo::epsilon_for(m, a, dt(s) as R, noise_um(s) as R, budget_um as R).map_err(perr)?;
@@ -270,11 +264,22 @@ pub mod fb {
         wrap(s, Feedback::Pid(law))
     }
 
-    /// HGO + robust law (000 eq. 6-8); `finite_time`: the finite-time variant (000 Part IV).
+    /// HGO + robust law (000 eq. 6-8) on CBW; `finite_time`: the finite-time variant
+    /// (000 Part IV).
     pub fn robust<const N: usize>(
         s: &StageInfo,
         feedforward: bool,
         finite_time: bool,
+    ) -> Result<Controller<N>> {
+        robust_with(s, feedforward, finite_time, Family::Cbw)
+    }
+
+    /// [`robust`] with the prediction model of `family`.
+    pub fn robust_with<const N: usize>(
+        s: &StageInfo,
+        feedforward: bool,
+        finite_time: bool,
+        family: Family,
     ) -> Result<Controller<N>> {
         let plain = !feedforward && !finite_time;
         let (l1_hz, budget) = if plain {
@@ -298,7 +303,7 @@ pub mod fb {
             (l1, l2, Convergence::Exponential)
         };
         let law = Robust::new(
-            hgo(s, budget)?,
+            hgo(s, budget, family)?,
             RobustConfig {
                 lambda1: lambda1 as R,
                 lambda2: lambda2 as R,
@@ -310,8 +315,16 @@ pub mod fb {
         wrap(s, Feedback::Robust(law))
     }
 
-    /// ESO + ADRC (000 eq. 10-11) on the structure's second-order model.
-    pub fn adrc<const N: usize>(s: &StageInfo, feedforward: bool) -> Result<Controller<N>> {
+    /// ESO + ADRC (000 eq. 10-11) with the input gain `b = b0 d_p` of the structure's
+    /// second-order model. `known_structure: false` is the seed's ESO, whose extended state
+    /// `Delta` holds the whole `-a1 y' - a2 y - b0 h + delta_y`; `true` gives the ESO the
+    /// structure's `a1, a2`, so that it estimates only `-b0 h + delta_y` (without feedforward
+    /// that tracks 5x better at 10 Hz, see the README).
+    pub fn adrc<const N: usize>(
+        s: &StageInfo,
+        feedforward: bool,
+        known_structure: bool,
+    ) -> Result<Controller<N>> {
         let r = &s.scenario.stage.resonance;
         let (w2, a1) = if r.enabled {
             let w = 2.0 * PI * r.freq_hz;
@@ -319,10 +332,15 @@ pub mod fb {
         } else {
             (pole(s).powi(2), 2.0 * pole(s))
         };
+        let (a1, a2) = if known_structure {
+            (a1, w2)
+        } else {
+            (0.0, 0.0)
+        };
         let law = Adrc::new(AdrcConfig {
             b: (s.linear.um_per_volt * w2) as R,
             a1: a1 as R,
-            a2: w2 as R,
+            a2: a2 as R,
             eps_s: 2e-5,
             omega_c: (2.0 * PI * 600.0) as R,
             feedforward,
@@ -333,9 +351,13 @@ pub mod fb {
     }
 
     /// HGO + NMPC at a tenth of the loop rate, horizon 8 moves (0.8 ms at 100 kHz).
-    pub fn nmpc<const N: usize>(s: &StageInfo, feedforward: bool) -> Result<Controller<N>> {
+    pub fn nmpc<const N: usize>(
+        s: &StageInfo,
+        feedforward: bool,
+        family: Family,
+    ) -> Result<Controller<N>> {
         let (lo, hi) = s.volts_range();
-        let m = model(s)?;
+        let m = prediction(s, family)?;
         // The prediction holds each move for 10 samples: a slower observer (eps 100 us) keeps
         // its noise out of the plan.
         let hgo = Hgo::with_eps(m, pole(s) as R, 1e-4, dt(s) as R).map_err(perr)?;

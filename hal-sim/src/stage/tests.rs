@@ -145,21 +145,6 @@ fn fractional_delay_interpolates() {
     }
 }
 
-#[test]
-fn rng_gauss_has_unit_variance() {
-    let mut r = Rng::new(3);
-    let n = 200_000;
-    let (mut m, mut v) = (0.0, 0.0);
-    for _ in 0..n {
-        let g = r.gauss();
-        m += g;
-        v += g * g;
-    }
-    m /= n as f64;
-    v = v / n as f64 - m * m;
-    assert!(m.abs() < 0.01 && (v - 1.0).abs() < 0.02, "{m} {v}");
-}
-
 /// A stage with only a linear actuator (no hysteresis, creep, resonance, drift, noise,
 /// delay) and an amplifier fast enough for 100 Hz full-range sines.
 fn linear_stage() -> Scenario {

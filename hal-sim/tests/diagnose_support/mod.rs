@@ -3,11 +3,12 @@
 //! `diagnose` names the cause and gains on the validation record.
 #![allow(dead_code)]
 
-use hal_sim::ident::diagnose::model::{dynamics, effective_input, hysteresis, lowpass, Shape};
+use hal_sim::ident::diagnose::model::{dynamics, effective_input, hysteresis, Shape};
 use hal_sim::ident::diagnose::{Cause, Signals};
+use hal_sim::numeric::lowpass;
 
 /// The generator's seeded RNG (SplitMix64).
-pub use hal_sim::ident::generate::Rng;
+pub use hal_sim::numeric::Rng;
 
 pub const RATE_HZ: f64 = 2000.0;
 pub const DURATION_S: f64 = 2.0;
@@ -42,25 +43,25 @@ impl Plant {
         } else {
             1
         };
-        let d = r.uniform(0.12, 0.2);
+        let d = r.range(0.12, 0.2);
         // u spans about 100 V: y about d*100 = 12..20 um.
         Self {
             d,
-            alpha: d * r.uniform(0.3, 0.5),
-            beta: r.uniform(0.015, 0.04),
-            gamma: r.uniform(-0.005, 0.012),
+            alpha: d * r.range(0.3, 0.5),
+            beta: r.range(0.015, 0.04),
+            gamma: r.range(-0.005, 0.012),
             effects: effects.to_vec(),
-            wn_hz: r.uniform(25.0, 80.0),
-            zeta: r.uniform(0.3, 0.8),
-            asym: r.uniform(0.4, 1.0) * r.uniform(-1.0, 1.0).signum(),
-            creep_gain: r.uniform(0.06, 0.15),
-            creep_tau_s: r.uniform(0.08, 0.6),
-            delay_s: r.uniform(2e-3, 8e-3),
-            rail_frac: r.uniform(0.64, 0.72),
-            slew_frac: r.uniform(0.2, 0.4),
-            coupling: r.uniform(0.05, 0.12) * r.uniform(-1.0, 1.0).signum(),
-            drift_per_s: r.uniform(0.4, 0.8) * r.uniform(-1.0, 1.0).signum(),
-            noise: r.uniform(0.01, 0.03),
+            wn_hz: r.range(25.0, 80.0),
+            zeta: r.range(0.3, 0.8),
+            asym: r.range(0.4, 1.0) * r.range(-1.0, 1.0).signum(),
+            creep_gain: r.range(0.06, 0.15),
+            creep_tau_s: r.range(0.08, 0.6),
+            delay_s: r.range(2e-3, 8e-3),
+            rail_frac: r.range(0.64, 0.72),
+            slew_frac: r.range(0.2, 0.4),
+            coupling: r.range(0.05, 0.12) * r.range(-1.0, 1.0).signum(),
+            drift_per_s: r.range(0.4, 0.8) * r.range(-1.0, 1.0).signum(),
+            noise: r.range(0.01, 0.03),
             axes,
         }
     }
@@ -128,7 +129,7 @@ impl Plant {
             }
         }
         for y in y.iter_mut() {
-            *y += self.noise * rng.normal() + 1.0;
+            *y += self.noise * rng.normal(1.0) + 1.0;
         }
         y
     }
@@ -155,15 +156,15 @@ impl Plant {
 /// Two sines (0.7..6 Hz) plus held steps with 4 ms ramps, from rest at 0 V, within 0..100 V.
 pub fn excitation(t: &[f64], r: &mut Rng) -> Vec<f64> {
     let tau = 2.0 * std::f64::consts::PI;
-    let (f1, f2) = (r.uniform(0.7, 2.0), r.uniform(2.5, 6.0));
-    let (p1, p2) = (r.uniform(0.0, tau), r.uniform(0.0, tau));
-    let (a1, a2) = (r.uniform(20.0, 28.0), r.uniform(5.0, 10.0));
+    let (f1, f2) = (r.range(0.7, 2.0), r.range(2.5, 6.0));
+    let (p1, p2) = (r.range(0.0, tau), r.range(0.0, tau));
+    let (a1, a2) = (r.range(20.0, 28.0), r.range(5.0, 10.0));
     // Held levels, each 0.15..0.4 s.
     let mut levels = Vec::new();
     let mut at = 0.0;
     while at < t.last().copied().unwrap_or(0.0) + 1.0 {
-        levels.push((at, r.uniform(-12.0, 12.0)));
-        at += r.uniform(0.15, 0.4);
+        levels.push((at, r.range(-12.0, 12.0)));
+        at += r.range(0.15, 0.4);
     }
     let ramp = 4e-3;
     let step = |t: f64| {

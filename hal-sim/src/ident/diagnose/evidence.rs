@@ -7,8 +7,9 @@
 
 use serde::Serialize;
 
-use super::model::{effective_input, least_squares, lowpass, own_input, Cause, Shape};
+use super::model::{effective_input, least_squares, own_input, Cause, Shape};
 use super::Signals;
+use crate::numeric::lowpass;
 
 /// The evidence for one cause on one record.
 #[derive(Debug, Clone, Serialize)]

@@ -11,6 +11,7 @@
 use serde::Serialize;
 
 use super::Signals;
+use crate::numeric::{lowpass, rmse, solve_spd};
 
 /// A cause the base model may miss; each has one model extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
@@ -374,18 +375,6 @@ pub fn hysteresis(v: &[f64], beta: f64, gamma: f64) -> Vec<f64> {
     g
 }
 
-/// First-order low-pass with time constant `tau_s`, starting at rest.
-pub fn lowpass(x: &[f64], tau_s: f64, dt: f64) -> Vec<f64> {
-    let a = (-dt / tau_s).exp();
-    let mut s = x.first().copied().unwrap_or(0.0);
-    x.iter()
-        .map(|&v| {
-            s = a * s + (1.0 - a) * v;
-            s
-        })
-        .collect()
-}
-
 /// Second-order low-pass with unit DC gain (004 eq. 8 with n = 2, m = 0), discretised
 /// exactly for an input held over each sample (a DAC drives the stage), output at the end of
 /// the hold; starting at rest at the first sample. `wn_hz` infinite: no dynamics.
@@ -570,7 +559,11 @@ pub fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
     }
     let mut ridge = 1e-12;
     for _ in 0..8 {
-        if let Some(x) = cholesky_solve(&a, &b, p, ridge) {
+        let mut ar = a.clone();
+        for r in 0..p {
+            ar[r * p + r] += ridge;
+        }
+        if let Some(x) = solve_spd(&ar, &b, p) {
             return x.iter().zip(&scale).map(|(x, s)| x * s).collect();
         }
         ridge *= 100.0;
@@ -590,55 +583,6 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     }
     let tail: f64 = ar.iter().zip(br).map(|(x, y)| x * y).sum();
     acc[0] + acc[1] + acc[2] + acc[3] + tail
-}
-
-fn cholesky_solve(a: &[f64], b: &[f64], p: usize, ridge: f64) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; p * p];
-    for r in 0..p {
-        for c in 0..=r {
-            let mut s = a[r * p + c];
-            if r == c {
-                s += ridge;
-            }
-            for k in 0..c {
-                s -= l[r * p + k] * l[c * p + k];
-            }
-            if r == c {
-                if s.is_nan() || s <= 0.0 {
-                    return None;
-                }
-                l[r * p + r] = s.sqrt();
-            } else {
-                l[r * p + c] = s / l[c * p + c];
-            }
-        }
-    }
-    let mut z = vec![0.0; p];
-    for r in 0..p {
-        let mut s = b[r];
-        for k in 0..r {
-            s -= l[r * p + k] * z[k];
-        }
-        z[r] = s / l[r * p + r];
-    }
-    let mut x = vec![0.0; p];
-    for r in (0..p).rev() {
-        let mut s = z[r];
-        for k in r + 1..p {
-            s -= l[k * p + r] * x[k];
-        }
-        x[r] = s / l[r * p + r];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
-
-pub fn rmse(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len().min(b.len());
-    if n == 0 {
-        return f64::NAN;
-    }
-    let s: f64 = a.iter().zip(b).map(|(a, b)| (a - b) * (a - b)).sum();
-    (s / n as f64).sqrt()
 }
 
 pub fn min_max(x: &[f64]) -> (f64, f64) {

@@ -139,8 +139,10 @@ fn cbw_n_specs(s: &Scales) -> Vec<ParamSpec> {
     v
 }
 
+/// 001 eq. (2) with the exponent form of [`Cbw`]: `beta*|u'|*|h|^(n-1)*h` (001 prints
+/// `|h|^n*h`, inconsistent with its eq. 3; see the `Cbw` doc).
 fn sim_cbw_n(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
-    // beta, gamma scale with |h|^(n-1): searched for n = 1, rescaled by h_max^(1-n).
+    // beta, gamma are searched in the n = 1 box (their unit is 1/(V um^(n-1)) for n > 1).
     let m = Cbw::new(p[0], p[1], p[2], p[3] * p[2], p[4])?;
     run(&m, u, dt, y);
     Ok(())
@@ -437,7 +439,7 @@ pub static MODELS: &[ModelDef] = &[
     },
     ModelDef {
         name: "cbw-n",
-        about: "classical Bouc-Wen with exponent n (001 eq. 2)",
+        about: "classical Bouc-Wen with exponent n (001 eq. 2 with |h|^(n-1)*h in the beta term, as its eq. 3)",
         params: cbw_n_specs,
         simulate: sim_cbw_n,
         dynamic: false,

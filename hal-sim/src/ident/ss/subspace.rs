@@ -5,6 +5,7 @@
 
 use super::frf::FrfData;
 use super::model::{Modal, C64};
+use crate::numeric::least_squares;
 use nalgebra::{DMatrix, DVector};
 
 /// At most this many lines enter the subspace step (evenly thinned); the least-squares
@@ -134,31 +135,4 @@ pub fn fit_bd(model: &mut Modal, data: &FrfData) -> anyhow::Result<()> {
     model.b = DMatrix::from_fn(n, m, |s, j| x[s * m + j]);
     model.d = DMatrix::from_fn(p, m, |o, j| x[n * m + o * m + j]);
     Ok(())
-}
-
-/// Least squares by column-scaled SVD (robust to rank deficiency).
-pub fn least_squares(mut a: DMatrix<f64>, rhs: DVector<f64>) -> anyhow::Result<DVector<f64>> {
-    let scale: Vec<f64> = a
-        .column_iter()
-        .map(|c| {
-            let n = c.norm();
-            if n > 0.0 {
-                1.0 / n
-            } else {
-                1.0
-            }
-        })
-        .collect();
-    for (j, s) in scale.iter().enumerate() {
-        a.column_mut(j).scale_mut(*s);
-    }
-    let x = a
-        .svd(true, true)
-        .solve(&rhs, 1e-12)
-        .map_err(|e| anyhow::anyhow!("least squares: {e}"))?;
-    anyhow::ensure!(
-        x.iter().all(|v| v.is_finite()),
-        "least squares: no finite solution"
-    );
-    Ok(DVector::from_fn(x.len(), |j, _| x[j] * scale[j]))
 }

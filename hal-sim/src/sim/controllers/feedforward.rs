@@ -3,13 +3,15 @@
 //! (or 20 % off them), pipeline in `Mode::Feedforward`, no feedback.
 //!
 //! Only the IMS entries share the stage's model structure (hysteresis family, static
-//! quadratic, creep, coupling); the others are built by mapping the stage's parameters
-//! into their own model (documented per builder), i.e. they run with a structure mismatch.
+//! quadratic, creep, coupling); `ff-mbw` runs the MBW identified from the stage's
+//! open-loop record; the others are built by mapping the stage's parameters into their own
+//! model (documented per builder), i.e. they run with a structure mismatch.
 
+use super::identified::identified;
 use super::{Controller, Entry, R};
 use crate::scenario::HysteresisModel;
 use crate::sim::StageInfo;
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use piezo_core::feedback::Feedback;
 use piezo_core::feedforward::*;
 use piezo_core::hysteresis::*;
@@ -40,7 +42,7 @@ pub fn entries() -> Vec<Entry> {
         entry!("ff-ims-delayed", "IMS with the one-sample-delayed h (004 §4.4); same model", ims_delayed),
         entry!("ff-ims-off20", "ff-ims with every hysteresis/creep/coupling parameter +20 % (d from calibration)", ims_off20),
         entry!("ff-ims-bare", "IMS on the hysteresis model only (no quadratic, creep, decoupler)", ims_bare),
-        entry!("ff-mbw", "002 feedforward without inversion (eq. 8-12, k_p = 1) on the stage's CBW", mbw_no_inverse),
+        entry!("ff-mbw", "002 feedforward without inversion (eq. 8-12, k_p = 1), MBW identified by piezo fit from the open-loop record", mbw_no_inverse),
         entry!("ff-wpmbw", "004 direct WPMBW inverse + inverse resonance + prefilter; MBW mapped from the CBW loop", wpmbw),
         entry!("ff-pi", "exact PI inverse; PI fitted to the stage's major loop (Masing)", pi_inverse),
         entry!("ff-ppi", "PPI inverse by bounded solve; same fit, c1 = 0", ppi),
@@ -149,10 +151,12 @@ fn ims_axis(s: &StageInfo, closure: ImsLoop, k: f64, full: bool) -> Result<Feedf
             )
         }
         HysteresisModel::Gbw => build!(
-            Gbw::new(
+            // alpha only scales A, B_h, B, G: scaling it too would scale the loop twice.
+            Gbw::with_beta_h(
                 hy.d as R,
-                kk(hy.alpha),
+                hy.alpha as R,
                 kk(hy.a),
+                kk(hy.beta_h),
                 kk(hy.beta),
                 kk(hy.gamma),
                 hy.n as R
@@ -163,6 +167,23 @@ fn ims_axis(s: &StageInfo, closure: ImsLoop, k: f64, full: bool) -> Result<Feedf
         HysteresisModel::Dahl => build!(
             Dahl::new(hy.d as R, kk(hy.alpha), kk(hy.hc), hy.n as R).map_err(e)?,
             ImsDahl
+        ),
+        HysteresisModel::Mbw002 => build!(
+            Mbw002::new(
+                AbwAbs::new(
+                    hy.d as R,
+                    kk(hy.alpha),
+                    kk(hy.beta),
+                    kk(hy.gamma),
+                    hy.n as R,
+                    kk(hy.delta)
+                )
+                .map_err(e)?,
+                kk(hy.p),
+                kk(hy.q)
+            )
+            .map_err(e)?,
+            ImsMbw
         ),
     })
 }
@@ -193,34 +214,53 @@ fn ims_bare<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     Ok(controller(ff))
 }
 
-/// The stage's CBW, or an error naming what the builder needs.
+/// The stage's CBW; on a stage of another family the least-squares CBW of its loop
+/// ([`super::models::fitted_cbw`], the CBW the feedback laws get there too).
 fn stage_cbw(s: &StageInfo) -> Result<Cbw<f64>> {
     let hy = s.hysteresis();
-    if hy.model != HysteresisModel::Cbw {
-        bail!(
-            "this compensator maps CBW parameters; the stage model is {:?}",
-            hy.model
-        );
+    if hy.model == HysteresisModel::Cbw {
+        return Cbw::new(hy.d, hy.alpha, hy.beta, hy.gamma, hy.n).map_err(e);
     }
-    Cbw::new(hy.d, hy.alpha, hy.beta, hy.gamma, hy.n).map_err(e)
+    let (lo, hi) = s.volts_range();
+    let (d, a, b, g, n) = super::models::fitted_cbw(hy, lo, hi)?;
+    Cbw::new(d, a, b, g, n).map_err(e)
 }
 
+/// 002's compensator (eq. 8-12, `k_p = 1`) on the MBW that `piezo fit --model mbw002`
+/// identifies from the scenario's open-loop record ([`identified`]), with the fit's output
+/// offset.
 fn mbw_no_inverse<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
-    let m = stage_cbw(s)?;
+    let f = identified(s, "mbw002")?;
+    let p = f.values();
+    anyhow::ensure!(
+        f.sign > 0.0 && p.len() == 7,
+        "the MBW fit of {} has the wrong orientation (sign {})",
+        s.scenario.name,
+        f.sign
+    );
+    // mbw002 fit parameters: d, alpha, beta, gamma/beta, delta/alpha, p, q (n = 1).
+    let abw = AbwAbs::new(p[0], p[1], p[2], p[3] * p[2], 1.0, p[4] * p[1]).map_err(e)?;
+    let mbw = Mbw002::new(abw, p[5], p[6]).map_err(e)?;
+    let mbw = Mbw002::new(
+        AbwAbs::new(
+            abw.d() as R,
+            abw.alpha() as R,
+            abw.beta() as R,
+            abw.gamma() as R,
+            1.0,
+            abw.delta() as R,
+        )
+        .map_err(e)?,
+        mbw.p() as R,
+        mbw.q() as R,
+    )
+    .map_err(e)?;
     let (lo, hi) = volts(s);
     let ff = per_axis_or_decoupled(s, NOMINAL, true, || {
-        let abw = AbwAbs::new(
-            m.d() as R,
-            m.alpha() as R,
-            m.beta() as R,
-            m.gamma() as R,
-            m.n() as R,
-            0.0,
-        )
-        .map_err(e)?;
-        let mbw = Mbw002::new(abw, 0.0, 0.0).map_err(e)?;
         Ok(Feedforward::Mbw(
-            MbwFf::new(mbw, 1.0, lo, hi, dt(s)).map_err(e)?,
+            MbwFf::new(mbw, 1.0, lo, hi, dt(s))
+                .and_then(|c| c.with_offset(f.offset as R))
+                .map_err(e)?,
         ))
     })?;
     Ok(controller(ff))

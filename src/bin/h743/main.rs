@@ -1,0 +1,470 @@
+//! Firmware for the Nucleo-H743ZI2 (STM32H743ZI, Cortex-M7F). The control period and the
+//! command line are the library's ([`piezo_core::firmware`]); this board supplies the
+//! hardware side: converters ([`onchip`] or [`spi_pair`]), the DWT cycle counter, the
+//! watchdog and USART3.
+//!
+//! Converters, on-chip (default):
+//! * TIM2 overflows at the sample rate; its update event (TRGO) starts an ADC1 conversion in
+//!   hardware, so the sampling instant does not jitter with interrupt latency.
+//! * The ADC1 end-of-conversion interrupt is the highest-priority task: read the sample, run
+//!   the step, write the DAC (PA4, DAC1 channel 1). Analog input: PA3 (ADC12_INP15, CN9
+//!   pin 1 "A0" on the Nucleo-144).
+//! * Feature `xy` (two axes): ADC2 converts the y input on the same TIM2 TRGO edge (PC0,
+//!   ADC123_INP10, CN9 pin 3 "A1"); the ADC1 interrupt reads both (ADC2, started on the same
+//!   edge with the same timing, is waited for a bounded number of polls; late counts as an
+//!   overrun and gives a code outside the sensor window, the safe state). The y output is
+//!   DAC1 channel 2 (PA5, CN7 pin 10 "D13"; the green LED LD1 is on PB0, not PA5, on the
+//!   Nucleo-144).
+//!
+//! Converters, external SPI pair (feature `spi-converters`), through the drivers of
+//! [`piezo_core::drivers`] (the ones hal-sim runs on its mock chips):
+//! * AD4020 position ADC on SPI1 (SCK PA5, SDO -> MISO PA6, SDI <- MOSI PB5). Its CNV input
+//!   is driven by TIM2 channel 1 (PA0, PWM mode 1): high for the first 1/20 of every sample
+//!   period (500 ns at 100 kHz, > t_CONV 320 ns), so the conversion starts in hardware at
+//!   the period boundary. The CC1 interrupt (CNV falls: the conversion is done) is the
+//!   control task: `Ad4000::read`, the step, `Ad5791::set_code`.
+//! * AD5791 DAC on SPI4 (SCK PE2, SDO -> MISO PE5, SDIN <- MOSI PE6), SYNC on PE4, LDAC on
+//!   PE3.
+//! * The SPI pair drives one axis; `xy` with `spi-converters` does not compile (a second
+//!   AD4020/AD5791 pair needs its own buses or chip selects, not wired here).
+//! * stm32h7xx-hal 0.16 implements embedded-hal 0.2 SPI; [`spi`] adapts it to the
+//!   embedded-hal 1.0 `SpiDevice` the drivers take (byte-wise full-duplex exchanges with a
+//!   bounded wait, chip select around each transaction).
+//!
+//! Common:
+//! * USART3 (ST-LINK virtual COM port, PD8/PD9, 115200 Bd) carries the command protocol;
+//!   its receive interrupt runs at priority 1. Replies are written without `core::fmt`.
+//! * Telemetry (timing, overruns) goes over defmt-RTT once per second from `idle`: defmt
+//!   logs from thread mode only (init, then idle), never from an interrupt handler, so its
+//!   logger lock is never contended and no handler reaches its reentrancy panic. Timing is
+//!   kept by the DWT cycle counter: no monotonic timer, no async task, no dispatcher.
+//!
+//! Build and flash (probe-rs, `.cargo/config.toml`'s runner):
+//! `cargo run --release --target thumbv7em-none-eabihf` (features `spi-converters`, `xy`).
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(all(target_os = "none", not(target_abi = "eabihf")))]
+compile_error!("the H743 is a Cortex-M7F: build it with --target thumbv7em-none-eabihf");
+
+#[cfg(all(target_os = "none", feature = "spi-converters", feature = "xy"))]
+compile_error!(
+    "feature `xy` (two axes) needs the on-chip converters: the SPI pair (`spi-converters`) drives one axis"
+);
+
+#[cfg(all(target_os = "none", not(feature = "spi-converters")))]
+mod onchip;
+#[cfg(target_os = "none")]
+mod safe;
+#[cfg(target_os = "none")]
+mod selftest;
+#[cfg(all(target_os = "none", feature = "spi-converters"))]
+mod spi;
+#[cfg(all(target_os = "none", feature = "spi-converters"))]
+mod spi_pair;
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!("h743: build with --target thumbv7em-none-eabihf");
+}
+
+#[cfg(target_os = "none")]
+use board::*;
+
+#[cfg(target_os = "none")]
+mod board {
+    use cortex_m::peripheral::DWT;
+    use piezo_core::command::{Error, Reply};
+    use piezo_core::firmware::{self, Clock, Port, REPLY_LEN};
+    use stm32h7xx_hal::{independent_watchdog::IndependentWatchdog, pac, serial};
+    // The panic handler is the board's own (`safe`): the safe state first.
+    use defmt_rtt as _;
+
+    /// Core clock (Hz): DWT cycle counts are in these cycles.
+    pub const SYSCLK_HZ: u32 = 400_000_000;
+    /// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
+    pub const WATCHDOG_MS: u32 = 10;
+
+    /// The converters of this build, and the control state over them.
+    #[cfg(not(feature = "spi-converters"))]
+    pub use super::onchip::Io;
+    #[cfg(not(feature = "spi-converters"))]
+    pub type Conv = firmware::OnChip;
+    #[cfg(feature = "spi-converters")]
+    pub use super::spi_pair::Io;
+    #[cfg(feature = "spi-converters")]
+    pub type Conv = firmware::SpiPair;
+    pub type Ctl = firmware::Ctl<Conv>;
+
+    /// What the control task owns besides the control state.
+    pub struct Hw {
+        pub io: Io,
+        /// Fed only by a control period that met its deadline.
+        pub watchdog: IndependentWatchdog,
+        pub clock: Dwt,
+    }
+
+    /// The DWT cycle counter (core clock).
+    pub struct Dwt {
+        /// The deadline: core cycles per sample period.
+        pub period_cycles: u32,
+    }
+
+    impl Clock for Dwt {
+        #[inline(always)]
+        fn now(&self) -> u32 {
+            DWT::cycle_count()
+        }
+        #[inline(always)]
+        fn elapsed(&self, start: u32, end: u32) -> u32 {
+            end.wrapping_sub(start)
+        }
+        #[inline(always)]
+        fn period(&self) -> u32 {
+            self.period_cycles
+        }
+    }
+
+    /// USART3's transmitter as the command port.
+    pub struct Usart3 {
+        pub tx: serial::Tx<pac::USART3>,
+    }
+
+    impl Port for Usart3 {
+        /// One reply line, blocking (low priority; 115200 Bd: the holding register always
+        /// drains, the control task preempts the wait).
+        fn send(&mut self, line: &str) {
+            use stm32h7xx_hal::hal::serial::Write;
+            for &b in line.as_bytes().iter().chain(b"\r\n") {
+                while let Err(stm32h7xx_hal::nb::Error::WouldBlock) = self.tx.write(b) {}
+            }
+        }
+        fn selftest(&mut self, r: &mut Reply<REPLY_LEN>) -> Result<(), Error> {
+            super::selftest::run::<Conv>(r);
+            Ok(())
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
+#[rtic::app(device = stm32h7xx_hal::pac, peripherals = true)]
+mod app {
+    use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, SYSCLK_HZ, WATCHDOG_MS};
+    use core::sync::atomic::Ordering::Relaxed;
+    use cortex_m::peripheral::DWT;
+    use piezo_core::firmware::{c, control_period, CommandLine, SAMPLE_HZ};
+    use stm32h7xx_hal::{
+        delay::Delay, independent_watchdog::IndependentWatchdog, pac, prelude::*, serial,
+    };
+
+    #[shared]
+    struct Shared {
+        ctl: Ctl,
+    }
+
+    #[local]
+    struct Local {
+        // The control task's hardware (one field per converter variant: RTIC names each
+        // local resource once across the variants).
+        #[cfg(not(feature = "spi-converters"))]
+        hw_adc: Hw,
+        #[cfg(feature = "spi-converters")]
+        hw_spi: Hw,
+        rx: serial::Rx<pac::USART3>,
+        port: Usart3,
+        cli: CommandLine,
+    }
+
+    #[init]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let mut cp = cx.core;
+        let dp = cx.device;
+        // Before anything that can fail: watchdog (frozen under the debugger), reset cause,
+        // amplifier off, on-chip DAC at the safe code (0: SAFE_VOLTS = 0 V at the DAC
+        // scale's 0 V code; the pipeline's own value is checked below).
+        safe::early(&dp.IWDG, &dp.DBGMCU, &dp.RCC, 0);
+        let safe_code = safe::safe_code::<Conv>();
+        safe::SAFE_CODE.store(safe_code, Relaxed);
+        #[cfg(not(feature = "spi-converters"))]
+        {
+            safe::dac1::set(0, safe_code as u16);
+            safe::dac1::set(1, safe_code as u16);
+        }
+        let rsr = safe::RESET_FLAGS.load(Relaxed);
+        defmt::info!(
+            "reset cause: {} (RCC_RSR {=u32:#010x})",
+            safe::reset_cause(rsr),
+            rsr
+        );
+
+        let pwrcfg = dp.PWR.constrain().freeze();
+        // PLL2P: ADC kernel clock; PLL1Q: SPI1 kernel clock (SPI4 runs from PCLK2).
+        let mut ccdr = dp
+            .RCC
+            .constrain()
+            .sys_ck(SYSCLK_HZ.Hz())
+            .pll1_q_ck(100.MHz())
+            .pll2_p_ck(72.MHz())
+            .freeze(pwrcfg, &dp.SYSCFG);
+        ccdr.peripheral
+            .kernel_adc_clk_mux(stm32h7xx_hal::rcc::rec::AdcClkSel::Pll2P);
+
+        cp.DCB.enable_trace();
+        DWT::unlock();
+        cp.DWT.enable_cycle_counter();
+
+        #[allow(unused_mut)] // only the on-chip converters use it
+        let mut delay = Delay::new(cp.SYST, ccdr.clocks);
+        let gpioa = dp.GPIOA.split(ccdr.peripheral.GPIOA);
+        let gpiod = dp.GPIOD.split(ccdr.peripheral.GPIOD);
+        // The converters, TIM2 configured but not running yet.
+        #[cfg(not(feature = "spi-converters"))]
+        let io = {
+            use stm32h7xx_hal::adc;
+            // DAC1 channel 1 on PA4 (xy: channel 2 on PA5) runs since `safe::early`.
+            // ADC1 (xy: and ADC2), 16 bit, triggered by TIM2 TRGO.
+            #[cfg(not(feature = "xy"))]
+            let mut adc = adc::Adc::adc1(
+                dp.ADC1,
+                36.MHz(),
+                &mut delay,
+                ccdr.peripheral.ADC12,
+                &ccdr.clocks,
+            )
+            .enable();
+            #[cfg(feature = "xy")]
+            let (mut adc, mut adc2) = {
+                let (a1, a2) = adc::adc12(
+                    dp.ADC1,
+                    dp.ADC2,
+                    36.MHz(),
+                    &mut delay,
+                    ccdr.peripheral.ADC12,
+                    &ccdr.clocks,
+                );
+                (a1.enable(), a2.enable())
+            };
+            adc.set_resolution(adc::Resolution::SixteenBit);
+            adc.set_sample_time(adc::AdcSampleTime::T_8);
+            configure_adc_trigger(adc.inner(), true);
+            let mut ain = gpioa.pa3.into_analog();
+            adc.start_conversion(&mut ain);
+            #[cfg(feature = "xy")]
+            {
+                let gpioc = dp.GPIOC.split(ccdr.peripheral.GPIOC);
+                adc2.set_resolution(adc::Resolution::SixteenBit);
+                adc2.set_sample_time(adc::AdcSampleTime::T_8);
+                // Its result is read by ADC1's interrupt.
+                configure_adc_trigger(adc2.inner(), false);
+                let mut ain2 = gpioc.pc0.into_analog();
+                adc2.start_conversion(&mut ain2);
+            }
+            let mut timer = dp
+                .TIM2
+                .timer(SAMPLE_HZ.Hz(), ccdr.peripheral.TIM2, &ccdr.clocks);
+            timer.pause();
+            timer.inner_mut().cr2.modify(|_, w| w.mms().update());
+            Io {
+                adc,
+                #[cfg(feature = "xy")]
+                adc2,
+                timer,
+            }
+        };
+        #[cfg(feature = "spi-converters")]
+        let io = {
+            use crate::spi::{CycleDelay, Gpio, HardwarePin, SpiDev};
+            use crate::spi_pair::{Adc, AdcSetup, Dac};
+            use piezo_core::firmware::{ADC_CONFIG, DAC_CONFIG};
+            use stm32h7xx_hal::spi;
+            let gpiob = dp.GPIOB.split(ccdr.peripheral.GPIOB);
+            let gpioe = dp.GPIOE.split(ccdr.peripheral.GPIOE);
+            // SYNC and LDAC high (idle) before SPI4 clocks anything.
+            let sync = Gpio(gpioe.pe4.into_push_pull_output());
+            let ldac = Gpio(gpioe.pe3.into_push_pull_output());
+            let dac_bus: spi::Spi<_, _, u8> = dp.SPI4.spi(
+                (
+                    gpioe.pe2.into_alternate::<5>(),
+                    gpioe.pe5.into_alternate::<5>(),
+                    gpioe.pe6.into_alternate::<5>(),
+                ),
+                spi::MODE_1,
+                25.MHz(),
+                ccdr.peripheral.SPI4,
+                &ccdr.clocks,
+            );
+            let spi4_hz = spi::Spi::<pac::SPI4, spi::Enabled, u8>::kernel_clk_unwrap(&ccdr.clocks);
+            // The DAC first: released from its power-on clamp only at the safe code (read
+            // back); on failure it stays clamped (0 V) and the board halts in the safe state.
+            let mut dac = Dac::new(
+                SpiDev::new(dac_bus, sync, spi4_hz.raw()),
+                ldac,
+                CycleDelay,
+                DAC_CONFIG,
+            )
+            .unwrap_or_else(|_| safe::halt());
+            if dac.init(safe_code).is_err() {
+                defmt::error!("AD5791 did not come up at the safe code: halted, output clamped");
+                safe::halt();
+            }
+            let adc_bus: spi::Spi<_, _, u8> = dp.SPI1.spi(
+                (
+                    gpioa.pa5.into_alternate::<5>(),
+                    gpioa.pa6.into_alternate::<5>(),
+                    gpiob.pb5.into_alternate::<5>(),
+                ),
+                spi::MODE_0,
+                25.MHz(),
+                ccdr.peripheral.SPI1,
+                &ccdr.clocks,
+            );
+            let spi1_hz = spi::Spi::<pac::SPI1, spi::Enabled, u8>::kernel_clk_unwrap(&ccdr.clocks);
+            // CNV (PA0) as a GPIO while configuring: register access needs CNV frames the
+            // driver times; then PA0 goes to TIM2 CH1 (AF1) for the loop.
+            let cnv = Gpio(gpioa.pa0.into_push_pull_output());
+            let mut setup = AdcSetup::new(
+                SpiDev::new(adc_bus, HardwarePin, spi1_hz.raw()),
+                cnv,
+                CycleDelay,
+                ADC_CONFIG,
+            )
+            .unwrap_or_else(|_| safe::halt());
+            if setup.init().is_err() {
+                defmt::error!("AD4020 did not take its configuration: halted in the safe state");
+                safe::halt();
+            }
+            let (adc_bus, cnv, delay) = setup.release();
+            let _cnv = cnv.0.into_alternate::<1>();
+            let adc =
+                Adc::new(adc_bus, HardwarePin, delay, ADC_CONFIG).unwrap_or_else(|_| safe::halt());
+            // TIM2: CH1 in PWM mode 1 is CNV, high for 1/20 of the period from the update
+            // event on; its compare interrupt (CNV falls) runs the control task.
+            let mut timer = dp
+                .TIM2
+                .timer(SAMPLE_HZ.Hz(), ccdr.peripheral.TIM2, &ccdr.clocks);
+            timer.pause();
+            let tim = timer.inner_mut();
+            let arr = tim.arr.read().arr().bits();
+            tim.ccr1().write(|w| w.ccr().bits(arr / 20 + 1));
+            tim.ccmr1_output()
+                .modify(|_, w| w.oc1m().pwm_mode1().oc1pe().set_bit());
+            tim.ccer.modify(|_, w| w.cc1e().set_bit());
+            tim.dier.modify(|_, w| w.cc1ie().set_bit());
+            Io {
+                adc,
+                dac,
+                timer,
+                held: safe_code,
+            }
+        };
+
+        let serial = dp
+            .USART3
+            .serial(
+                (gpiod.pd8.into_alternate(), gpiod.pd9.into_alternate()),
+                115_200.bps(),
+                ccdr.peripheral.USART3,
+                &ccdr.clocks,
+            )
+            .unwrap_or_else(|_| panic!("USART3 setup"));
+        let (tx, mut rx) = serial.split();
+        rx.listen();
+
+        let _ = delay.free();
+
+        // Independent watchdog (LSI clock, survives a main-clock failure): only a control
+        // period that met its deadline feeds it, so a stalled or overrunning loop resets
+        // the MCU, whose DAC then comes up at its safe code.
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.start(stm32h7xx_hal::time::MilliSeconds::from_ticks(WATCHDOG_MS));
+
+        // TIM2 last: from here on samples arrive.
+        let mut io = io;
+        io.timer.resume();
+        safe::amp::set(false); // on from the first period without a fault
+        let hw = Hw {
+            io,
+            watchdog,
+            clock: Dwt {
+                period_cycles: SYSCLK_HZ / SAMPLE_HZ,
+            },
+        };
+
+        defmt::info!("firmware up: {} Hz sample rate", SAMPLE_HZ);
+        (
+            Shared {
+                ctl: Ctl::new(c(SAMPLE_HZ as f64)),
+            },
+            Local {
+                #[cfg(not(feature = "spi-converters"))]
+                hw_adc: hw,
+                #[cfg(feature = "spi-converters")]
+                hw_spi: hw,
+                rx,
+                port: Usart3 { tx },
+                cli: CommandLine::new(),
+            },
+        )
+    }
+
+    /// ADC1 (or ADC2): external trigger TIM2_TRGO (EXTSEL 11, RM0433 table 205), rising
+    /// edge, and the end-of-conversion interrupt if `eoc_interrupt`.
+    #[cfg(not(feature = "spi-converters"))]
+    fn configure_adc_trigger(adc: &pac::adc1::RegisterBlock, eoc_interrupt: bool) {
+        // SAFETY: EXTSEL is a 5-bit field; 11 selects tim2_trgo.
+        #[allow(unsafe_code)]
+        adc.cfgr
+            .modify(|_, w| unsafe { w.extsel().bits(11) }.exten().rising_edge());
+        adc.ier
+            .modify(|_, w| w.eocie().bit(eoc_interrupt).ovrie().clear_bit());
+    }
+
+    /// The control period, on-chip converters: ADC1 end of conversion. Highest priority.
+    #[cfg(not(feature = "spi-converters"))]
+    #[task(binds = ADC1_2, priority = 3, shared = [ctl], local = [hw_adc])]
+    fn sample_adc(mut cx: sample_adc::Context) {
+        period(cx.local.hw_adc, &mut cx.shared.ctl);
+    }
+
+    /// The control period, SPI converters: TIM2 CC1 (CNV fell, the conversion is done).
+    #[cfg(feature = "spi-converters")]
+    #[task(binds = TIM2, priority = 3, shared = [ctl], local = [hw_spi])]
+    fn sample_tim(mut cx: sample_tim::Context) {
+        period(cx.local.hw_spi, &mut cx.shared.ctl);
+    }
+
+    /// The library's control period; the watchdog is fed only when the deadline held.
+    #[inline(always)]
+    fn period(hw: &mut Hw, ctl: &mut impl rtic::Mutex<T = Ctl>) {
+        if control_period(&mut hw.io, &hw.clock, ctl) {
+            hw.watchdog.feed();
+        }
+    }
+
+    /// Command lines from the serial port (priority 1; the control task preempts it).
+    #[task(binds = USART3, priority = 1, shared = [ctl], local = [rx, port, cli])]
+    fn serial_rx(mut cx: serial_rx::Context) {
+        use stm32h7xx_hal::hal::serial::Read;
+        while let Ok(byte) = cx.local.rx.read() {
+            cx.local.cli.byte(byte, &mut cx.shared.ctl, cx.local.port);
+        }
+    }
+
+    /// Timing and overruns over defmt, once per second (DWT cycle counter), from thread
+    /// mode: the only context besides `init` that logs.
+    #[idle(shared = [ctl])]
+    fn idle(mut cx: idle::Context) -> ! {
+        let mut last = DWT::cycle_count();
+        loop {
+            if DWT::cycle_count().wrapping_sub(last) < SYSCLK_HZ {
+                continue;
+            }
+            last = last.wrapping_add(SYSCLK_HZ);
+            let t = cx.shared.ctl.lock(|c| c.timing);
+            defmt::info!(
+                "step cycles min {} max {} last {} | isr min {} max {} last {} | samples {} overruns {}",
+                t.step.min, t.step.max, t.step.last, t.isr.min, t.isr.max, t.isr.last,
+                t.isr.count, t.overruns
+            );
+        }
+    }
+}

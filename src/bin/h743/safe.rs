@@ -1,0 +1,234 @@
+//! The H743's safe state at register level (RM0433), so it works before the HAL is set up
+//! and from the panic and HardFault handlers, where the HAL's owned peripherals are out of
+//! reach.
+//!
+//! * [`early`]: the first thing `init` runs: the independent watchdog started and frozen
+//!   under the debugger, the reset cause read, the amplifier enable line driven low, the
+//!   on-chip DAC at the safe code.
+//! * [`halt`]: a panic or HardFault: interrupts off, amplifier off, the safe code into every
+//!   DAC of the build (the AD5791 through the same driver over a register-level SPI4), then
+//!   a wait for the watchdog reset.
+//!
+//! The hardware side (README, bring-up guide): a pull-down on the amplifier enable line
+//! (amplifier off while the MCU is in reset or its pin is not yet driven) and on the DAC
+//! output the amplifier sees (0 V while no DAC drives it).
+
+use core::sync::atomic::{AtomicI32, AtomicU32, Ordering::Relaxed};
+use stm32h7xx_hal::pac;
+
+/// RCC_RSR as read at boot, before RMVF cleared it.
+pub static RESET_FLAGS: AtomicU32 = AtomicU32::new(0);
+/// The DAC's safe code (the pipeline's safe voltage at the DAC's own scale): set in `init`,
+/// read by [`halt`].
+pub static SAFE_CODE: AtomicI32 = AtomicI32::new(0);
+/// The independent watchdog while booting (ms), before the loop's own 10 ms.
+pub const BOOT_WATCHDOG_MS: u32 = 100;
+
+/// The DAC code of the pipeline's safe voltage at the DAC's own scale: the start-up code
+/// the pipeline itself computes (`Output::code_in_range` of the safe voltage, axis 0's
+/// converter configuration), without building the pipeline (which would put a copy of the
+/// control state on `init`'s stack). 0 if the configuration were refused.
+#[inline(never)]
+pub fn safe_code<C: piezo_core::firmware::Converters>() -> i32 {
+    use piezo_core::firmware::{c, converter_config, SAMPLE_HZ};
+    let config = converter_config::<C>(c(SAMPLE_HZ as f64));
+    let [axis, ..] = config.axes;
+    piezo_core::pipeline::Output::new(&axis.limits, &axis.dac, config.sample_hz)
+        .map_or(0, |o| o.code_in_range(axis.safe_volts) << C::DAC_SHIFT)
+}
+
+/// The reset cause from RCC_RSR flags (RM0433 "RCC reset status register"): the most
+/// specific flag wins.
+pub fn reset_cause(rsr: u32) -> &'static str {
+    const CAUSES: [(u32, &str); 8] = [
+        (1 << 30, "low-power"),
+        (1 << 28, "window-watchdog"),
+        (1 << 26, "independent-watchdog"),
+        (1 << 24, "software"),
+        (1 << 21, "brown-out"),
+        (1 << 23, "power-on"),
+        (1 << 22, "pin"),
+        (1 << 17, "cpu"),
+    ];
+    CAUSES
+        .iter()
+        .find(|(bit, _)| rsr & bit != 0)
+        .map_or("unknown", |(_, name)| name)
+}
+
+/// Boot, before anything that can fail: IWDG1 started at [`BOOT_WATCHDOG_MS`] and frozen
+/// while the core is halted by a debugger (DBGMCU_APB4FZ1.DBG_IWDG1); RCC_RSR kept and
+/// cleared (RMVF); the amplifier off; the on-chip DAC at `safe_code` (on-chip builds; the
+/// AD5791 of `spi-converters` sits clamped at 0 V from its own power-on until `init` brings
+/// it up at the safe code).
+#[allow(unsafe_code)]
+pub fn early(iwdg: &pac::IWDG, dbgmcu: &pac::DBGMCU, rcc: &pac::RCC, safe_code: u16) {
+    dbgmcu.apb4fz1.modify(|_, w| w.dbg_iwdg1().set_bit());
+    // IWDG1 (RM0433 "Independent watchdog"): KR = 0xCCCC starts it (and the LSI), 0x5555
+    // unlocks PR/RLR; /64 prescaler (PR = 4): 32 kHz / 64 = 2 ms per count.
+    // SAFETY: the documented key values and field ranges (PR 3 bits, RLR 12 bits).
+    iwdg.kr.write(|w| unsafe { w.bits(0xCCCC) });
+    iwdg.kr.write(|w| unsafe { w.bits(0x5555) });
+    iwdg.pr.write(|w| unsafe { w.bits(4) });
+    iwdg.rlr.write(|w| unsafe { w.bits(BOOT_WATCHDOG_MS / 2) });
+    iwdg.kr.write(|w| unsafe { w.bits(0xAAAA) });
+    RESET_FLAGS.store(rcc.rsr.read().bits(), Relaxed);
+    rcc.rsr.modify(|_, w| w.rmvf().set_bit());
+    amp::init(rcc);
+    #[cfg(not(feature = "spi-converters"))]
+    dac1::init(rcc, safe_code);
+    #[cfg(feature = "spi-converters")]
+    let _ = safe_code;
+}
+
+/// Interrupts off, amplifier off, the safe code out; never returns (the watchdog, no
+/// longer fed, resets the MCU within its timeout).
+pub fn halt() -> ! {
+    cortex_m::interrupt::disable();
+    amp::off();
+    let code = SAFE_CODE.load(Relaxed);
+    #[cfg(not(feature = "spi-converters"))]
+    {
+        dac1::set(0, code as u16);
+        dac1::set(1, code as u16);
+    }
+    #[cfg(feature = "spi-converters")]
+    {
+        use crate::spi::{CycleDelay, PanicLdac, PanicSpi4};
+        let dac = piezo_core::drivers::Ad5791::new(
+            PanicSpi4,
+            PanicLdac,
+            CycleDelay,
+            piezo_core::firmware::DAC_CONFIG,
+        );
+        if let Ok(mut dac) = dac {
+            dac.set_code(code).ok();
+        }
+    }
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// A panic (thread mode only: no interrupt handler has a panic path, checked by
+/// `.ci/firmware-safety.py`): the safe state first, the message only after, over defmt.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    amp::off();
+    defmt::error!("panic: {}", defmt::Display2Format(info));
+    halt()
+}
+
+/// A HardFault (a bus fault, a stack overflow caught by flip-link, ...): the safe state.
+/// No trampoline: the handler is this function itself (a stack record for the static
+/// stack check; it needs no exception frame).
+#[cortex_m_rt::exception(trampoline = false)]
+#[allow(unsafe_code)]
+unsafe fn HardFault() -> ! {
+    halt()
+}
+
+/// The amplifier enable line: PG12, push-pull output, high = amplifier on. A pull-down on
+/// the board holds it low through reset.
+pub mod amp {
+    use stm32h7xx_hal::pac;
+    const PIN: u32 = 12;
+
+    #[allow(unsafe_code)]
+    fn gpiog() -> &'static pac::gpiog::RegisterBlock {
+        // SAFETY: this module is PG12's only user; BSRR writes touch PG12 alone.
+        unsafe { &*pac::GPIOG::ptr() }
+    }
+
+    /// GPIOG clocked (RCC_AHB4ENR.GPIOGEN), PG12 low, then an output (GPIOG_MODER12 = 01).
+    #[allow(unsafe_code)]
+    pub fn init(rcc: &pac::RCC) {
+        rcc.ahb4enr.modify(|_, w| w.gpiogen().set_bit());
+        let _ = rcc.ahb4enr.read(); // the clock is on before the first GPIOG access
+        off();
+        let mask = 0b11 << (2 * PIN);
+        // SAFETY: MODER12 = 0b01 (general-purpose output); the other pins keep theirs.
+        gpiog()
+            .moder
+            .modify(|r, w| unsafe { w.bits((r.bits() & !mask) | (0b01 << (2 * PIN))) });
+    }
+
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    pub fn off() {
+        // SAFETY: BSRR.BR12 resets PG12 only.
+        gpiog().bsrr.write(|w| unsafe { w.bits(1 << (PIN + 16)) });
+    }
+
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    pub fn set(on: bool) {
+        let bit = if on { 1 << PIN } else { 1 << (PIN + 16) };
+        // SAFETY: BSRR.BS12/BR12 set or reset PG12 only.
+        gpiog().bsrr.write(|w| unsafe { w.bits(bit) });
+    }
+
+    /// The line's level as driven (GPIOG_ODR12).
+    pub fn is_on() -> bool {
+        gpiog().odr.read().bits() & (1 << PIN) != 0
+    }
+}
+
+#[cfg(not(feature = "spi-converters"))]
+/// The on-chip DAC1 (12 bit) at register level: channel 1 on PA4, channel 2 (`xy`) on PA5.
+/// The pins are analog at reset (GPIOA_MODER reset value), as the DAC needs. The HAL's DAC
+/// is not used: its constructor resets the DAC and its buffer calibration disables the
+/// channel (the output floats) in an unbounded loop; the factory trim stays in use.
+pub mod dac1 {
+    use stm32h7xx_hal::pac;
+
+    #[allow(unsafe_code)]
+    fn regs() -> &'static pac::dac::RegisterBlock {
+        // SAFETY: DAC1 is this module's alone; the control task writes the holding
+        // registers, the halt path too after masking interrupts.
+        unsafe { &*pac::DAC::ptr() }
+    }
+
+    /// Clock on (RCC_APB1LENR.DAC12EN), holding registers at `code`, normal mode with the
+    /// output buffer on the pin (DAC_MCR.MODEx = 000), channel(s) enabled (DAC_CR.ENx), no
+    /// trigger: DHR moves to the output one APB clock after each write.
+    #[allow(unsafe_code)]
+    pub fn init(rcc: &pac::RCC, code: u16) {
+        rcc.apb1lenr.modify(|_, w| w.dac12en().set_bit());
+        let _ = rcc.apb1lenr.read();
+        set(0, code);
+        set(1, code);
+        // SAFETY: MODE1 = MODE2 = 0 is a valid mode (normal, buffer on, external pin).
+        regs()
+            .mcr
+            .modify(|_, w| unsafe { w.mode1().bits(0).mode2().bits(0) });
+        #[cfg(not(feature = "xy"))]
+        regs().cr.modify(|_, w| w.en1().set_bit());
+        #[cfg(feature = "xy")]
+        regs().cr.modify(|_, w| w.en1().set_bit().en2().set_bit());
+    }
+
+    /// Channel `ch` (0 or 1) to `code` (12 bit, right aligned: DAC_DHR12R1/2).
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    pub fn set(ch: usize, code: u16) {
+        let v = (code & 0x0FFF) as u32;
+        // SAFETY: DHR12Rx holds 12 data bits; the mask keeps the rest 0.
+        if ch == 0 {
+            regs().dhr12r1.write(|w| unsafe { w.bits(v) });
+        } else {
+            regs().dhr12r2.write(|w| unsafe { w.bits(v) });
+        }
+    }
+
+    /// The code channel `ch` outputs (DAC_DOR1/2), for `selftest`'s read-back.
+    pub fn output(ch: usize) -> u16 {
+        let d = regs();
+        (if ch == 0 {
+            d.dor1.read().bits()
+        } else {
+            d.dor2.read().bits()
+        } & 0x0FFF) as u16
+    }
+}

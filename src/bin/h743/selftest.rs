@@ -1,0 +1,53 @@
+//! `selftest`: the command line asks, the next control period reads axis 0's DAC back after
+//! its write (the on-chip DAC's output register, or the AD5791's DAC register at the
+//! read-back SCLK) and answers; the reply adds the last ADC code against the sensor window,
+//! the amplifier enable line and the reset cause.
+
+use crate::safe::{amp, reset_cause, RESET_FLAGS};
+use core::sync::atomic::{AtomicI32, AtomicU8, Ordering::Relaxed};
+use piezo_core::command::Reply;
+use piezo_core::firmware::{Converters, REPLY_LEN};
+
+pub const IDLE: u8 = 0;
+pub const REQUESTED: u8 = 1;
+pub const DONE: u8 = 2;
+pub static STATE: AtomicU8 = AtomicU8::new(IDLE);
+/// The code the period wrote and the one it read back (`i32::MIN`: the read failed).
+pub static WROTE: AtomicI32 = AtomicI32::new(0);
+pub static READ: AtomicI32 = AtomicI32::new(0);
+/// The last ADC code of axis 0.
+pub static ADC: AtomicI32 = AtomicI32::new(0);
+
+/// Asks the control period for a read-back, waits for it (bounded: the command task runs
+/// below the control task, so a running loop answers within one period),
+/// and appends the findings.
+pub fn run<C: Converters>(r: &mut Reply<REPLY_LEN>) {
+    STATE.store(REQUESTED, Relaxed);
+    // At least 1 ms of polls at 400 MHz (a poll is several cycles).
+    let done = (0..400_000).any(|_| STATE.load(Relaxed) == DONE);
+    STATE.store(IDLE, Relaxed);
+    r.push_str(" reset ");
+    r.push_str(reset_cause(RESET_FLAGS.load(Relaxed)));
+    r.push_str(" dac ");
+    if done {
+        let (read, wrote) = (READ.load(Relaxed), WROTE.load(Relaxed));
+        r.push_i32(read);
+        r.push_str("/");
+        r.push_i32(wrote);
+        r.push_str(if read == wrote { " ok" } else { " BAD" });
+    } else {
+        r.push_str("no-period BAD");
+    }
+    let adc = ADC.load(Relaxed);
+    let s = C::sensor();
+    r.push_str(" adc ");
+    r.push_i32(adc);
+    let seen = adc >> C::ADC_SHIFT;
+    r.push_str(if (s.code_min..=s.code_max).contains(&seen) {
+        " in"
+    } else {
+        " out"
+    });
+    r.push_str(" amp ");
+    r.push_str(if amp::is_on() { "on" } else { "off" });
+}

@@ -1,0 +1,243 @@
+//! Instruction counts per control step, measured in `init`.
+
+use super::stage::SimStage;
+use super::{chips, uart, Ctl};
+use core::hint::black_box;
+use cortex_m::peripheral::{syst::SystClkSource, SYST};
+use piezo_core::command::Reply;
+use piezo_core::firmware::{c, AXES, FFS, LAWS, SAMPLE_HZ};
+use piezo_core::pipeline::Wave;
+
+/// Steps per benchmark row.
+pub const BENCH_STEPS: usize = 2_000;
+
+pub const ROWS: usize = LAWS.len() * FFS.len();
+
+/// Profiling build (`PIEZO_BENCH_ONLY="<law> <ff>"` at compile time): the bench runs that
+/// row only, brackets its timed loop with calls to [`mark`] and exits QEMU after it, so
+/// a `-singlestep -d exec,nochain` log holds one row (see the README's profile command).
+const ONLY: Option<&str> = option_env!("PIEZO_BENCH_ONLY");
+
+/// Marks the start (1) and end (2) of a timed loop in an execution log.
+#[inline(never)]
+pub fn mark(k: u32) {
+    black_box(k);
+}
+
+fn selected(law: &str, ff: &str) -> bool {
+    match ONLY {
+        None => true,
+        Some(o) => o.split_once(' ') == Some((law, ff)),
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Row {
+    pub law: &'static str,
+    pub ff: &'static str,
+    /// Instructions per step x 100.
+    pub instr_x100: u32,
+    /// Worst single step (instructions, SysTick resolution).
+    pub max_instr: u32,
+    /// The law or compensator could not be configured for this number type.
+    pub unsupported: bool,
+}
+
+pub struct Table {
+    pub rows: [Row; ROWS],
+    /// Instructions per SysTick tick x 1000 (calibration, 40 000 expected).
+    pub instr_per_tick_x1000: u32,
+    /// Loop overhead subtracted (ticks over BENCH_STEPS).
+    pub overhead_ticks: u32,
+    /// The driver path per sample x 100: `Ad4000::convert` (with its `t_CONV` wait) +
+    /// `Ad5791::set_code`, mock chips included (not part of the rows).
+    pub drivers_x100: u32,
+}
+
+/// Ticks elapsed on the down-counting SysTick between two readings.
+fn ticks(start: u32, end: u32) -> u32 {
+    start.wrapping_sub(end) & 0x00FF_FFFF
+}
+
+/// `n` iterations of a two-instruction loop (`subs` + `bne`).
+#[allow(unsafe_code)]
+fn known_loop(n: u32) {
+    // SAFETY: register-only countdown, no memory access.
+    unsafe {
+        core::arch::asm!("1:", "subs {n}, {n}, #1", "bne 1b", n = inout(reg) n => _,
+            options(nomem, nostack));
+    }
+}
+
+/// A loop with `ff` and `law` (`open-loop` means the feedforward alone) on a 5 um,
+/// 100 Hz sine around 10 um.
+fn configured(law: &str, ff: &str) -> Option<Ctl> {
+    let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
+    ctl.lp.set_ff(ff).ok()?;
+    let law = if law == "open-loop" {
+        "feedforward"
+    } else {
+        law
+    };
+    ctl.lp.set_law(law).ok()?;
+    ctl.lp
+        .p
+        .set_wave(
+            0,
+            Wave::Sine {
+                offset_um: c(10.0),
+                amplitude_um: c(5.0),
+                freq_hz: c(100.0),
+                phase_turns: c(0.0),
+            },
+        )
+        .ok()?;
+    Some(ctl)
+}
+
+/// Runs every row; SysTick is left free-running (no interrupt).
+pub fn run(syst: &mut SYST) -> Table {
+    syst.disable_interrupt();
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(0x00FF_FFFF);
+    syst.clear_current();
+    syst.enable_counter();
+
+    const CAL: u32 = 100_000;
+    let t0 = SYST::get_current();
+    known_loop(CAL);
+    let cal_ticks = ticks(t0, SYST::get_current()).max(1);
+    let instr_per_tick_x1000 = ((2 * CAL as u64 * 1000) / cal_ticks as u64) as u32;
+
+    // ADC codes of a closed-loop run, replayed identically to every timed run.
+    let mut codes = [0i32; BENCH_STEPS];
+    let mut overhead_ticks = 0;
+    {
+        let t0 = SYST::get_current();
+        for c in codes.iter() {
+            black_box(black_box(*c));
+        }
+        overhead_ticks = overhead_ticks.max(ticks(t0, SYST::get_current()));
+    }
+
+    let mut rows = [Row::default(); ROWS];
+    let mut slot = rows.iter_mut();
+    for law in LAWS {
+        for ff in FFS {
+            let Some(row) = slot.next() else { break };
+            row.law = law;
+            row.ff = ff;
+            if !selected(law, ff) {
+                row.unsupported = true;
+                continue;
+            }
+            let Some(mut ctl) = configured(law, ff) else {
+                row.unsupported = true;
+                continue;
+            };
+            let mut stage = SimStage::new(SAMPLE_HZ as f32);
+            let mut dac = 0;
+            for c in codes.iter_mut() {
+                *c = stage.step(dac);
+                [dac, ..] = ctl.lp.step([*c; AXES]);
+            }
+            // Same codes, same initial state: the timed run repeats that trajectory.
+            let Some(mut ctl) = configured(law, ff) else {
+                continue;
+            };
+            let mut worst = 0;
+            for c in codes.iter().take(50) {
+                let t = SYST::get_current();
+                black_box(ctl.lp.step(black_box([*c; AXES])));
+                worst = worst.max(ticks(t, SYST::get_current()));
+            }
+            let Some(mut ctl) = configured(law, ff) else {
+                continue;
+            };
+            mark(1);
+            let t0 = SYST::get_current();
+            for c in codes.iter() {
+                black_box(ctl.lp.step(black_box([*c; AXES])));
+            }
+            let dt = ticks(t0, SYST::get_current()).saturating_sub(overhead_ticks);
+            mark(2);
+            row.instr_x100 =
+                ((dt as u64 * instr_per_tick_x1000 as u64) / (10 * BENCH_STEPS as u64)) as u32;
+            row.max_instr = ((worst as u64 * instr_per_tick_x1000 as u64) / 1000) as u32;
+        }
+    }
+    // The driver path alone, on the codes of the last row: conversion (CNV high for
+    // t_CONV, waited on the chips' timer), read, DAC write and LDAC pulse.
+    let Ok((mut adc, mut dac)) = chips::drivers_of::<0>(0) else {
+        return Table {
+            rows,
+            instr_per_tick_x1000,
+            overhead_ticks,
+            drivers_x100: 0,
+        };
+    };
+    let (adc, dac) = (black_box(&mut adc), black_box(&mut dac));
+    let t0 = SYST::get_current();
+    for c in codes.iter() {
+        chips::set_input(0, *c);
+        let code = adc.convert().unwrap_or(i32::MIN);
+        dac.set_code(black_box(code.max(0))).ok();
+    }
+    let dt = ticks(t0, SYST::get_current()).saturating_sub(overhead_ticks);
+    let drivers_x100 =
+        ((dt as u64 * instr_per_tick_x1000 as u64) / (10 * BENCH_STEPS as u64)) as u32;
+    Table {
+        rows,
+        instr_per_tick_x1000,
+        overhead_ticks,
+        drivers_x100,
+    }
+}
+
+/// The table as text lines (UART) and, with `log`, defmt (semihosting stops the core,
+/// so not while the loop runs).
+pub fn print(t: &Table, log: bool) {
+    let mut r = Reply::<160>::new();
+    r.push_str("bench: instructions per control step (ADC code -> DAC code), ");
+    r.push_usize(BENCH_STEPS);
+    r.push_str(" steps, QEMU -icount shift=0, ");
+    r.push_fixed(t.instr_per_tick_x1000, 3);
+    r.push_str(" instr/SysTick tick, loop overhead ");
+    r.push_u32(t.overhead_ticks);
+    r.push_str(" ticks");
+    uart::line(r.as_str());
+    r.clear();
+    r.push_str("bench: rows = pipeline step only; SPI driver path per sample (Ad4000 convert incl. t_CONV wait, Ad5791 set_code incl. LDAC pulse, mock chips): ");
+    r.push_fixed(t.drivers_x100, 2);
+    r.push_str(" instr");
+    uart::line(r.as_str());
+    uart::line("mode               feedforward        instr/step  first-50-max");
+    for row in &t.rows {
+        r.clear();
+        r.push_padded(row.law, 19);
+        r.push_padded(row.ff, 19);
+        if row.unsupported {
+            r.push_right("n/a", 10);
+            uart::line(r.as_str());
+            continue;
+        }
+        let mut n = Reply::<16>::new();
+        n.push_fixed(row.instr_x100, 2);
+        r.push_right(n.as_str(), 10);
+        n.clear();
+        n.push_u32(row.max_instr);
+        r.push_str("  ");
+        r.push_right(n.as_str(), 8);
+        uart::line(r.as_str());
+        if !log {
+            continue;
+        }
+        defmt::info!(
+            "bench {=str} + {=str}: {=u32}.{=u32:02} instructions/step",
+            row.law,
+            row.ff,
+            row.instr_x100 / 100,
+            row.instr_x100 % 100
+        );
+    }
+}

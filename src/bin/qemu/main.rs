@@ -1,0 +1,401 @@
+//! Firmware for QEMU `mps2-an386` (Cortex-M4F, thumbv7em-none-eabihf, f32 at 100 kHz) and
+//! `mps2-an385` (Cortex-M3, thumbv7m-none-eabi, Q16.16 at 16 384 Hz): the RTIC app boots in
+//! CI with a simulated stage. The control period and the command line are the library's
+//! ([`piezo_core::firmware`]); this board supplies the hardware side:
+//!
+//! * SysTick (25 MHz in QEMU's mps2 model) fires at the sample rate and runs the control
+//!   period at the highest priority. The stage is [`stage::SimStage`]: the CBW model of the
+//!   core plus a first-order lag. It sits behind the firmware's real converter drivers: the
+//!   control task runs `Ad4000::start_conversion` + `Ad4000::read` and `Ad5791::set_code`
+//!   (the drivers of `piezo_core::drivers`, the ones hal-sim runs) over the no_std mock
+//!   chips of [`chips`] (an AD4020 whose CNV edge samples the stage, an AD5791 whose LDAC
+//!   edge sets the stage's voltage), with the 20-bit codes of the SPI converter pair. With
+//!   feature `xy` there are two identical, independent stages, each behind its own pair of
+//!   chips ([`io::SimIo`]).
+//! * The CMSDK UART0 (0x4000_4000, QEMU `-serial`) carries the command protocol, polled from
+//!   the idle task (lowest priority).
+//! * defmt logs go out over semihosting (decode with `defmt-print -e <elf>`).
+//! * Before the loop starts, `init` measures the instructions per control step of every
+//!   feedback law x feedforward combination ([`bench`]; run QEMU with `-icount shift=0`: one
+//!   instruction per virtual ns, so SysTick ticks over N steps count instructions; a loop of
+//!   known length calibrates ticks to instructions). The `bench` command prints that table.
+//!   The table counts the pipeline step (ADC code in, DAC code out) without the driver
+//!   calls; one extra line counts the driver path per sample (both drivers and the mock
+//!   chips).
+//! * The host ends the run: the line `exit` (this board's test-harness command, not part of
+//!   the protocol) makes the app exit through semihosting with status 0 once at least
+//!   [`PERIODS_MIN`] periods have run; a host that kills QEMU ends it too. If no command
+//!   arrives within [`PERIODS_MAX`] periods it exits with status 1. Nothing depends on how
+//!   long the host is silent: a busy host may pause between `piezo serial` calls for any
+//!   time without ending the session.
+//!
+//! Build: `cargo build --release --target thumbv7em-none-eabihf --bin qemu` (or
+//! `--target thumbv7m-none-eabi`); `.ci/test.d/30-qemu.sh` runs it.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(target_os = "none")]
+mod bench;
+#[cfg(target_os = "none")]
+mod chips;
+#[cfg(target_os = "none")]
+mod io;
+#[cfg(target_os = "none")]
+mod stage;
+#[cfg(target_os = "none")]
+mod uart;
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!(
+        "qemu: build with --target thumbv7em-none-eabihf (mps2-an386) or thumbv7m-none-eabi (mps2-an385)"
+    );
+}
+
+#[cfg(target_os = "none")]
+use board::*;
+
+#[cfg(target_os = "none")]
+mod board {
+    use super::{bench, chips, io, uart};
+    use core::sync::atomic::{AtomicI32, Ordering::Relaxed};
+    use cortex_m::peripheral::{SCB, SYST};
+    use piezo_core::command::{Error, Reply};
+    use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
+    use {cortex_m_rt as _, defmt_semihosting as _};
+
+    /// The control state over this board's converters (the SPI pair, on mock chips).
+    pub type Ctl = firmware::Ctl<SpiPair>;
+
+    /// SysTick clock of QEMU's mps2 machines (Hz).
+    pub const SYSTICK_HZ: u32 = 25_000_000;
+    /// Control periods to run before exiting.
+    pub const PERIODS_MIN: u32 = 10_000;
+    /// Give up (exit 1) when no command was answered after this many periods.
+    pub const PERIODS_MAX: u32 = 300_000;
+    /// The harness line that ends the run (after [`PERIODS_MIN`] periods).
+    const EXIT_LINE: &[u8] = b"exit";
+    /// The harness line that forces a panic (after [`PERIODS_MIN`] periods, so the DAC has
+    /// left its safe code): the panic handler must put the safe code back (CI checks it).
+    const PANIC_LINE: &[u8] = b"panic";
+    /// The DAC's safe code (the pipeline's safe voltage at the DAC's own scale), set in
+    /// `init` before anything else, read by the panic handler.
+    pub static SAFE_CODE: AtomicI32 = AtomicI32::new(0);
+    /// SysTick ticks per control period.
+    const PERIOD: u32 = SYSTICK_HZ / SAMPLE_HZ;
+
+    /// The "device" RTIC needs: no vendor interrupts are used, only SysTick.
+    pub mod pac {
+        /// QEMU's NVIC implements 8 bits; RTIC only needs 3 levels here.
+        pub const NVIC_PRIO_BITS: u8 = 3;
+    }
+
+    /// The mps2's 32 external interrupts, none used: all to the default handler.
+    /// cortex-m-rt leaves this table to the application when its `device` feature is on,
+    /// which the H743's PAC turns on for every eabihf build of this package (Cargo.toml);
+    /// on thumbv7m cortex-m-rt supplies it.
+    #[cfg(target_abi = "eabihf")]
+    #[allow(unsafe_code)]
+    #[unsafe(link_section = ".vector_table.interrupts")]
+    #[unsafe(no_mangle)]
+    static __INTERRUPTS: [unsafe extern "C" fn(); 32] = {
+        unsafe extern "C" {
+            fn DefaultHandler();
+        }
+        [DefaultHandler; 32]
+    };
+
+    /// SysTick as the cycle counter: it counts down from the period's reload value, so
+    /// ticks stand in for cycles (x40 = instructions with `-icount shift=0`).
+    pub struct SysTickClock;
+
+    impl Clock for SysTickClock {
+        #[inline(always)]
+        fn now(&self) -> u32 {
+            SYST::get_current()
+        }
+        /// A reload in between is undone.
+        #[inline(always)]
+        fn elapsed(&self, start: u32, end: u32) -> u32 {
+            let d = start.wrapping_sub(end);
+            if d > PERIOD {
+                d.wrapping_add(PERIOD)
+            } else {
+                d
+            }
+        }
+        #[inline(always)]
+        fn period(&self) -> u32 {
+            PERIOD
+        }
+        #[inline(always)]
+        fn next_due(&self) -> bool {
+            SCB::is_pendst_pending()
+        }
+    }
+
+    /// UART0 as the command port, plus this board's `bench` table, `selftest` and the
+    /// harness' `exit` and `panic`.
+    pub struct Uart {
+        pub table: bench::Table,
+        /// The harness asked to end the run, or to panic.
+        pub exit: bool,
+        pub panic: bool,
+    }
+
+    impl Port for Uart {
+        fn send(&mut self, line: &str) {
+            uart::line(line);
+        }
+        fn bench(&mut self) -> Result<usize, Error> {
+            bench::print(&self.table, false);
+            Ok(bench::ROWS)
+        }
+        fn harness(&mut self, line: &[u8]) -> bool {
+            self.exit |= line == EXIT_LINE;
+            self.panic |= line == PANIC_LINE;
+            line == EXIT_LINE || line == PANIC_LINE
+        }
+        /// The next control period reads axis 0's DAC register back after its write (at
+        /// the read-back SCLK); plus the last ADC code against the sensor window, the
+        /// amplifier enable line and the mock chips' rule violations. The wait for the
+        /// period is bounded (idle runs below it, so it comes within one period).
+        fn selftest(&mut self, r: &mut Reply<REPLY_LEN>) -> Result<(), Error> {
+            use io::selftest::{DONE, IDLE, READ, REQUESTED, STATE, WROTE};
+            STATE.store(REQUESTED, Relaxed);
+            let mut done = false;
+            for _ in 0..10 * SYSTICK_HZ / SAMPLE_HZ * 40 {
+                if STATE.load(Relaxed) == DONE {
+                    done = true;
+                    break;
+                }
+            }
+            STATE.store(IDLE, Relaxed);
+            r.push_str(" reset n/a dac ");
+            if done {
+                let (read, wrote) = (READ.load(Relaxed), WROTE.load(Relaxed));
+                r.push_i32(read);
+                r.push_str("/");
+                r.push_i32(wrote);
+                r.push_str(if read == wrote { " ok" } else { " BAD" });
+            } else {
+                r.push_str("no-period BAD");
+            }
+            let adc = io::selftest::ADC.load(Relaxed);
+            let s = <SpiPair as Converters>::sensor();
+            let seen = adc >> <SpiPair as Converters>::ADC_SHIFT;
+            r.push_str(" adc ");
+            r.push_i32(adc);
+            r.push_str(if (s.code_min..=s.code_max).contains(&seen) {
+                " in"
+            } else {
+                " out"
+            });
+            r.push_str(" amp ");
+            r.push_str(if chips::AMP_ON.load(Relaxed) {
+                "on"
+            } else {
+                "off"
+            });
+            let (n, first) = chips::violations();
+            r.push_str(" chips ");
+            r.push_u32(n);
+            r.push_str(" ");
+            r.push_str(first);
+            Ok(())
+        }
+    }
+
+    /// A panic: interrupts off (the control period stops), amplifier off, the safe code
+    /// written to every axis' DAC through the same driver (a new instance on the same mock
+    /// chip), then the DAC model's output before and after is printed from the mock itself
+    /// (CI checks it is the safe code) and the run ends with status 101.
+    #[panic_handler]
+    fn panic(info: &core::panic::PanicInfo) -> ! {
+        cortex_m::interrupt::disable();
+        chips::AMP_ON.store(false, Relaxed);
+        let safe = SAFE_CODE.load(Relaxed);
+        let before = [chips::dac_out(0), chips::dac_out(1)];
+        safe_dac::<0>(safe);
+        #[cfg(feature = "xy")]
+        safe_dac::<1>(safe);
+        for (axis, before) in before.iter().enumerate().take(firmware::AXES) {
+            let mut r = Reply::<120>::new();
+            r.push_str("panic: dac ");
+            r.push_usize(axis);
+            r.push_str(" out ");
+            r.push_i32(*before);
+            r.push_str(" -> ");
+            r.push_i32(chips::dac_out(axis));
+            r.push_str(" safe ");
+            r.push_i32(safe);
+            r.push_str(" amp ");
+            r.push_str(if chips::AMP_ON.load(Relaxed) {
+                "on"
+            } else {
+                "off"
+            });
+            uart::line(r.as_str());
+        }
+        defmt::error!("panic: {}", defmt::Display2Format(info));
+        uart::line("panic");
+        semihosting::process::exit(101)
+    }
+
+    /// Axis `A`'s DAC to `code` through the firmware's driver.
+    fn safe_dac<const A: usize>(code: i32) {
+        if let Ok(mut dac) = chips::Dac::<A>::new(
+            chips::DacSpi,
+            chips::Ldac,
+            chips::TimerDelay,
+            firmware::DAC_CONFIG,
+        ) {
+            dac.set_code(code).ok();
+        }
+    }
+}
+
+#[cfg(target_os = "none")]
+#[rtic::app(device = crate::board::pac, peripherals = false)]
+mod app {
+    use super::io::SimIo;
+    use super::{
+        bench, chips, uart, Ctl, SysTickClock, Uart, PERIODS_MAX, PERIODS_MIN, SAFE_CODE,
+        SYSTICK_HZ,
+    };
+    use core::sync::atomic::Ordering::Relaxed;
+    use cortex_m::peripheral::syst::SystClkSource;
+    use piezo_core::command::Reply;
+    use piezo_core::firmware::{c, control_period, CommandLine, AXES, SAMPLE_HZ};
+    use piezo_core::firmware::{Converters, SpiPair};
+    use piezo_core::pipeline::Wave;
+
+    #[shared]
+    struct Shared {
+        ctl: Ctl,
+    }
+
+    #[local]
+    struct Local {
+        io: SimIo,
+        cli: CommandLine,
+        port: Uart,
+    }
+
+    #[init]
+    fn init(cx: init::Context) -> (Shared, Local) {
+        let mut syst = cx.core.SYST;
+        // First: the chips' time base, then the DAC at the safe code (the pipeline's safe
+        // voltage at the DAC's scale) before anything that can fail; the amplifier stays
+        // off until the loop runs without a fault.
+        chips::clock::start();
+        let ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        let safe = ctl.lp.p.codes()[0] << <SpiPair as Converters>::DAC_SHIFT;
+        SAFE_CODE.store(safe, Relaxed);
+        uart::init();
+        let io = match SimIo::new(safe) {
+            Ok(io) => io,
+            Err(rule) => {
+                uart::line("error: converters did not come up:");
+                uart::line(rule);
+                semihosting::process::exit(1)
+            }
+        };
+        defmt::info!("qemu board: bench");
+        let table = bench::run(&mut syst);
+        bench::print(&table, true);
+        if option_env!("PIEZO_BENCH_ONLY").is_some() {
+            semihosting::process::exit(0);
+        }
+
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(SYSTICK_HZ / SAMPLE_HZ - 1);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+        defmt::info!("qemu board: control loop at {=u32} Hz", SAMPLE_HZ);
+        uart::line("ready");
+        let mut ctl = ctl;
+        for axis in 0..AXES {
+            ctl.lp.p.set_wave(axis, Wave::Hold { y_um: c(10.0) }).ok();
+        }
+        (
+            Shared { ctl },
+            Local {
+                io,
+                cli: CommandLine::new(),
+                port: Uart {
+                    table,
+                    exit: false,
+                    panic: false,
+                },
+            },
+        )
+    }
+
+    /// The control period: the stage moves under the voltage of the DAC's output, the ADC
+    /// driver samples and reads it, the DAC driver writes and loads the new code (every
+    /// axis).
+    #[task(binds = SysTick, priority = 2, shared = [ctl], local = [io])]
+    fn sample(mut cx: sample::Context) {
+        control_period(cx.local.io, &SysTickClock, &mut cx.shared.ctl);
+    }
+
+    #[idle(shared = [ctl], local = [cli, port])]
+    fn idle(mut cx: idle::Context) -> ! {
+        let mut answered = 0u32;
+        loop {
+            while let Some(byte) = uart::try_read() {
+                if cx.local.cli.byte(byte, &mut cx.shared.ctl, cx.local.port) {
+                    answered += 1;
+                }
+            }
+            let periods = cx.shared.ctl.lock(|c| c.periods);
+            if cx.local.port.panic && periods >= PERIODS_MIN {
+                panic!("forced by the harness");
+            }
+            if cx.local.port.exit && periods >= PERIODS_MIN {
+                finish(&mut cx.shared.ctl, periods, answered, 0);
+            }
+            if periods >= PERIODS_MAX && answered == 0 {
+                uart::line("error: no command received");
+                finish(&mut cx.shared.ctl, periods, answered, 1);
+            }
+        }
+    }
+
+    fn finish(ctl: &mut impl rtic::Mutex<T = Ctl>, periods: u32, answered: u32, code: i32) -> ! {
+        let t = ctl.lock(|c| c.timing);
+        let mut r = Reply::<160>::new();
+        r.push_str("done periods ");
+        r.push_u32(periods);
+        r.push_str(" commands ");
+        r.push_u32(answered);
+        r.push_str(" step_ticks ");
+        r.push_u32(t.step.min);
+        r.push_str(" ");
+        r.push_u32(t.step.max);
+        r.push_str(" isr_ticks ");
+        r.push_u32(t.isr.min);
+        r.push_str(" ");
+        r.push_u32(t.isr.max);
+        r.push_str(" overruns ");
+        r.push_u32(t.overruns);
+        uart::line(r.as_str());
+        let (n, first) = chips::violations();
+        r.clear();
+        r.push_str("chips: ");
+        r.push_u32(n);
+        r.push_str(" data-sheet rule violations, first: ");
+        r.push_str(first);
+        uart::line(r.as_str());
+        defmt::info!(
+            "done: {=u32} periods, {=u32} commands, step ticks min {=u32} max {=u32}, overruns {=u32}",
+            periods,
+            answered,
+            t.step.min,
+            t.step.max,
+            t.overruns
+        );
+        semihosting::process::exit(code)
+    }
+}

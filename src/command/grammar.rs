@@ -1,0 +1,771 @@
+//! The grammar: a line's words into a [`Command`], bounded and without allocation.
+
+use super::error::Error;
+use super::number::{parse_f32, parse_usize};
+use super::{MAX_LEVELS, MAX_LINE, MAX_LINES, MAX_WORDS, TABLE_ADD_MAX};
+
+/// Waveform shapes of the `wave` command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shape {
+    Sine,
+    Triangle,
+    Square,
+}
+
+impl Shape {
+    pub fn name(self) -> &'static str {
+        match self {
+            Shape::Sine => "sine",
+            Shape::Triangle => "triangle",
+            Shape::Square => "square",
+        }
+    }
+}
+
+/// What starts a recording.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TriggerCmd {
+    /// Trigger at once.
+    Now,
+    /// Channel crosses `level` upwards.
+    Rising {
+        channel: usize,
+        level: f32,
+        pre: usize,
+    },
+    /// Channel crosses `level` downwards.
+    Falling {
+        channel: usize,
+        level: f32,
+        pre: usize,
+    },
+    /// Channel crosses `level` in either direction.
+    Level {
+        channel: usize,
+        level: f32,
+        pre: usize,
+    },
+}
+
+/// Recorder sub-commands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RecCmd<'a> {
+    /// Channel signal names (1..=[`MAX_WORDS`]-2 of them).
+    Select(Words<'a>),
+    Trigger(TriggerCmd),
+    Arm,
+    Stop,
+    Status,
+    Read {
+        start: usize,
+        count: usize,
+    },
+    /// Record every n-th period (`Some`), or report the divider (`None`).
+    Divider(Option<usize>),
+}
+
+/// The points of one `table add` line (1..=[`TABLE_ADD_MAX`]), without allocation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Points {
+    values: [f32; TABLE_ADD_MAX],
+    len: usize,
+}
+
+impl Points {
+    /// `None` unless `values` has 1..=[`TABLE_ADD_MAX`] points.
+    pub fn from_slice(values: &[f32]) -> Option<Self> {
+        if values.is_empty() || values.len() > TABLE_ADD_MAX {
+            return None;
+        }
+        let mut p = Self {
+            values: [0.0; TABLE_ADD_MAX],
+            len: values.len(),
+        };
+        p.values.iter_mut().zip(values).for_each(|(d, s)| *d = *s);
+        Some(p)
+    }
+
+    pub fn as_slice(&self) -> &[f32] {
+        self.values.get(..self.len).unwrap_or(&[])
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// A parsed command; names borrow from the line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command<'a> {
+    /// Empty line: no reply needed.
+    Empty,
+    Ping,
+    Help,
+    Get(&'a str),
+    Set(&'a str, f32),
+    /// `cbw <d> <alpha> <beta> <gamma>`: the four CBW parameters at once (one check, one
+    /// rebuild: a fitted model can be valid where a mix of old and new values is not).
+    Cbw([f32; 4]),
+    Mode(&'a str),
+    Feedforward(&'a str),
+    WaveOff,
+    WaveHold(f32),
+    Wave {
+        shape: Shape,
+        amp_um: f32,
+        freq_hz: f32,
+        offset_um: f32,
+    },
+    /// Staircase `low_um` .. `high_um` in `levels` (2..=[`MAX_LEVELS`]) levels and back.
+    WaveSteps {
+        low_um: f32,
+        high_um: f32,
+        levels: u16,
+        freq_hz: f32,
+    },
+    /// Periodic spline through the point table, at this frequency (Hz).
+    WaveTable(f32),
+    /// 2-axis raster: x triangle over `span_um[0]` at `line_hz`, y triangle over
+    /// `span_um[1]` at `line_hz / (2 lines)`, around `center_um`.
+    WaveRaster {
+        span_um: [f32; 2],
+        lines: u16,
+        line_hz: f32,
+        center_um: [f32; 2],
+    },
+    /// 2-axis Lissajous scan: sines at `freq_hz`, y `phase_deg` ahead of x.
+    WaveLissajous {
+        amp_um: [f32; 2],
+        freq_hz: [f32; 2],
+        phase_deg: f32,
+        center_um: [f32; 2],
+    },
+    /// Select the axis of the 1-axis waves (`Some`), or report it (`None`).
+    Axis(Option<usize>),
+    /// Empty the point table.
+    TableClear,
+    /// Append points (um) to the table.
+    TableAdd(Points),
+    /// Number of points in the table.
+    TableLen,
+    Stats,
+    StatsReset,
+    Rec(RecCmd<'a>),
+    /// Latched fault and fault counters.
+    Fault,
+    /// Leave the safe state a fault latched.
+    FaultClear,
+    Bench,
+    /// Exercise the converters and the safe-state hardware and report (board-specific).
+    Selftest,
+}
+
+/// Up to [`MAX_WORDS`] words of a line, without allocation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Words<'a> {
+    words: [&'a str; MAX_WORDS],
+    len: usize,
+}
+
+impl<'a> Words<'a> {
+    fn split(line: &'a str) -> Result<Self, Error> {
+        let mut words = [""; MAX_WORDS];
+        let mut len = 0;
+        // Byte scan (no core::str::split: its searcher carries panic paths).
+        let mut start = 0;
+        for (i, c) in line.bytes().chain(core::iter::once(b' ')).enumerate() {
+            if c != b' ' {
+                continue;
+            }
+            if i > start {
+                let slot = words.get_mut(len).ok_or(Error::TooManyArguments)?;
+                *slot = line.get(start..i).ok_or(Error::NotAscii)?;
+                len += 1;
+            }
+            start = i + 1;
+        }
+        Ok(Self { words, len })
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn get(&self, i: usize) -> Option<&'a str> {
+        if i < self.len {
+            self.words.get(i).copied()
+        } else {
+            None
+        }
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &'a str> + '_ {
+        self.words.iter().take(self.len).copied()
+    }
+
+    /// The words from index `from` on.
+    fn tail(&self, from: usize) -> Self {
+        let mut out = Self {
+            words: [""; MAX_WORDS],
+            len: 0,
+        };
+        for w in self.iter().skip(from) {
+            if let Some(slot) = out.words.get_mut(out.len) {
+                *slot = w;
+                out.len += 1;
+            }
+        }
+        out
+    }
+
+    fn arg(&self, i: usize) -> Result<&'a str, Error> {
+        self.get(i).ok_or(Error::MissingArgument)
+    }
+
+    fn num(&self, i: usize) -> Result<f32, Error> {
+        parse_f32(self.arg(i)?)
+    }
+
+    fn index(&self, i: usize) -> Result<usize, Error> {
+        parse_usize(self.arg(i)?)
+    }
+
+    /// Fails unless the line has at most `n` words.
+    fn at_most(&self, n: usize) -> Result<(), Error> {
+        if self.len > n {
+            Err(Error::TooManyArguments)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// Parses one line (without its terminator).
+pub fn parse(line: &[u8]) -> Result<Command<'_>, Error> {
+    if line.len() > MAX_LINE {
+        return Err(Error::LineTooLong);
+    }
+    let line = line.strip_suffix(b"\r").unwrap_or(line);
+    if !line.iter().all(|b| (b' '..=b'~').contains(b)) {
+        return Err(Error::NotAscii);
+    }
+    let text = core::str::from_utf8(line).map_err(|_| Error::NotAscii)?;
+    parse_words(&Words::split(text)?)
+}
+
+fn parse_words<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
+    let Some(cmd) = w.get(0) else {
+        return Ok(Command::Empty);
+    };
+    let c = match cmd {
+        "ping" => {
+            w.at_most(1)?;
+            Command::Ping
+        }
+        "help" => {
+            w.at_most(1)?;
+            Command::Help
+        }
+        "bench" => {
+            w.at_most(1)?;
+            Command::Bench
+        }
+        "selftest" => {
+            w.at_most(1)?;
+            Command::Selftest
+        }
+        "get" => {
+            w.at_most(2)?;
+            Command::Get(w.arg(1)?)
+        }
+        "set" => {
+            w.at_most(3)?;
+            let name = w.arg(1)?;
+            Command::Set(name, w.num(2)?)
+        }
+        "cbw" => {
+            w.at_most(5)?;
+            Command::Cbw([w.num(1)?, w.num(2)?, w.num(3)?, w.num(4)?])
+        }
+        "mode" => {
+            w.at_most(2)?;
+            Command::Mode(w.arg(1)?)
+        }
+        "ff" => {
+            w.at_most(2)?;
+            Command::Feedforward(w.arg(1)?)
+        }
+        "wave" => parse_wave(w)?,
+        "axis" => {
+            w.at_most(2)?;
+            Command::Axis(match w.get(1) {
+                Some(_) => Some(w.index(1)?),
+                None => None,
+            })
+        }
+        "table" => match w.arg(1)? {
+            "clear" => {
+                w.at_most(2)?;
+                Command::TableClear
+            }
+            "len" => {
+                w.at_most(2)?;
+                Command::TableLen
+            }
+            "add" => {
+                let mut values = [0.0; TABLE_ADD_MAX];
+                let mut len = 0;
+                for (slot, word) in values.iter_mut().zip(w.iter().skip(2)) {
+                    *slot = parse_f32(word)?;
+                    len += 1;
+                }
+                w.at_most(2 + TABLE_ADD_MAX)?;
+                if len == 0 {
+                    return Err(Error::MissingArgument);
+                }
+                Command::TableAdd(Points { values, len })
+            }
+            _ => return Err(Error::BadKeyword),
+        },
+        "stats" => match w.get(1) {
+            None => Command::Stats,
+            Some("reset") => {
+                w.at_most(2)?;
+                Command::StatsReset
+            }
+            Some(_) => return Err(Error::BadKeyword),
+        },
+        "rec" => Command::Rec(parse_rec(w)?),
+        "fault" => match w.get(1) {
+            None => Command::Fault,
+            Some("clear") => {
+                w.at_most(2)?;
+                Command::FaultClear
+            }
+            Some(_) => return Err(Error::BadKeyword),
+        },
+        _ => return Err(Error::UnknownCommand),
+    };
+    Ok(c)
+}
+
+fn parse_wave<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
+    let shape = match w.arg(1)? {
+        "off" => {
+            w.at_most(2)?;
+            return Ok(Command::WaveOff);
+        }
+        "hold" => {
+            w.at_most(3)?;
+            return Ok(Command::WaveHold(w.num(2)?));
+        }
+        "steps" => {
+            w.at_most(6)?;
+            let (low_um, high_um) = (w.num(2)?, w.num(3)?);
+            let levels = w.index(4)?;
+            let freq_hz = w.num(5)?;
+            if !(2..=MAX_LEVELS as usize).contains(&levels) || !(freq_hz >= 0.0) {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveSteps {
+                low_um,
+                high_um,
+                levels: levels as u16,
+                freq_hz,
+            });
+        }
+        "table" => {
+            w.at_most(3)?;
+            let freq_hz = w.num(2)?;
+            if !(freq_hz >= 0.0) {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveTable(freq_hz));
+        }
+        "raster" => {
+            // 4 arguments, or 6 with the centre.
+            w.at_most(8)?;
+            let span_um = [w.num(2)?, w.num(3)?];
+            let lines = w.index(4)?;
+            let line_hz = w.num(5)?;
+            let center_um = match w.len() {
+                6 => [span_um[0] * 0.5, span_um[1] * 0.5],
+                _ => [w.num(6)?, w.num(7)?],
+            };
+            let ok = span_um[0] >= 0.0
+                && span_um[1] >= 0.0
+                && (1..=MAX_LINES as usize).contains(&lines)
+                && line_hz >= 0.0;
+            if !ok {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveRaster {
+                span_um,
+                lines: lines as u16,
+                line_hz,
+                center_um,
+            });
+        }
+        "lissajous" => {
+            // 4 arguments; 5: + phase; 6: + centre; 7: + phase and centre.
+            w.at_most(9)?;
+            let amp_um = [w.num(2)?, w.num(3)?];
+            let freq_hz = [w.num(4)?, w.num(5)?];
+            let (phase_deg, center_um) = match w.len() {
+                6 => (90.0, amp_um),
+                7 => (w.num(6)?, amp_um),
+                8 => (90.0, [w.num(6)?, w.num(7)?]),
+                _ => (w.num(6)?, [w.num(7)?, w.num(8)?]),
+            };
+            let ok = amp_um[0] >= 0.0
+                && amp_um[1] >= 0.0
+                && freq_hz[0] >= 0.0
+                && freq_hz[1] >= 0.0
+                && (-360.0..=360.0).contains(&phase_deg);
+            if !ok {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveLissajous {
+                amp_um,
+                freq_hz,
+                phase_deg,
+                center_um,
+            });
+        }
+        "sine" => Shape::Sine,
+        "triangle" => Shape::Triangle,
+        "square" => Shape::Square,
+        _ => return Err(Error::BadKeyword),
+    };
+    w.at_most(5)?;
+    let amp_um = w.num(2)?;
+    let freq_hz = w.num(3)?;
+    let offset_um = if w.len() > 4 { w.num(4)? } else { 0.0 };
+    if !(freq_hz >= 0.0) || !(amp_um >= 0.0) {
+        return Err(Error::OutOfRange);
+    }
+    Ok(Command::Wave {
+        shape,
+        amp_um,
+        freq_hz,
+        offset_um,
+    })
+}
+
+fn parse_rec<'a>(w: &Words<'a>) -> Result<RecCmd<'a>, Error> {
+    let r = match w.arg(1)? {
+        "sel" => {
+            let names = w.tail(2);
+            if names.is_empty() {
+                return Err(Error::MissingArgument);
+            }
+            RecCmd::Select(names)
+        }
+        "trig" => {
+            let kind = w.arg(2)?;
+            if kind == "now" {
+                w.at_most(3)?;
+                return Ok(RecCmd::Trigger(TriggerCmd::Now));
+            }
+            w.at_most(6)?;
+            let channel = w.index(3)?;
+            let level = w.num(4)?;
+            let pre = if w.len() > 5 { w.index(5)? } else { 0 };
+            RecCmd::Trigger(match kind {
+                "rise" => TriggerCmd::Rising {
+                    channel,
+                    level,
+                    pre,
+                },
+                "fall" => TriggerCmd::Falling {
+                    channel,
+                    level,
+                    pre,
+                },
+                "level" => TriggerCmd::Level {
+                    channel,
+                    level,
+                    pre,
+                },
+                _ => return Err(Error::BadKeyword),
+            })
+        }
+        "arm" => {
+            w.at_most(2)?;
+            RecCmd::Arm
+        }
+        "stop" => {
+            w.at_most(2)?;
+            RecCmd::Stop
+        }
+        "status" => {
+            w.at_most(2)?;
+            RecCmd::Status
+        }
+        "div" => {
+            w.at_most(3)?;
+            RecCmd::Divider(match w.get(2) {
+                Some(_) => Some(w.index(2)?),
+                None => None,
+            })
+        }
+        "read" => {
+            w.at_most(4)?;
+            RecCmd::Read {
+                start: w.index(2)?,
+                count: w.index(3)?,
+            }
+        }
+        _ => return Err(Error::BadKeyword),
+    };
+    Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::command::LineBuffer;
+    use proptest::prelude::*;
+
+    fn p(s: &str) -> Result<Command<'_>, Error> {
+        parse(s.as_bytes())
+    }
+
+    #[test]
+    fn parses_every_command() {
+        assert_eq!(p("ping"), Ok(Command::Ping));
+        assert_eq!(p("selftest"), Ok(Command::Selftest));
+        assert!(p("selftest now").is_err());
+        assert_eq!(p("  ping \r"), Ok(Command::Ping));
+        assert_eq!(p(""), Ok(Command::Empty));
+        assert_eq!(p("get kp"), Ok(Command::Get("kp")));
+        assert_eq!(p("set kp 1.5e-3"), Ok(Command::Set("kp", 1.5e-3)));
+        assert_eq!(
+            p("cbw 0.39 0.27 1e-3 1.8e-4"),
+            Ok(Command::Cbw([0.39, 0.27, 1e-3, 1.8e-4]))
+        );
+        assert_eq!(p("cbw 0.39 0.27 1e-3"), Err(Error::MissingArgument));
+        assert_eq!(p("cbw 0.39 0.27 1e-3 1 2"), Err(Error::TooManyArguments));
+        assert_eq!(p("mode hgo"), Ok(Command::Mode("hgo")));
+        assert_eq!(p("ff ims-cbw"), Ok(Command::Feedforward("ims-cbw")));
+        assert_eq!(p("wave off"), Ok(Command::WaveOff));
+        assert_eq!(p("wave hold 12.5"), Ok(Command::WaveHold(12.5)));
+        assert_eq!(
+            p("wave sine 5 100 20"),
+            Ok(Command::Wave {
+                shape: Shape::Sine,
+                amp_um: 5.0,
+                freq_hz: 100.0,
+                offset_um: 20.0
+            })
+        );
+        assert_eq!(p("stats"), Ok(Command::Stats));
+        assert_eq!(p("stats reset"), Ok(Command::StatsReset));
+        assert_eq!(p("fault"), Ok(Command::Fault));
+        assert_eq!(p("fault clear"), Ok(Command::FaultClear));
+        assert_eq!(p("fault reset"), Err(Error::BadKeyword));
+        assert_eq!(p("fault clear now"), Err(Error::TooManyArguments));
+        assert_eq!(p("rec arm"), Ok(Command::Rec(RecCmd::Arm)));
+        assert_eq!(
+            p("rec trig rise 1 2.5 100"),
+            Ok(Command::Rec(RecCmd::Trigger(TriggerCmd::Rising {
+                channel: 1,
+                level: 2.5,
+                pre: 100
+            })))
+        );
+        assert_eq!(
+            p("rec read 0 16"),
+            Ok(Command::Rec(RecCmd::Read {
+                start: 0,
+                count: 16
+            }))
+        );
+        match p("rec sel y_um u_volts") {
+            Ok(Command::Rec(RecCmd::Select(w))) => {
+                assert_eq!(w.len(), 2);
+                assert_eq!(w.get(0), Some("y_um"));
+                assert_eq!(w.get(1), Some("u_volts"));
+                assert_eq!(w.get(2), None);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn parses_scans_and_axis() {
+        assert_eq!(
+            p("wave raster 20 10 16 50"),
+            Ok(Command::WaveRaster {
+                span_um: [20.0, 10.0],
+                lines: 16,
+                line_hz: 50.0,
+                center_um: [10.0, 5.0],
+            })
+        );
+        assert_eq!(
+            p("wave raster 20 10 16 50 30 40"),
+            Ok(Command::WaveRaster {
+                span_um: [20.0, 10.0],
+                lines: 16,
+                line_hz: 50.0,
+                center_um: [30.0, 40.0],
+            })
+        );
+        let liss = |phase_deg, center_um| {
+            Ok(Command::WaveLissajous {
+                amp_um: [5.0, 4.0],
+                freq_hz: [30.0, 40.0],
+                phase_deg,
+                center_um,
+            })
+        };
+        assert_eq!(p("wave lissajous 5 4 30 40"), liss(90.0, [5.0, 4.0]));
+        assert_eq!(p("wave lissajous 5 4 30 40 45"), liss(45.0, [5.0, 4.0]));
+        assert_eq!(
+            p("wave lissajous 5 4 30 40 10 20"),
+            liss(90.0, [10.0, 20.0])
+        );
+        assert_eq!(
+            p("wave lissajous 5 4 30 40 -45 10 20"),
+            liss(-45.0, [10.0, 20.0])
+        );
+        for (line, e) in [
+            ("wave raster 20 10 16", Error::MissingArgument),
+            ("wave raster 20 10 16 50 30", Error::MissingArgument),
+            ("wave raster 20 10 16 50 30 40 1", Error::TooManyArguments),
+            ("wave raster 20 10 0 50", Error::OutOfRange),
+            ("wave raster 20 10 4097 50", Error::OutOfRange),
+            ("wave raster -20 10 16 50", Error::OutOfRange),
+            ("wave raster 20 10 16 -50", Error::OutOfRange),
+            ("wave raster 20 10 1.5 50", Error::BadNumber),
+            ("wave lissajous 5 4 30", Error::MissingArgument),
+            ("wave lissajous 5 4 30 -40", Error::OutOfRange),
+            ("wave lissajous 5 -4 30 40", Error::OutOfRange),
+            ("wave lissajous 5 4 30 40 400", Error::OutOfRange),
+            ("wave lissajous 5 4 30 40 nan", Error::BadNumber),
+            ("wave lissajous 5 4 30 40 90 1 2 3", Error::TooManyArguments),
+            ("axis -1", Error::BadNumber),
+            ("axis 1 2", Error::TooManyArguments),
+        ] {
+            assert_eq!(p(line), Err(e), "{line}");
+        }
+        assert_eq!(p("axis"), Ok(Command::Axis(None)));
+        assert_eq!(p("rec div"), Ok(Command::Rec(RecCmd::Divider(None))));
+        assert_eq!(p("rec div 10"), Ok(Command::Rec(RecCmd::Divider(Some(10)))));
+        assert_eq!(p("rec div 1 2"), Err(Error::TooManyArguments));
+        assert_eq!(p("axis 1"), Ok(Command::Axis(Some(1))));
+    }
+
+    #[test]
+    fn every_error_has_its_code() {
+        assert_eq!(p("jump").unwrap_err().code(), 3);
+        assert_eq!(p("set kp").unwrap_err(), Error::MissingArgument);
+        assert_eq!(p("set kp nan").unwrap_err(), Error::BadNumber);
+        assert_eq!(p("set kp inf").unwrap_err(), Error::BadNumber);
+        assert_eq!(p("set kp 1 2").unwrap_err(), Error::TooManyArguments);
+        assert_eq!(p("wave saw 1 2").unwrap_err(), Error::BadKeyword);
+        assert_eq!(p("wave sine 1 -2").unwrap_err(), Error::OutOfRange);
+        assert_eq!(p("rec read -1 3").unwrap_err(), Error::BadNumber);
+        assert_eq!(parse(b"ping\x00").unwrap_err(), Error::NotAscii);
+        assert_eq!(
+            parse(&[b'a'; MAX_LINE + 1]).unwrap_err(),
+            Error::LineTooLong
+        );
+        assert_eq!(
+            p("a b c d e f g h i j k").unwrap_err(),
+            Error::TooManyArguments
+        );
+        assert_eq!(
+            Error::UnknownParam.to_string(),
+            "err 7 unknown parameter".to_string()
+        );
+    }
+
+    #[test]
+    fn parses_steps_and_table_commands() {
+        assert_eq!(
+            p("wave steps 10 30 5 2.5"),
+            Ok(Command::WaveSteps {
+                low_um: 10.0,
+                high_um: 30.0,
+                levels: 5,
+                freq_hz: 2.5
+            })
+        );
+        assert_eq!(p("wave steps 1 2 64 1").map(|_| ()), Ok(()));
+        assert_eq!(p("wave steps 1 2 1 1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave steps 1 2 65 1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave steps 1 2 4 -1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave steps 1 2 4.5 1"), Err(Error::BadNumber));
+        assert_eq!(p("wave steps 1 2 4"), Err(Error::MissingArgument));
+        assert_eq!(p("wave steps 1 2 4 1 0"), Err(Error::TooManyArguments));
+        assert_eq!(p("wave table 10"), Ok(Command::WaveTable(10.0)));
+        assert_eq!(p("wave table"), Err(Error::MissingArgument));
+        assert_eq!(p("wave table -1"), Err(Error::OutOfRange));
+        assert_eq!(p("wave table 1 2"), Err(Error::TooManyArguments));
+        assert_eq!(p("table clear"), Ok(Command::TableClear));
+        assert_eq!(p("table len"), Ok(Command::TableLen));
+        assert_eq!(p("table"), Err(Error::MissingArgument));
+        assert_eq!(p("table drop"), Err(Error::BadKeyword));
+        assert_eq!(p("table len 3"), Err(Error::TooManyArguments));
+        assert_eq!(p("table add"), Err(Error::MissingArgument));
+        assert_eq!(p("table add 1 x"), Err(Error::BadNumber));
+        assert_eq!(
+            p("table add 1.5 -2 3e1"),
+            Ok(Command::TableAdd(
+                Points::from_slice(&[1.5, -2.0, 30.0]).unwrap()
+            ))
+        );
+        let full = "table add 1 2 3 4 5 6 7 8";
+        match p(full) {
+            Ok(Command::TableAdd(pts)) => {
+                assert_eq!(pts.len(), TABLE_ADD_MAX);
+                assert_eq!(pts.as_slice(), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(
+            p("table add 1 2 3 4 5 6 7 8 9"),
+            Err(Error::TooManyArguments)
+        );
+        assert!(Points::from_slice(&[]).is_none());
+        assert!(Points::from_slice(&[0.0; TABLE_ADD_MAX + 1]).is_none());
+    }
+
+    proptest! {
+        #[test]
+        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
+            let _ = parse(&bytes);
+            let mut lb = LineBuffer::new();
+            for &b in &bytes {
+                if let Some(Ok(line)) = lb.push(b) {
+                    let _ = parse(line);
+                }
+            }
+        }
+
+        #[test]
+        fn arbitrary_words_never_panic(words in proptest::collection::vec(
+            prop_oneof![
+                proptest::sample::select(&[
+                    "rec", "trig", "sel", "wave", "sine", "set", "1e3", "-1", "read", "3",
+                    "rise", "stats", "reset", "hold", "now", "arm", "steps", "table",
+                    "add", "clear", "len", "raster", "lissajous", "axis",
+                ][..]).prop_map(|s| s.to_string()),
+                "[a-z0-9.]{0,6}",
+            ],
+            0..12)) {
+            let line = words.join(" ");
+            let _ = parse(line.as_bytes());
+        }
+    }
+}

@@ -1,0 +1,41 @@
+//! The firmware's board-independent part: what every board runs, built once here and used
+//! by the board binaries (`src/bin/h743.rs`, `src/bin/qemu.rs`) and the tests alike.
+//!
+//! * [`control_period`]: one control period (ADC codes in, pipeline step, DAC codes out,
+//!   recorder, timing), over the board's [`Io`] and [`Clock`];
+//! * [`CommandLine`]: the serial command line (line buffer, parser, [`Ctl::execute`], the
+//!   streamed `rec read`), over the board's [`Port`];
+//! * [`Ctl`]: the control state the two share (the [`Loop`] of axes, the recorder, the
+//!   timing, the point table) and the command executor;
+//! * [`Params`] and the laws and compensators by name ([`law_with`], [`ff_with`]);
+//! * [`Converters`]: the converter pairs a board can have ([`OnChip`], [`SpiPair`]) and the
+//!   sensor and DAC scalings that follow from them.
+//!
+//! The number type [`R`], the sample rate and the axis count follow the target and the
+//! features: `f32` at 100 kHz with an FPU (and on the host), Q16.16 at 16 384 Hz without
+//! one; two axes with feature `xy`.
+
+mod console;
+mod control_loop;
+mod converters;
+mod ctl;
+mod execute;
+mod laws;
+mod params;
+mod period;
+mod target;
+mod timing;
+
+pub use console::{CommandLine, Port};
+pub use control_loop::Loop;
+pub use converters::{
+    converter_config, ActuatorDac, Converters, OnChip, PositionAdc, SpiPair, ADC_CONFIG,
+    DAC_CONFIG, SPI_CENTER_UM, SPI_SPAN_UM,
+};
+pub use ctl::{Ctl, PointTable};
+pub use execute::{push_real, stream_frames, PARAMS};
+pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
+pub use params::Params;
+pub use period::{control_period, Clock, Io};
+pub use target::{c, LoopPipeline, AXES, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ};
+pub use timing::{CycleStats, Timing};

@@ -1,0 +1,88 @@
+//! Everything the control task owns.
+
+use super::control_loop::Loop;
+use super::converters::Converters;
+use super::target::{c, AXES, R, REC_CH, REC_N};
+use super::timing::Timing;
+use crate::command::Error;
+use crate::pipeline::TABLE_LEN;
+use crate::recorder::{self, Recorder};
+use crate::Real;
+
+/// Everything the control task owns: the loop, the recorder and the timing; and the point
+/// table the executor fills (`table add`) and hands to the reference on `wave table`
+/// (the control step never reads it).
+pub struct Ctl<C> {
+    pub lp: Loop<C>,
+    pub rec: Recorder<R, REC_CH, REC_N>,
+    pub timing: Timing,
+    pub table: PointTable,
+    /// The axis the 1-axis waves go to (`axis <n>`).
+    pub axis: usize,
+    /// Control periods run since start-up (wrapping; `stats reset` leaves it).
+    pub periods: u32,
+}
+
+impl<C: Converters> Ctl<C> {
+    pub fn new(sample_hz: R) -> Self {
+        Self {
+            lp: Loop::new(sample_hz),
+            rec: Recorder::new(),
+            timing: Timing::new(),
+            table: PointTable::new(),
+            axis: 0,
+            periods: 0,
+        }
+    }
+
+    /// Feeds the recorder (only while it captures: the signals cost a few instructions).
+    #[inline(always)]
+    pub fn record(&mut self, adc_code: [i32; AXES], dac_code: [i32; AXES]) {
+        if matches!(
+            self.rec.state(),
+            recorder::State::Armed | recorder::State::Triggered
+        ) {
+            let s = self.lp.signals(adc_code, dac_code);
+            self.rec.push(&s);
+        }
+    }
+}
+
+/// Points of `wave table` as `table add` appends them (um).
+pub struct PointTable {
+    points: [R; TABLE_LEN],
+    pub(super) len: usize,
+}
+
+impl PointTable {
+    pub const fn new() -> Self {
+        Self {
+            points: [R::ZERO; TABLE_LEN],
+            len: 0,
+        }
+    }
+
+    /// The points so far.
+    pub fn points(&self) -> &[R] {
+        self.points.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Appends all of `values` or, if they do not fit, none.
+    pub(super) fn add(&mut self, values: &[f32]) -> Result<(), Error> {
+        let free = self.points.get_mut(self.len..).unwrap_or(&mut []);
+        if values.len() > free.len() {
+            return Err(Error::OutOfRange);
+        }
+        for (d, v) in free.iter_mut().zip(values) {
+            *d = c(*v as f64);
+        }
+        self.len += values.len();
+        Ok(())
+    }
+}
+
+impl Default for PointTable {
+    fn default() -> Self {
+        Self::new()
+    }
+}

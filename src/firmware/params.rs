@@ -1,0 +1,80 @@
+//! What `set` changes besides the limits: the hysteresis model, the open-loop scaling and
+//! the gains the laws and compensators are built from.
+
+use super::target::{c, R};
+use crate::feedforward::LinearFf;
+use crate::hysteresis::Cbw;
+
+/// What `set` changes besides the limits: the hysteresis model (the one `piezo fit
+/// --model cbw` identifies), the open-loop scaling and the gains (config, apart from the
+/// laws' state). [`Params::default`] is the simulated stage: CBW set 1 of the 000 backup
+/// slide, first-order linear part with pole [`super::STAGE_POLE_PER_S`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// CBW (n = 1) of the IMS feedforward and the HGO's observer model: `d`, `alpha` (um/V),
+    /// `beta`, `gamma` (1/V).
+    pub cbw_d: R,
+    pub cbw_alpha: R,
+    pub cbw_beta: R,
+    pub cbw_gamma: R,
+    /// Open-loop scaling (open-loop mode and the `linear` compensator).
+    pub um_per_volt: R,
+    pub offset_um: R,
+    /// HGO `epsilon` (s), 000 eq. (8).
+    pub hgo_eps_s: R,
+    /// Robust law gains (1/s).
+    pub lambda1: R,
+    pub lambda2: R,
+    /// PID gains: V/um and V/(um s).
+    pub pid_kp: R,
+    pub pid_ki: R,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            cbw_d: c(0.16),
+            cbw_alpha: c(0.07),
+            cbw_beta: c(0.02),
+            cbw_gamma: c(0.01),
+            um_per_volt: c(0.16),
+            offset_um: c(0.0),
+            hgo_eps_s: c(2e-4),
+            lambda1: c(2_000.0),
+            lambda2: c(2_000.0),
+            pid_kp: c(0.5),
+            pid_ki: c(2_000.0),
+        }
+    }
+}
+
+impl Params {
+    pub fn model(&self) -> Option<Cbw<R>> {
+        Cbw::with_n1(self.cbw_d, self.cbw_alpha, self.cbw_beta, self.cbw_gamma).ok()
+    }
+
+    pub fn linear(&self) -> LinearFf<R> {
+        LinearFf {
+            um_per_volt: self.um_per_volt,
+            offset_um: self.offset_um,
+        }
+    }
+
+    /// The slot of a settable parameter, by its `get`/`set` name.
+    pub(super) fn slot(&mut self, name: &str) -> Option<&mut R> {
+        Some(match name {
+            "cbw_d" => &mut self.cbw_d,
+            "cbw_alpha" => &mut self.cbw_alpha,
+            "cbw_beta" => &mut self.cbw_beta,
+            "cbw_gamma" => &mut self.cbw_gamma,
+            "um_per_volt" => &mut self.um_per_volt,
+            "offset_um" => &mut self.offset_um,
+            "hgo_eps" => &mut self.hgo_eps_s,
+            "lambda1" => &mut self.lambda1,
+            "lambda2" => &mut self.lambda2,
+            "pid_kp" => &mut self.pid_kp,
+            "pid_ki" => &mut self.pid_ki,
+            _ => return None,
+        })
+    }
+}

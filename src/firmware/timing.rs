@@ -1,0 +1,63 @@
+//! Timing statistics of the control task.
+
+/// Min/max/last of a cycle count, and how many samples there were.
+#[derive(Clone, Copy, Debug)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct CycleStats {
+    pub min: u32,
+    pub max: u32,
+    pub last: u32,
+    pub count: u32,
+}
+
+impl CycleStats {
+    pub const fn new() -> Self {
+        Self {
+            min: u32::MAX,
+            max: 0,
+            last: 0,
+            count: 0,
+        }
+    }
+    #[inline(always)]
+    pub fn record(&mut self, cycles: u32) {
+        self.last = cycles;
+        self.min = self.min.min(cycles);
+        self.max = self.max.max(cycles);
+        self.count = self.count.wrapping_add(1);
+    }
+}
+
+impl Default for CycleStats {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Timing of the control task, reported by `stats` and reset by `stats reset`.
+#[derive(Clone, Copy, Debug)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub struct Timing {
+    /// The pipeline step alone.
+    pub step: CycleStats,
+    /// The whole interrupt handler (converter access, step, recorder, bookkeeping).
+    pub isr: CycleStats,
+    /// Samples whose processing missed the deadline (the next sample was due or lost).
+    pub overruns: u32,
+}
+
+impl Timing {
+    pub const fn new() -> Self {
+        Self {
+            step: CycleStats::new(),
+            isr: CycleStats::new(),
+            overruns: 0,
+        }
+    }
+}
+
+impl Default for Timing {
+    fn default() -> Self {
+        Self::new()
+    }
+}
