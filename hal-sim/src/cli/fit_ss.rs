@@ -1,5 +1,6 @@
-//! `piezo fit --model ss | hammerstein-ss`: one multivariable state-space model (with a
-//! hysteresis per actuator) for several training records.
+//! `piezo fit --model ss | hammerstein-ss | scheduled-ss`: one multivariable state-space
+//! model (with a hysteresis per actuator, or scheduled by the input level) for several
+//! training records.
 use super::fit::Args;
 use super::predict::{score_last_period, Loaded};
 use crate::ident::fit::models;

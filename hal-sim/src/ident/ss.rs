@@ -244,18 +244,18 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
         scheduled_rms: None,
     };
     if let Some(tau_s) = opts.schedule {
+        // `model.linear` stays the model of all records (`piezo sim --stage`) and is one
+        // start of every local refinement.
         anyhow::ensure!(
             opts.hysteresis.is_none(),
             "the amplitude schedule and a hysteresis front are not combined"
         );
         let cfg = PemConfig {
             iterations: opts.iterations,
-            progress: opts
-                .progress
-                .then(|| format!("local order {order}")),
+            progress: opts.progress.then(|| format!("local order {order}")),
             ..Default::default()
         };
-        let (sched, c) = scheduled::identify(recs, &spectra, order, tau_s, &cfg)?;
+        let (sched, c) = scheduled::identify(recs, &spectra, &linear, tau_s, &cfg)?;
         let rms = (c / records).sqrt();
         progress(opts.progress, || {
             format!("scheduled model: RMS output error {rms:.4e} at the BLA lines")

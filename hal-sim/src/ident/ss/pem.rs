@@ -67,7 +67,7 @@ impl Default for PemConfig {
     fn default() -> Self {
         Self {
             iterations: 50,
-            ftol: 1e-6,
+            ftol: 1e-9,
             progress: None,
         }
     }
