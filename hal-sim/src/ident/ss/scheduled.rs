@@ -251,7 +251,7 @@ mod tests {
             let u: Vec<f64> = (0..1000)
                 .map(|i| if i % 2 == 0 { amp } else { -amp })
                 .collect();
-            let y = s.simulate(&like, &[u.clone()], 1e-3).unwrap();
+            let y = s.simulate(&like, std::slice::from_ref(&u), 1e-3).unwrap();
             for i in 900..1000 {
                 assert!(
                     (y[0][i] - k * u[i]).abs() < 1e-6 * amp,
