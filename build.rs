@@ -30,6 +30,12 @@ fn main() {
         let dir = out.join(bin);
         fs::create_dir_all(&dir).expect("create a board directory in OUT_DIR");
         fs::write(dir.join("board-memory.x"), memory).expect("write board-memory.x to OUT_DIR");
+        // cortex-m-rt's `device` feature includes `device.x`: the H743's PAC supplies it on
+        // eabihf; without an FPU (QEMU's M3) the QEMU board's own, naming its interrupt.
+        if bin == "qemu" && env::var("CARGO_CFG_TARGET_ABI").as_deref() != Ok("eabihf") {
+            fs::write(dir.join("device.x"), "PROVIDE(UARTRX0 = DefaultHandler);\n")
+                .expect("write device.x to OUT_DIR");
+        }
         // Two arguments: flip-link reads `-L <dir>` (not `-L<dir>`) when it looks for RAM.
         println!("cargo:rustc-link-arg-bin={bin}=-L");
         println!("cargo:rustc-link-arg-bin={bin}={}", dir.display());

@@ -133,7 +133,10 @@ def call_graph(elf):
         if m:
             (lo if m.group(1) == "w" else hi).add(int(m.group(2), 0))
         m = re.search(r"\t(bl|blx|b|b\.w|bx|b\w\w|b\w\w\.w|cbz|cbnz)\s.*<([^>+]+)(\+0x[0-9a-f]+)?>", line)
-        if m and m.group(2) != cur:
+        # A branch into the middle of another function is no call: it is alignment padding
+        # after a function's last branch that happens to decode as a branch (seen after
+        # h743::safe::halt's `wfi` loop: `bmi <h743::app::idle+0x15e>`).
+        if m and m.group(2) != cur and m.group(3) is None:
             graph[cur].add(m.group(2))
         m = re.match(r"^\s*([0-9a-f]+):\s*\t(\S+)\s*([^@]*)", line)
         if m and m.group(2).startswith("adr"):  # pc-relative address: counted as taken

@@ -26,14 +26,14 @@ mod period;
 mod target;
 mod timing;
 
-pub use console::{CommandLine, Port};
+pub use console::{CommandLine, Port, Replica};
 pub use control_loop::Loop;
 pub use converters::{
     converter_config, ActuatorDac, Converters, OnChip, PositionAdc, SpiPair, ADC_CONFIG,
     DAC_CONFIG, SPI_CENTER_UM, SPI_SPAN_UM,
 };
 pub use ctl::{Ctl, PointTable};
-pub use execute::{push_real, stream_frames, PARAMS};
+pub use execute::{push_real, push_stats, stream_frames, PARAMS};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
 pub use params::Params;
 pub use period::{control_period, Clock, Io};

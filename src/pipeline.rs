@@ -12,11 +12,13 @@
 //! Faults (an ADC code outside the sensor window, a non-finite command) latch the safe
 //! state: the output slews to `safe_volts` and stays there until [`Pipeline::clear_fault`].
 
+mod adopt;
 mod fused;
 pub mod output;
 pub mod reference;
 pub mod sensor;
 
+pub use adopt::Parts;
 pub use output::{DacScale, Limited, Output, OutputLimits};
 pub use reference::{lissajous, raster, Wave, WaveGen, TABLE_LEN};
 pub use sensor::Sensor;
@@ -338,20 +340,10 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         };
         let out = Output::new(&limits, &a.dac, fs).map_err(|e| e.on_axis(axis))?;
         check_safe_volts(&limits, safe_volts).map_err(|e| e.on_axis(axis))?;
-        // The last code stays inside the output range (every step starts from there): a
-        // range that excludes it takes its nearest code now, as the next sample's limit
-        // would (the range wins over the slew limit).
-        if let (Some(code), Some(u)) = (
-            self.state.code.get_mut(axis),
-            self.state.u_applied.get_mut(axis),
-        ) {
-            let (lo, hi) = out.code_range();
-            *code = (*code).max(lo).min(hi);
-            *u = out.dac.volts(*code);
-        }
         *o = out;
         a.limits = limits;
         a.safe_volts = safe_volts;
+        self.clamp_code(axis);
         // The fused step's guard proof covers the output range: decide again.
         self.fused = self.fusable();
         Ok(())
@@ -382,6 +374,21 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     pub fn clear_fault(&mut self) {
         self.state.fault = None;
         self.restart();
+    }
+
+    /// The last code stays inside the output range (every step starts from there): a range
+    /// that excludes it takes its nearest code now, as the next sample's limit would (the
+    /// range wins over the slew limit).
+    fn clamp_code(&mut self, axis: usize) {
+        if let (Some(code), Some(u), Some(out)) = (
+            self.state.code.get_mut(axis),
+            self.state.u_applied.get_mut(axis),
+            self.output.get(axis),
+        ) {
+            let (lo, hi) = out.code_range();
+            *code = (*code).max(lo).min(hi);
+            *u = out.dac.volts(*code);
+        }
     }
 
     fn restart(&mut self) {

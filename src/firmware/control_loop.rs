@@ -8,7 +8,7 @@ use super::target::{c, LoopPipeline, AXES, R, SAFE_VOLTS};
 use crate::command::Error;
 use crate::feedback::Feedback;
 use crate::feedforward::{Feedforward, MultiFeedforward};
-use crate::pipeline::{Mode, OutputLimits, Wave};
+use crate::pipeline::{Mode, OutputLimits, Parts, Wave};
 use crate::recorder::Signal;
 use crate::Real;
 use core::marker::PhantomData;
@@ -27,7 +27,32 @@ pub struct Loop<C> {
     converters: PhantomData<C>,
 }
 
+// By hand: `derive` would ask `C: Clone` of the converter marker.
+impl<C> Clone for Loop<C> {
+    fn clone(&self) -> Self {
+        Self {
+            p: self.p.clone(),
+            sample_hz: self.sample_hz,
+            law: self.law,
+            ff: self.ff,
+            params: self.params,
+            converters: PhantomData,
+        }
+    }
+}
+
 impl<C: Converters> Loop<C> {
+    /// Takes `parts` of the replica `from` (where a command was validated and its law or
+    /// compensator built, outside the control task's lock) with its names and parameters:
+    /// a copy and one bumpless restart ([`crate::pipeline::Pipeline::adopt`]).
+    #[inline(never)]
+    pub fn adopt(&mut self, from: &Self, parts: Parts) {
+        self.p.adopt(&from.p, parts);
+        self.law = from.law;
+        self.ff = from.ff;
+        self.params = from.params;
+    }
+
     /// Open loop, holding 0 um, in the safe state's voltage.
     pub fn new(sample_hz: R) -> Self {
         let params = Params::default();

@@ -3,11 +3,11 @@
 
 use super::control_loop::Loop;
 use super::converters::Converters;
-use super::ctl::Ctl;
+use super::ctl::{Ctl, PointTable};
 use super::target::{c, LoopPipeline, AXES, R, REC_CH, REC_N};
 use super::timing::Timing;
 use crate::command::{self, Command, Error, RecCmd, Shape, TriggerCmd};
-use crate::pipeline::{lissajous, raster, Wave};
+use crate::pipeline::{lissajous, raster, Parts, Wave};
 use crate::recorder::{self, Signal};
 use crate::Real;
 
@@ -28,253 +28,274 @@ impl<C: Converters> Ctl<C> {
         cmd: Command<'_>,
         out: &mut command::Reply<N>,
     ) -> Result<(), Error> {
-        let lp = &mut self.lp;
-        let axis = self.axis;
         match cmd {
-            Command::Empty => {}
-            Command::Ping => out.push_str("ok pong"),
-            Command::Help => {
-                out.push_str(
-                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest; params:",
-                );
-                for p in PARAMS {
-                    out.push_str(" ");
-                    out.push_str(p);
-                }
-            }
-            Command::Get(name) => {
-                let v = get_param(lp, name)?;
-                out.push_str("ok ");
-                out.push_str(name);
-                out.push_str(" ");
-                push_real(out, v);
-            }
-            Command::Set(name, v) => {
-                set_param(lp, name, c(v as f64))?;
-                out.push_str("ok ");
-                out.push_str(name);
-                out.push_str(" ");
-                push_real(out, get_param(lp, name)?);
-            }
-            Command::Cbw(v) => {
-                let v = v.map(rc);
-                lp.set_cbw(v)?;
-                out.push_str("ok cbw");
-                for v in [
-                    lp.params.cbw_d,
-                    lp.params.cbw_alpha,
-                    lp.params.cbw_beta,
-                    lp.params.cbw_gamma,
-                ] {
-                    out.push_str(" ");
-                    push_real(out, v);
-                }
-            }
-            Command::Mode(name) => {
-                lp.set_law(name)?;
-                out.push_str("ok mode ");
-                out.push_str(lp.law);
-            }
-            Command::Feedforward(name) => {
-                lp.set_ff(name)?;
-                out.push_str("ok ff ");
-                out.push_str(lp.ff);
-            }
-            Command::WaveOff => {
-                // Every axis holds where its reference is now.
-                let sp = lp.p.state().trace.setpoint;
-                for (a, s) in sp.iter().enumerate() {
-                    lp.p.set_wave(a, Wave::Hold { y_um: s.y_um })
-                        .map_err(|_| Error::OutOfRange)?;
-                }
-                out.push_str("ok wave off");
-            }
-            Command::WaveHold(y) => {
-                lp.p.set_wave(axis, Wave::Hold { y_um: c(y as f64) })
-                    .map_err(|_| Error::OutOfRange)?;
-                out.push_str("ok wave hold ");
-                out.push_f32(y);
-            }
-            Command::Wave {
-                shape,
-                amp_um,
-                freq_hz,
-                offset_um,
-            } => {
-                let (a, f, o) = (c(amp_um as f64), c(freq_hz as f64), c(offset_um as f64));
-                let wave = match shape {
-                    Shape::Sine => Wave::Sine {
-                        offset_um: o,
-                        amplitude_um: a,
-                        freq_hz: f,
-                        phase_turns: c(0.0),
-                    },
-                    Shape::Triangle => Wave::Triangle {
-                        offset_um: o,
-                        amplitude_um: a,
-                        freq_hz: f,
-                        phase_turns: c(0.0),
-                    },
-                    Shape::Square => Wave::Steps {
-                        low_um: o - a,
-                        high_um: o + a,
-                        levels: 2,
-                        freq_hz: f,
-                    },
-                };
-                lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
-                out.push_str("ok wave ");
-                out.push_str(shape.name());
-                for v in [a, f, o] {
-                    out.push_str(" ");
-                    push_real(out, v);
-                }
-            }
-            Command::WaveSteps {
-                low_um,
-                high_um,
-                levels,
-                freq_hz,
-            } => {
-                let (lo, hi, f) = (c(low_um as f64), c(high_um as f64), c(freq_hz as f64));
-                lp.p.set_wave(
-                    axis,
-                    Wave::Steps {
-                        low_um: lo,
-                        high_um: hi,
-                        levels,
-                        freq_hz: f,
-                    },
-                )
-                .map_err(|_| Error::OutOfRange)?;
-                out.push_str("ok wave steps ");
-                push_real(out, lo);
-                out.push_str(" ");
-                push_real(out, hi);
-                out.push_str(" ");
-                out.push_u32(levels as u32);
-                out.push_str(" ");
-                push_real(out, f);
-            }
-            Command::TableClear => {
-                self.table.len = 0;
-                out.push_str("ok table 0");
-            }
-            Command::TableAdd(points) => {
-                self.table.add(points.as_slice())?;
-                out.push_str("ok table ");
-                out.push_usize(self.table.len);
-            }
-            Command::TableLen => {
-                out.push_str("ok table ");
-                out.push_usize(self.table.len);
-            }
-            Command::WaveTable(freq_hz) => {
-                let points = self.table.points();
-                if points.len() < 2 {
-                    return Err(Error::Busy);
-                }
-                let f = c(freq_hz as f64);
-                let wave = Wave::table(points, f).map_err(|_| Error::OutOfRange)?;
-                lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
-                out.push_str("ok wave table ");
-                push_real(out, f);
-                out.push_str(" ");
-                out.push_usize(points.len());
-            }
-            Command::WaveRaster {
-                span_um,
-                lines,
-                line_hz,
-                center_um,
-            } => {
-                let (half, center) = (span_um.map(|s| c(s as f64 * 0.5)), center_um.map(rc));
-                let line_hz = c(line_hz as f64);
-                // One y sweep per `lines` x periods: y runs at line_hz / (2 lines).
-                let frame_hz = line_hz / R::from_i32(2 * lines as i32);
-                set_scan(lp, raster(center, half, line_hz, frame_hz))?;
-                out.push_str("ok wave raster ");
-                push_real(out, half[0] + half[0]);
-                out.push_str(" ");
-                push_real(out, half[1] + half[1]);
-                out.push_str(" ");
-                out.push_u32(lines as u32);
-                out.push_str(" ");
-                push_real(out, line_hz);
-                for v in center {
-                    out.push_str(" ");
-                    push_real(out, v);
-                }
-            }
-            Command::WaveLissajous {
-                amp_um,
-                freq_hz,
-                phase_deg,
-                center_um,
-            } => {
-                let (amp, f, center) = (amp_um.map(rc), freq_hz.map(rc), center_um.map(rc));
-                // The core's lissajous(), with y `phase_deg` ahead of x instead of 90 deg.
-                let mut waves = lissajous(center, amp, f);
-                if let [_, Wave::Sine { phase_turns, .. }] = &mut waves {
-                    *phase_turns = c(phase_deg as f64 / 360.0);
-                }
-                set_scan(lp, waves)?;
-                out.push_str("ok wave lissajous");
-                for v in amp.into_iter().chain(f) {
-                    out.push_str(" ");
-                    push_real(out, v);
-                }
-                out.push_str(" ");
-                out.push_f32(phase_deg);
-                for v in center {
-                    out.push_str(" ");
-                    push_real(out, v);
-                }
-            }
-            Command::Axis(n) => {
-                if let Some(n) = n {
-                    if n >= AXES {
-                        return Err(Error::OutOfRange);
-                    }
-                    self.axis = n;
-                }
-                out.push_str("ok axis ");
-                out.push_usize(self.axis);
-                out.push_str(" of ");
-                out.push_usize(AXES);
-            }
-            Command::Stats => {
-                let t = &self.timing;
-                out.push_str("ok step");
-                for v in [t.step.min, t.step.max, t.step.last] {
-                    out.push_str(" ");
-                    out.push_u32(v);
-                }
-                out.push_str(" isr");
-                for v in [t.isr.min, t.isr.max, t.isr.last] {
-                    out.push_str(" ");
-                    out.push_u32(v);
-                }
-                out.push_str(" samples ");
-                out.push_u32(t.isr.count);
-                out.push_str(" overruns ");
-                out.push_u32(t.overruns);
-            }
+            Command::Stats => push_stats(out, &self.timing),
             Command::StatsReset => {
                 self.timing = Timing::new();
                 out.push_str("ok");
             }
             Command::Rec(r) => self.rec_command(r, out)?,
-            Command::Fault => push_fault(out, &lp.p),
-            Command::FaultClear => {
-                lp.p.clear_fault();
-                push_fault(out, &lp.p);
+            cmd => {
+                run(&mut self.lp, &mut self.table, &mut self.axis, cmd, out)?;
             }
-            Command::Bench | Command::Selftest => return Err(Error::Unsupported),
         }
         Ok(())
     }
+}
 
+/// A command on the loop `lp` (the live one, or the command task's replica), the point table
+/// and the selected axis; returns the parts of the pipeline it changed. The timing and the
+/// recorder commands are the control state's ([`Ctl::execute`]).
+pub(super) fn run<C: Converters, const N: usize>(
+    lp: &mut Loop<C>,
+    table: &mut PointTable,
+    selected: &mut usize,
+    cmd: Command<'_>,
+    out: &mut command::Reply<N>,
+) -> Result<Parts, Error> {
+    let axis = *selected;
+    let mut parts = Parts::NONE;
+    match cmd {
+        Command::Empty => {}
+        Command::Ping => out.push_str("ok pong"),
+        Command::Help => {
+            out.push_str(
+                    "ok ping help get set cbw mode ff wave axis table stats rec fault bench selftest; params:",
+                );
+            for p in PARAMS {
+                out.push_str(" ");
+                out.push_str(p);
+            }
+        }
+        Command::Get(name) => {
+            let v = get_param(lp, name)?;
+            out.push_str("ok ");
+            out.push_str(name);
+            out.push_str(" ");
+            push_real(out, v);
+        }
+        Command::Set(name, v) => {
+            set_param(lp, name, c(v as f64))?;
+            parts = if matches!(name, "u_min" | "u_max" | "slew") {
+                Parts::LIMITS
+            } else {
+                Parts::MODEL
+            };
+            out.push_str("ok ");
+            out.push_str(name);
+            out.push_str(" ");
+            push_real(out, get_param(lp, name)?);
+        }
+        Command::Cbw(v) => {
+            let v = v.map(rc);
+            lp.set_cbw(v)?;
+            parts = Parts::MODEL;
+            out.push_str("ok cbw");
+            for v in [
+                lp.params.cbw_d,
+                lp.params.cbw_alpha,
+                lp.params.cbw_beta,
+                lp.params.cbw_gamma,
+            ] {
+                out.push_str(" ");
+                push_real(out, v);
+            }
+        }
+        Command::Mode(name) => {
+            lp.set_law(name)?;
+            parts = Parts::FEEDBACK.union(Parts::MODE);
+            out.push_str("ok mode ");
+            out.push_str(lp.law);
+        }
+        Command::Feedforward(name) => {
+            lp.set_ff(name)?;
+            parts = Parts::FEEDFORWARD;
+            out.push_str("ok ff ");
+            out.push_str(lp.ff);
+        }
+        Command::WaveOff => {
+            // Every axis holds where its reference is now.
+            let sp = lp.p.state().trace.setpoint;
+            for (a, s) in sp.iter().enumerate() {
+                lp.p.set_wave(a, Wave::Hold { y_um: s.y_um })
+                    .map_err(|_| Error::OutOfRange)?;
+            }
+            parts = Parts::WAVES;
+            out.push_str("ok wave off");
+        }
+        Command::WaveHold(y) => {
+            lp.p.set_wave(axis, Wave::Hold { y_um: c(y as f64) })
+                .map_err(|_| Error::OutOfRange)?;
+            parts = Parts::wave(axis);
+            out.push_str("ok wave hold ");
+            out.push_f32(y);
+        }
+        Command::Wave {
+            shape,
+            amp_um,
+            freq_hz,
+            offset_um,
+        } => {
+            let (a, f, o) = (c(amp_um as f64), c(freq_hz as f64), c(offset_um as f64));
+            let wave = match shape {
+                Shape::Sine => Wave::Sine {
+                    offset_um: o,
+                    amplitude_um: a,
+                    freq_hz: f,
+                    phase_turns: c(0.0),
+                },
+                Shape::Triangle => Wave::Triangle {
+                    offset_um: o,
+                    amplitude_um: a,
+                    freq_hz: f,
+                    phase_turns: c(0.0),
+                },
+                Shape::Square => Wave::Steps {
+                    low_um: o - a,
+                    high_um: o + a,
+                    levels: 2,
+                    freq_hz: f,
+                },
+            };
+            lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
+            parts = Parts::wave(axis);
+            out.push_str("ok wave ");
+            out.push_str(shape.name());
+            for v in [a, f, o] {
+                out.push_str(" ");
+                push_real(out, v);
+            }
+        }
+        Command::WaveSteps {
+            low_um,
+            high_um,
+            levels,
+            freq_hz,
+        } => {
+            let (lo, hi, f) = (c(low_um as f64), c(high_um as f64), c(freq_hz as f64));
+            lp.p.set_wave(
+                axis,
+                Wave::Steps {
+                    low_um: lo,
+                    high_um: hi,
+                    levels,
+                    freq_hz: f,
+                },
+            )
+            .map_err(|_| Error::OutOfRange)?;
+            parts = Parts::wave(axis);
+            out.push_str("ok wave steps ");
+            push_real(out, lo);
+            out.push_str(" ");
+            push_real(out, hi);
+            out.push_str(" ");
+            out.push_u32(levels as u32);
+            out.push_str(" ");
+            push_real(out, f);
+        }
+        Command::TableClear => {
+            table.len = 0;
+            out.push_str("ok table 0");
+        }
+        Command::TableAdd(points) => {
+            table.add(points.as_slice())?;
+            out.push_str("ok table ");
+            out.push_usize(table.len);
+        }
+        Command::TableLen => {
+            out.push_str("ok table ");
+            out.push_usize(table.len);
+        }
+        Command::WaveTable(freq_hz) => {
+            let points = table.points();
+            if points.len() < 2 {
+                return Err(Error::Busy);
+            }
+            let f = c(freq_hz as f64);
+            let wave = Wave::table(points, f).map_err(|_| Error::OutOfRange)?;
+            lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
+            parts = Parts::wave(axis);
+            out.push_str("ok wave table ");
+            push_real(out, f);
+            out.push_str(" ");
+            out.push_usize(points.len());
+        }
+        Command::WaveRaster {
+            span_um,
+            lines,
+            line_hz,
+            center_um,
+        } => {
+            let (half, center) = (span_um.map(|s| c(s as f64 * 0.5)), center_um.map(rc));
+            let line_hz = c(line_hz as f64);
+            // One y sweep per `lines` x periods: y runs at line_hz / (2 lines).
+            let frame_hz = line_hz / R::from_i32(2 * lines as i32);
+            set_scan(lp, raster(center, half, line_hz, frame_hz))?;
+            parts = Parts::wave(0).union(Parts::wave(1));
+            out.push_str("ok wave raster ");
+            push_real(out, half[0] + half[0]);
+            out.push_str(" ");
+            push_real(out, half[1] + half[1]);
+            out.push_str(" ");
+            out.push_u32(lines as u32);
+            out.push_str(" ");
+            push_real(out, line_hz);
+            for v in center {
+                out.push_str(" ");
+                push_real(out, v);
+            }
+        }
+        Command::WaveLissajous {
+            amp_um,
+            freq_hz,
+            phase_deg,
+            center_um,
+        } => {
+            let (amp, f, center) = (amp_um.map(rc), freq_hz.map(rc), center_um.map(rc));
+            // The core's lissajous(), with y `phase_deg` ahead of x instead of 90 deg.
+            let mut waves = lissajous(center, amp, f);
+            if let [_, Wave::Sine { phase_turns, .. }] = &mut waves {
+                *phase_turns = c(phase_deg as f64 / 360.0);
+            }
+            set_scan(lp, waves)?;
+            parts = Parts::wave(0).union(Parts::wave(1));
+            out.push_str("ok wave lissajous");
+            for v in amp.into_iter().chain(f) {
+                out.push_str(" ");
+                push_real(out, v);
+            }
+            out.push_str(" ");
+            out.push_f32(phase_deg);
+            for v in center {
+                out.push_str(" ");
+                push_real(out, v);
+            }
+        }
+        Command::Axis(n) => {
+            if let Some(n) = n {
+                if n >= AXES {
+                    return Err(Error::OutOfRange);
+                }
+                *selected = n;
+            }
+            out.push_str("ok axis ");
+            out.push_usize(*selected);
+            out.push_str(" of ");
+            out.push_usize(AXES);
+        }
+        Command::Stats | Command::StatsReset | Command::Rec(_) => return Err(Error::Unsupported),
+        Command::Fault => push_fault(out, &lp.p),
+        Command::FaultClear => {
+            lp.p.clear_fault();
+            parts = Parts::CLEAR_FAULT;
+            push_fault(out, &lp.p);
+        }
+        Command::Bench | Command::Selftest => return Err(Error::Unsupported),
+    }
+    Ok(parts)
+}
+
+impl<C: Converters> Ctl<C> {
     fn rec_command<const N: usize>(
         &mut self,
         r: RecCmd<'_>,
@@ -371,6 +392,24 @@ impl<C: Converters> Ctl<C> {
         }
         Ok(())
     }
+}
+
+/// `ok step <min max last> isr <min max last> samples <n> overruns <n>`.
+pub fn push_stats<const N: usize>(out: &mut command::Reply<N>, t: &Timing) {
+    out.push_str("ok step");
+    for v in [t.step.min, t.step.max, t.step.last] {
+        out.push_str(" ");
+        out.push_u32(v);
+    }
+    out.push_str(" isr");
+    for v in [t.isr.min, t.isr.max, t.isr.last] {
+        out.push_str(" ");
+        out.push_u32(v);
+    }
+    out.push_str(" samples ");
+    out.push_u32(t.isr.count);
+    out.push_str(" overruns ");
+    out.push_u32(t.overruns);
 }
 
 /// Streams `rec read <start> <count>`: `frame(i)` fetches frame `i` (under a short lock),

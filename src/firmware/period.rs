@@ -32,6 +32,12 @@ pub trait Clock {
     fn next_due(&self) -> bool {
         false
     }
+    /// Ticks from this period's trigger (the timer event) to `now`, on a board whose
+    /// counter can tell (QEMU's SysTick counts from its reload): the control interrupt's
+    /// delay, by higher-priority work or a lock held by a lower-priority task.
+    fn since_trigger(&self, _now: u32) -> Option<u32> {
+        None
+    }
 }
 
 /// One control period, from the interrupt that says a sample is ready: read the ADCs, step
@@ -47,6 +53,7 @@ where
     M: Mutex<T = Ctl<C>>,
 {
     let t0 = clock.now();
+    let delay = clock.since_trigger(t0);
     let (code, lost) = io.sample();
     ctl.lock(|ctl| {
         let t1 = clock.now();
@@ -65,6 +72,9 @@ where
         let t = &mut ctl.timing;
         t.step.record(clock.elapsed(t1, t2));
         t.isr.record(isr);
+        if let Some(d) = delay {
+            t.delay.record(d);
+        }
         if late {
             t.overruns = t.overruns.wrapping_add(1);
         }

@@ -42,6 +42,9 @@ pub struct Timing {
     pub step: CycleStats,
     /// The whole interrupt handler (converter access, step, recorder, bookkeeping).
     pub isr: CycleStats,
+    /// From the period's trigger to the control interrupt's first reading of the counter
+    /// (boards whose counter tells, [`super::Clock::since_trigger`]; else no samples).
+    pub delay: CycleStats,
     /// Samples whose processing missed the deadline (the next sample was due or lost).
     pub overruns: u32,
 }
@@ -51,6 +54,7 @@ impl Timing {
         Self {
             step: CycleStats::new(),
             isr: CycleStats::new(),
+            delay: CycleStats::new(),
             overruns: 0,
         }
     }

@@ -33,10 +33,12 @@
 //!
 //! Common:
 //! * USART3 (ST-LINK virtual COM port, PD8/PD9, 115200 Bd) carries the command protocol;
-//!   its receive interrupt runs at priority 1. Replies are written without `core::fmt`.
+//!   its receive interrupt runs at priority 1 and holds the control task's lock only for
+//!   copies ([`piezo_core::firmware::CommandLine`]). Replies are written without `core::fmt`.
 //! * Telemetry (timing, overruns) goes over defmt-RTT once per second from `idle`: defmt
 //!   logs from thread mode only (init, then idle), never from an interrupt handler, so its
-//!   logger lock is never contended and no handler reaches its reentrancy panic. Timing is
+//!   logger is never contended; defmt-rtt runs without a critical section and never blocks
+//!   (`drop-on-contention`, `disable-blocking-mode`), so logging masks no interrupt. Timing is
 //!   kept by the DWT cycle counter: no monotonic timer, no async task, no dispatcher.
 //!
 //! Build and flash (probe-rs, `.cargo/config.toml`'s runner):
@@ -171,7 +173,7 @@ mod app {
         hw_spi: Hw,
         rx: serial::Rx<pac::USART3>,
         port: Usart3,
-        cli: CommandLine,
+        cli: CommandLine<Conv>,
     }
 
     #[init]
@@ -401,7 +403,7 @@ mod app {
                 hw_spi: hw,
                 rx,
                 port: Usart3 { tx },
-                cli: CommandLine::new(),
+                cli: CommandLine::for_new(c(SAMPLE_HZ as f64)),
             },
         )
     }

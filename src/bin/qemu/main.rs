@@ -12,8 +12,13 @@
 //!   edge sets the stage's voltage), with the 20-bit codes of the SPI converter pair. With
 //!   feature `xy` there are two identical, independent stages, each behind its own pair of
 //!   chips ([`io::SimIo`]).
-//! * The CMSDK UART0 (0x4000_4000, QEMU `-serial`) carries the command protocol, polled from
-//!   the idle task (lowest priority).
+//! * The CMSDK UART0 (0x4000_4000, QEMU `-serial`) carries the command protocol. As on the
+//!   H743 (USART3), its receive interrupt runs the command line at priority 1 under the
+//!   control task (priority 3), sharing the control state through the same lock: QEMU
+//!   measures what a command costs the control loop. The harness lines `flood start` and
+//!   `flood stop` frame a command flood and print `flood: <n> commands, max control delay
+//!   <k> instructions, overruns <m>` (the delay from SysTick's reload to the control
+//!   interrupt's first instruction of its own).
 //! * defmt logs go out over semihosting (decode with `defmt-print -e <elf>`).
 //! * Before the loop starts, `init` measures the instructions per control step of every
 //!   feedback law x feedforward combination ([`bench`]; run QEMU with `-icount shift=0`: one
@@ -57,7 +62,7 @@ use board::*;
 #[cfg(target_os = "none")]
 mod board {
     use super::{bench, chips, io, uart};
-    use core::sync::atomic::{AtomicI32, Ordering::Relaxed};
+    use core::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, Ordering::Relaxed};
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
     use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
@@ -82,26 +87,58 @@ mod board {
     pub static SAFE_CODE: AtomicI32 = AtomicI32::new(0);
     /// SysTick ticks per control period.
     const PERIOD: u32 = SYSTICK_HZ / SAMPLE_HZ;
+    /// Instructions per SysTick tick under `-icount shift=0` (1 instruction per ns).
+    pub const INSTR_PER_TICK: u32 = 1_000_000_000 / SYSTICK_HZ;
+    /// The harness asked (serial task) to end the run or to panic (idle acts on it).
+    pub static EXIT: AtomicBool = AtomicBool::new(false);
+    pub static PANIC: AtomicBool = AtomicBool::new(false);
+    /// Replies sent (serial task), read by idle.
+    pub static ANSWERED: AtomicU32 = AtomicU32::new(0);
+    /// The harness line that starts a command flood (resets the timing) and the one that
+    /// ends it (prints the flood line).
+    const FLOOD_START: &[u8] = b"flood start";
+    const FLOOD_STOP: &[u8] = b"flood stop";
 
-    /// The "device" RTIC needs: no vendor interrupts are used, only SysTick.
+    /// The "device" RTIC needs: SysTick and the UART0 receive interrupt.
     pub mod pac {
         /// QEMU's NVIC implements 8 bits; RTIC only needs 3 levels here.
         pub const NVIC_PRIO_BITS: u8 = 3;
+
+        /// The mps2-an385/an386 external interrupts this board uses (QEMU hw/arm/mps2.c).
+        #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+        #[allow(non_camel_case_types, clippy::upper_case_acronyms)]
+        pub enum Interrupt {
+            /// CMSDK UART0 receive.
+            UARTRX0 = 0,
+        }
+
+        /// RTIC checks the bound interrupt's name here (a PAC's `rt` re-export).
+        pub use self::Interrupt as interrupt;
+
+        // SAFETY: the number is the interrupt's position in the vector table below.
+        #[allow(unsafe_code)]
+        unsafe impl cortex_m::interrupt::InterruptNumber for Interrupt {
+            fn number(self) -> u16 {
+                self as u16
+            }
+        }
     }
 
-    /// The mps2's 32 external interrupts, none used: all to the default handler.
-    /// cortex-m-rt leaves this table to the application when its `device` feature is on,
-    /// which the H743's PAC turns on for every eabihf build of this package (Cargo.toml);
-    /// on thumbv7m cortex-m-rt supplies it.
-    #[cfg(target_abi = "eabihf")]
+    /// The mps2's 32 external interrupts: UART0 receive (0) to its RTIC task, the rest to
+    /// the default handler. cortex-m-rt leaves this table to the application with its
+    /// `device` feature, which the H743's PAC turns on for eabihf and Cargo.toml for
+    /// thumbv7m.
     #[allow(unsafe_code)]
     #[unsafe(link_section = ".vector_table.interrupts")]
     #[unsafe(no_mangle)]
     static __INTERRUPTS: [unsafe extern "C" fn(); 32] = {
         unsafe extern "C" {
             fn DefaultHandler();
+            fn UARTRX0();
         }
-        [DefaultHandler; 32]
+        let mut v: [unsafe extern "C" fn(); 32] = [DefaultHandler; 32];
+        v[0] = UARTRX0;
+        v
     };
 
     /// SysTick as the cycle counter: it counts down from the period's reload value, so
@@ -131,15 +168,20 @@ mod board {
         fn next_due(&self) -> bool {
             SCB::is_pendst_pending()
         }
+        /// SysTick counts down to 0 (the trigger, which reads 0 for one tick) and reloads
+        /// `PERIOD - 1`: `now` ticks are left of the period.
+        #[inline(always)]
+        fn since_trigger(&self, now: u32) -> Option<u32> {
+            Some(PERIOD.wrapping_sub(now) % PERIOD)
+        }
     }
 
     /// UART0 as the command port, plus this board's `bench` table, `selftest` and the
     /// harness' `exit` and `panic`.
     pub struct Uart {
         pub table: bench::Table,
-        /// The harness asked to end the run, or to panic.
-        pub exit: bool,
-        pub panic: bool,
+        /// A harness line asked to start (true) or stop (false) a flood.
+        pub flood: Option<bool>,
     }
 
     impl Port for Uart {
@@ -151,9 +193,14 @@ mod board {
             Ok(bench::ROWS)
         }
         fn harness(&mut self, line: &[u8]) -> bool {
-            self.exit |= line == EXIT_LINE;
-            self.panic |= line == PANIC_LINE;
-            line == EXIT_LINE || line == PANIC_LINE
+            match line {
+                EXIT_LINE => EXIT.store(true, Relaxed),
+                PANIC_LINE => PANIC.store(true, Relaxed),
+                FLOOD_START => self.flood = Some(true),
+                FLOOD_STOP => self.flood = Some(false),
+                _ => return false,
+            }
+            true
         }
         /// The next control period reads axis 0's DAC register back after its write (at
         /// the read-back SCLK); plus the last ADC code against the sensor window, the
@@ -259,14 +306,14 @@ mod board {
 mod app {
     use super::io::SimIo;
     use super::{
-        bench, chips, uart, Ctl, SysTickClock, Uart, PERIODS_MAX, PERIODS_MIN, SAFE_CODE,
-        SYSTICK_HZ,
+        bench, chips, uart, Ctl, SysTickClock, Uart, ANSWERED, EXIT, INSTR_PER_TICK, PANIC,
+        PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
     use piezo_core::command::Reply;
     use piezo_core::firmware::{c, control_period, CommandLine, AXES, SAMPLE_HZ};
-    use piezo_core::firmware::{Converters, SpiPair};
+    use piezo_core::firmware::{Converters, SpiPair, Timing};
     use piezo_core::pipeline::Wave;
 
     #[shared]
@@ -277,7 +324,9 @@ mod app {
     #[local]
     struct Local {
         io: SimIo,
-        cli: CommandLine,
+        cli: CommandLine<SpiPair>,
+        /// Replies sent when the flood started.
+        flood_from: u32,
         port: Uart,
     }
 
@@ -318,16 +367,14 @@ mod app {
         for axis in 0..AXES {
             ctl.lp.p.set_wave(axis, Wave::Hold { y_um: c(10.0) }).ok();
         }
+        let cli = CommandLine::new(&ctl.lp);
         (
             Shared { ctl },
             Local {
                 io,
-                cli: CommandLine::new(),
-                port: Uart {
-                    table,
-                    exit: false,
-                    panic: false,
-                },
+                cli,
+                port: Uart { table, flood: None },
+                flood_from: 0,
             },
         )
     }
@@ -335,25 +382,67 @@ mod app {
     /// The control period: the stage moves under the voltage of the DAC's output, the ADC
     /// driver samples and reads it, the DAC driver writes and loads the new code (every
     /// axis).
-    #[task(binds = SysTick, priority = 2, shared = [ctl], local = [io])]
+    /// Priority 3, as the H743's control task.
+    #[task(binds = SysTick, priority = 3, shared = [ctl], local = [io])]
     fn sample(mut cx: sample::Context) {
         control_period(cx.local.io, &SysTickClock, &mut cx.shared.ctl);
     }
 
-    #[idle(shared = [ctl], local = [cli, port])]
-    fn idle(mut cx: idle::Context) -> ! {
-        let mut answered = 0u32;
-        loop {
-            while let Some(byte) = uart::try_read() {
-                if cx.local.cli.byte(byte, &mut cx.shared.ctl, cx.local.port) {
-                    answered += 1;
-                }
+    /// Command lines from UART0 (priority 1, under the control task; the H743's USART3
+    /// task).
+    #[task(binds = UARTRX0, priority = 1, shared = [ctl], local = [cli, port, flood_from])]
+    fn serial_rx(mut cx: serial_rx::Context) {
+        uart::clear_rx_interrupt();
+        while let Some(byte) = uart::try_read() {
+            if cx.local.cli.byte(byte, &mut cx.shared.ctl, cx.local.port) {
+                ANSWERED.fetch_add(1, Relaxed);
             }
+            match cx.local.port.flood.take() {
+                Some(true) => {
+                    cx.shared.ctl.lock(|c| c.timing = Timing::new());
+                    *cx.local.flood_from = ANSWERED.load(Relaxed);
+                }
+                Some(false) => {
+                    let t = cx.shared.ctl.lock(|c| c.timing);
+                    let mut r = Reply::<160>::new();
+                    r.push_str("flood: ");
+                    r.push_u32(ANSWERED.load(Relaxed).wrapping_sub(*cx.local.flood_from));
+                    r.push_str(" commands, max control delay ");
+                    r.push_u32(t.delay.max.saturating_mul(INSTR_PER_TICK));
+                    r.push_str(" instructions, overruns ");
+                    r.push_u32(t.overruns);
+                    r.push_str(", max control interrupt ");
+                    r.push_u32(t.isr.max.saturating_mul(INSTR_PER_TICK));
+                    r.push_str(" instructions, periods ");
+                    r.push_u32(t.isr.count);
+                    uart::line(r.as_str());
+                }
+                None => {}
+            }
+        }
+    }
+
+    /// The harness' requests, and the timing once per second of virtual time over defmt
+    /// (thread mode only, as on the H743).
+    #[idle(shared = [ctl])]
+    fn idle(mut cx: idle::Context) -> ! {
+        let mut second = 0u32;
+        loop {
             let periods = cx.shared.ctl.lock(|c| c.periods);
-            if cx.local.port.panic && periods >= PERIODS_MIN {
+            if periods / SAMPLE_HZ != second {
+                second = periods / SAMPLE_HZ;
+                let t = cx.shared.ctl.lock(|c| c.timing);
+                defmt::info!(
+                    "step cycles min {} max {} last {} | isr min {} max {} last {} | samples {} overruns {}",
+                    t.step.min, t.step.max, t.step.last, t.isr.min, t.isr.max, t.isr.last,
+                    t.isr.count, t.overruns
+                );
+            }
+            let answered = ANSWERED.load(Relaxed);
+            if PANIC.load(Relaxed) && periods >= PERIODS_MIN {
                 panic!("forced by the harness");
             }
-            if cx.local.port.exit && periods >= PERIODS_MIN {
+            if EXIT.load(Relaxed) && periods >= PERIODS_MIN {
                 finish(&mut cx.shared.ctl, periods, answered, 0);
             }
             if periods >= PERIODS_MAX && answered == 0 {

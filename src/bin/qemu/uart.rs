@@ -1,11 +1,16 @@
-//! CMSDK APB UART0 of the mps2 machines (0x4000_4000, QEMU `-serial`): polled, no
-//! interrupts.
+//! CMSDK APB UART0 of the mps2 machines (0x4000_4000, QEMU `-serial`): the receiver
+//! interrupts (UARTRX0, the mps2's external interrupt 0), the transmitter is polled.
 
 const BASE: usize = 0x4000_4000;
 const DATA: usize = BASE;
 const STATE: usize = BASE + 0x4;
 const CTRL: usize = BASE + 0x8;
+const INTCLEAR: usize = BASE + 0xC;
 const BAUDDIV: usize = BASE + 0x10;
+/// CTRL: transmitter, receiver and receive interrupt enabled.
+const CTRL_TX_RX_RXINT: u32 = 0b1011;
+/// INTSTATUS / INTCLEAR: the receive interrupt.
+const INT_RX: u32 = 2;
 const TX_FULL: u32 = 1;
 const RX_FULL: u32 = 2;
 
@@ -20,10 +25,15 @@ fn write(addr: usize, v: u32) {
     unsafe { core::ptr::write_volatile(addr as *mut u32, v) }
 }
 
-/// 115200 Bd at 25 MHz, transmitter and receiver on, no interrupts.
+/// 115200 Bd at 25 MHz, transmitter and receiver on, the receive interrupt on.
 pub fn init() {
     write(BAUDDIV, 217);
-    write(CTRL, 0b11);
+    write(CTRL, CTRL_TX_RX_RXINT);
+}
+
+/// Clears the receive interrupt (before reading: a byte that arrives after sets it again).
+pub fn clear_rx_interrupt() {
+    write(INTCLEAR, INT_RX);
 }
 
 pub fn try_read() -> Option<u8> {

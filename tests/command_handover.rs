@@ -1,0 +1,81 @@
+//! The firmware's command line (`CommandLine`, as both boards run it: each command on the
+//! command task's replica, its changes handed to the live pipeline by `Pipeline::adopt`)
+//! against the executor run directly on the live control state: the same replies, and the
+//! live loop runs the same DAC codes and state after every command.
+
+use piezo_core::command::{parse, Reply};
+use piezo_core::firmware::{c, CommandLine, Converters, Ctl, OnChip, Port, REPLY_LEN, SAMPLE_HZ};
+use rtic_core::Exclusive;
+
+#[derive(Default)]
+struct Lines(Vec<String>);
+
+impl Port for Lines {
+    fn send(&mut self, line: &str) {
+        self.0.push(line.to_string());
+    }
+}
+
+fn direct(ctl: &mut Ctl<OnChip>, line: &str) -> String {
+    let mut r = Reply::<REPLY_LEN>::new();
+    match parse(line.as_bytes()) {
+        Ok(cmd) => ctl.execute(cmd, &mut r),
+        Err(e) => r.push_error(e),
+    }
+    r.as_str().to_string()
+}
+
+#[test]
+fn the_replica_path_answers_and_steps_as_the_direct_executor() {
+    let hz = c(SAMPLE_HZ as f64);
+    let mut a = Ctl::<OnChip>::new(hz);
+    let mut b = Ctl::<OnChip>::new(hz);
+    let mut cli = CommandLine::new(&b.lp);
+    let mut port = Lines::default();
+    let script = [
+        "ping",
+        "get u_max",
+        "wave sine 5 100 10",
+        "mode ff+hgo-robust",
+        "ff ims-cbw",
+        "set lambda1 2500",
+        "set slew 0",
+        "set u_max 120",
+        "cbw 0.17 0.07 0.02 0.01",
+        "set cbw_d -1",
+        "mode fts",
+        "mode nonsense",
+        "ff ims-cbw-delayed",
+        "table add 8 10 12 10",
+        "wave table 50",
+        "wave triangle 4 20 10",
+        "wave off",
+        "wave steps 5 15 4 50",
+        "mode adrc",
+        "set u_min 5",
+        "mode ff+pid",
+        "fault",
+        "fault clear",
+        "get lambda1",
+        "axis",
+        "help",
+    ];
+    // A closed trajectory of ADC codes around mid-range, the same for both.
+    let mid = 1i32 << (OnChip::ADC_BITS - 1);
+    let mut k = 0i32;
+    for line in script {
+        let want = direct(&mut a, line);
+        port.0.clear();
+        for byte in line.bytes().chain(Some(b'\n')) {
+            cli.byte(byte, &mut Exclusive(&mut b), &mut port);
+        }
+        assert_eq!(port.0, [want], "reply to `{line}`");
+        for _ in 0..50 {
+            k += 1;
+            let code = [mid + (k * 37) % 900 - 450];
+            assert_eq!(a.lp.step(code), b.lp.step(code), "after `{line}`");
+        }
+        assert_eq!(a.lp.p.state(), b.lp.p.state(), "state after `{line}`");
+        assert_eq!((a.lp.law, a.lp.ff), (b.lp.law, b.lp.ff));
+    }
+}
