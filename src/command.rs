@@ -43,7 +43,8 @@
 //! read-only `um_per_code`, `volts_per_code`, `sample_hz`; the hysteresis model and gains
 //! the laws and compensators are built from: `cbw_d`, `cbw_alpha` (um/V), `cbw_beta`,
 //! `cbw_gamma` (1/V) of the CBW (n = 1) that `piezo fit --model cbw` identifies,
-//! `um_per_volt`, `offset_um` (open-loop scaling), `hgo_eps` (s), `lambda1`, `lambda2`
+//! `gbw_b` (1/V, the asymmetry `B` of the GBW that `fts-gbw` and `nmpc-gbw` predict with:
+//! the CBW's loop tilted, 000 eq. 3), `um_per_volt`, `offset_um` (open-loop scaling), `hgo_eps` (s), `lambda1`, `lambda2`
 //! (1/s, robust law), `pid_kp` (V/um), `pid_ki` (V/(um s)). A model or gain `set` is
 //! checked by the core's constructors and installs the rebuilt law and compensator
 //! bumplessly; a refused value (`err 8`) changes nothing.

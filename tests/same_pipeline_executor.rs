@@ -454,3 +454,60 @@ fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
         );
     }
 }
+
+/// `fts-gbw` and `nmpc-gbw` (000 Part IV) are selectable and predict with the GBW of
+/// `Params::gbw_model`: the CBW's loop with the asymmetry `gbw_b`; a `gbw_b` without
+/// bounded equilibria (`|B| >= beta + gamma`) is refused and changes nothing.
+#[test]
+fn the_gbw_laws_predict_with_the_gbw() {
+    use piezo_core::feedback::{Feedback, ObserverModel};
+    fn gbw_of(f: &Feedback<f32>) -> (f32, f32, f32, f32) {
+        let m = match f {
+            Feedback::Robust(r) => *r.observer().model(),
+            Feedback::Nmpc(n) => *n.observer().model(),
+            other => panic!("a law with an observer expected, got {}", other.name()),
+        };
+        match m {
+            ObserverModel::Gbw(g) => (g.a(), g.beta_h(), g.b(), g.g()),
+            ObserverModel::Cbw(_) => panic!("{} predicts with the CBW", f.name()),
+            _ => panic!("{}: GBW expected", f.name()),
+        }
+    }
+    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    assert_eq!(ask(&mut ctl, "get gbw_b"), "ok gbw_b 0");
+    assert_eq!(ask(&mut ctl, "set gbw_b 0.006"), "ok gbw_b 0.006");
+    let mid = 1 << (control::ADC_BITS - 1);
+    assert_eq!(ask(&mut ctl, "wave sine 5 100 20"), "ok wave sine 5 100 20");
+    for law in ["fts-gbw", "nmpc-gbw"] {
+        assert_eq!(
+            ask(&mut ctl, &format!("mode {law}")),
+            format!("ok mode {law}")
+        );
+        assert_eq!(ctl.lp.law, law);
+        for f in ctl.lp.p.feedback() {
+            assert_eq!(f.name(), law);
+            assert_eq!(gbw_of(f), (0.07, 0.02, 0.006, 0.01));
+        }
+        for _ in 0..500 {
+            let codes = ctl.lp.step([mid; control::AXES]);
+            assert!(codes.iter().all(|c| (0..=control::DAC_FULL).contains(c)));
+        }
+    }
+    // The CBW laws keep the CBW.
+    assert_eq!(ask(&mut ctl, "mode nmpc"), "ok mode nmpc");
+    for f in ctl.lp.p.feedback() {
+        let Feedback::Nmpc(n) = f else { panic!() };
+        assert!(matches!(n.observer().model(), ObserverModel::Cbw(_)));
+    }
+    assert_eq!(ask(&mut ctl, "mode ff+nmpc-gbw"), "err 9 unknown mode name");
+    assert_eq!(ask(&mut ctl, "set gbw_b 0.03"), "err 8 value out of range");
+    assert_eq!(
+        ask(&mut ctl, "set gbw_b -0.031"),
+        "err 8 value out of range"
+    );
+    assert_eq!(ask(&mut ctl, "get gbw_b"), "ok gbw_b 0.006");
+    assert_eq!(
+        ask(&mut ctl, "fault"),
+        "ok fault none sensor 0 nonfinite 0 dac 0"
+    );
+}

@@ -494,7 +494,7 @@ pub fn push_real<const N: usize>(out: &mut command::Reply<N>, v: R) {
 
 /// Parameter names of `get`/`set` (`sample_hz` and the converter scalings are read-only;
 /// from `cbw_d` on they are the [`Params`]).
-pub const PARAMS: [&str; 17] = [
+pub const PARAMS: [&str; 18] = [
     "u_min",
     "u_max",
     "slew",
@@ -505,6 +505,7 @@ pub const PARAMS: [&str; 17] = [
     "cbw_alpha",
     "cbw_beta",
     "cbw_gamma",
+    "gbw_b",
     "um_per_volt",
     "offset_um",
     "hgo_eps",

@@ -12,7 +12,8 @@ use crate::feedforward::{Feedforward, Ims, ImsLoop};
 
 /// Names of the feedback laws `mode` accepts (the bench iterates over them); they are the
 /// laws' own [`Feedback::name`]s.
-pub const LAWS: [&str; 11] = [
+/// The `-gbw` laws predict with [`Params::gbw_model`] (000 Part IV), the others with the CBW.
+pub const LAWS: [&str; 13] = [
     "open-loop",
     "pid",
     "ff+pid",
@@ -20,10 +21,12 @@ pub const LAWS: [&str; 11] = [
     "ff+hgo-robust",
     "fts",
     "ff+fts",
+    "fts-gbw",
     "adrc",
     "ff+adrc",
     "nmpc",
     "ff+nmpc",
+    "nmpc-gbw",
 ];
 
 /// Names of the feedforward compensators `ff` accepts.
@@ -40,6 +43,7 @@ pub const STAGE_POLE_PER_S: f64 = 2.0 * core::f64::consts::PI * 500.0;
 pub fn validate(p: &Params, sample_hz: R) -> Result<(), Error> {
     let ok = ff_with("ims-cbw", p, sample_hz).is_some()
         && law_with("hgo-robust", p, sample_hz).is_some()
+        && law_with("fts-gbw", p, sample_hz).is_some()
         && law_with("pid", p, sample_hz).is_some()
         && p.linear().is_valid();
     if ok {
@@ -61,10 +65,20 @@ pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
         Some(b) => (true, b),
         None => (false, name),
     };
-    let model = p.model()?;
+    // Only `fts-gbw` and `nmpc-gbw` of the GBW laws are in [`LAWS`].
+    let (gbw, base) = match base.strip_suffix("-gbw") {
+        Some(b @ ("fts" | "nmpc")) if !ff => (true, b),
+        Some(_) => return None,
+        None => (false, base),
+    };
+    let model = if gbw {
+        ObserverModel::Gbw(p.gbw_model()?)
+    } else {
+        ObserverModel::Cbw(p.model()?)
+    };
     let hgo = || {
         Hgo::new(
-            ObserverModel::Cbw(model),
+            model,
             c(STAGE_POLE_PER_S),
             p.hgo_eps_s,
             c(hgo::K1),

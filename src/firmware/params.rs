@@ -3,7 +3,7 @@
 
 use super::target::{c, R};
 use crate::feedforward::LinearFf;
-use crate::hysteresis::Cbw;
+use crate::hysteresis::{Cbw, Gbw};
 
 /// What `set` changes besides the limits: the hysteresis model (the one `piezo fit
 /// --model cbw` identifies), the open-loop scaling and the gains (config, apart from the
@@ -17,6 +17,8 @@ pub struct Params {
     pub cbw_alpha: R,
     pub cbw_beta: R,
     pub cbw_gamma: R,
+    /// Asymmetry `B` (1/V) of the GBW of `fts-gbw` and `nmpc-gbw` ([`Params::gbw_model`]).
+    pub gbw_b: R,
     /// Open-loop scaling (open-loop mode and the `linear` compensator).
     pub um_per_volt: R,
     pub offset_um: R,
@@ -37,6 +39,7 @@ impl Default for Params {
             cbw_alpha: c(0.07),
             cbw_beta: c(0.02),
             cbw_gamma: c(0.01),
+            gbw_b: c(0.0),
             um_per_volt: c(0.16),
             offset_um: c(0.0),
             hgo_eps_s: c(2e-4),
@@ -53,6 +56,23 @@ impl Params {
         Cbw::with_n1(self.cbw_d, self.cbw_alpha, self.cbw_beta, self.cbw_gamma).ok()
     }
 
+    /// The GBW (000 eq. 3 with its CBW term, [`Gbw::with_beta_h`]) that nests the CBW
+    /// (`alpha = n = 1`, `A, B_h, G` = the CBW's `alpha, beta, gamma`) with the asymmetry
+    /// `B = gbw_b`; `gbw_b = 0` is the CBW's own loop.
+    pub fn gbw_model(&self) -> Option<Gbw<R>> {
+        let one = c(1.0);
+        Gbw::with_beta_h(
+            self.cbw_d,
+            one,
+            self.cbw_alpha,
+            self.cbw_beta,
+            self.gbw_b,
+            self.cbw_gamma,
+            one,
+        )
+        .ok()
+    }
+
     pub fn linear(&self) -> LinearFf<R> {
         LinearFf {
             um_per_volt: self.um_per_volt,
@@ -67,6 +87,7 @@ impl Params {
             "cbw_alpha" => &mut self.cbw_alpha,
             "cbw_beta" => &mut self.cbw_beta,
             "cbw_gamma" => &mut self.cbw_gamma,
+            "gbw_b" => &mut self.gbw_b,
             "um_per_volt" => &mut self.um_per_volt,
             "offset_um" => &mut self.offset_um,
             "hgo_eps" => &mut self.hgo_eps_s,
