@@ -38,6 +38,9 @@
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
 //! | `selftest` | converters and safe-state hardware: DAC read-back, ADC code and sensor window, amplifier enable, reset cause, mock-chip rule violations (QEMU) | `ok selftest reset <cause> dac <read>/<wrote> ok adc <code> in ...` |
+//! | `save` | store every settable parameter in the settings flash as one versioned, checksummed record (power-fail safe: the old record or the new one); only in the safe state (open loop holding, or a fault latched), else `err 12`; no settings flash on the board: `err 13` | `ok save <n> settings <bytes> B` |
+//! | `load` | the stored record, checked (magic, version, CRC-32, exactly the stored settings, values as `set` checks them) and installed bumplessly, all or none; nothing stored `err 15`, refused `err 16`, flash failed `err 17` | `ok load <n> settings` |
+//! | `defaults` | the built-in settings (the stored record stays) | `ok defaults` |
 //!
 //! Parameters (the firmware's `help` lists them): `u_min`, `u_max` (V), `slew` (V/s);
 //! read-only `um_per_code`, `volts_per_code`, `sample_hz`; the hysteresis model and gains
@@ -47,7 +50,9 @@
 //! the CBW's loop tilted, 000 eq. 3), `um_per_volt`, `offset_um` (open-loop scaling), `hgo_eps` (s), `lambda1`, `lambda2`
 //! (1/s, robust law), `pid_kp` (V/um), `pid_ki` (V/(um s)). A model or gain `set` is
 //! checked by the core's constructors and installs the rebuilt law and compensator
-//! bumplessly; a refused value (`err 8`) changes nothing.
+//! bumplessly; a refused value (`err 8`) changes nothing. `save` stores all of them except
+//! the read-only ones; at power-up a stored record is loaded (a refused one leaves the
+//! defaults running, with a `warn settings: ...` line before `ready` and a defmt warning).
 //!
 //! On a 2-axis (XY) board `mode`, `ff`, `set` (limits and model) and `wave off` act on every axis;
 //! `get` reads axis 0 (the axes are configured alike).

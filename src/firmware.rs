@@ -8,6 +8,8 @@
 //! * [`Ctl`]: the control state the two share (the [`Loop`] of axes, the recorder, the
 //!   timing, the point table) and the command executor;
 //! * [`Params`] and the laws and compensators by name ([`law_with`], [`ff_with`]);
+//! * [`SettingsFlash`]: the settings record in NOR flash (`save`, `load`, `defaults`),
+//!   and [`RamNor`], the strict RAM-backed NOR flash of the QEMU board and the tests;
 //! * [`Converters`]: the converter pairs a board can have ([`OnChip`], [`SpiPair`]) and the
 //!   sensor and DAC scalings that follow from them.
 //!
@@ -21,8 +23,10 @@ mod converters;
 mod ctl;
 mod execute;
 mod laws;
+mod nor;
 mod params;
 mod period;
+mod storage;
 mod target;
 mod timing;
 
@@ -33,9 +37,11 @@ pub use converters::{
     DAC_CONFIG, SPI_CENTER_UM, SPI_SPAN_UM,
 };
 pub use ctl::{Ctl, PointTable};
-pub use execute::{push_real, push_stats, stream_frames, PARAMS};
+pub use execute::{push_real, push_stats, stream_frames, PARAMS, READ_ONLY};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
+pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;
 pub use period::{control_period, Clock, Io};
+pub use storage::{decode, encode, stored, Boot, Record, SettingsFlash, MAX_RECORD, VERSION};
 pub use target::{c, LoopPipeline, AXES, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ};
 pub use timing::{CycleStats, Timing};

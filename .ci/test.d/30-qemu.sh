@@ -31,7 +31,7 @@ run() {
     -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$dir/defmt.bin" &
   local qemu=$!
-  printf 'ping\nbench\nget u_max\nset slew 0\nmode ff+hgo-robust\nwave sine 5 100 10\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nexit\n' \
+  printf 'ping\nbench\nget u_max\nset slew 0\nset pid_kp 0.75\nsave\nset pid_kp 0.25\nload\nget pid_kp\ndefaults\nget pid_kp\nmode ff+hgo-robust\nwave sine 5 100 10\nsave\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nexit\n' \
     >"$dir/uart.in"
   wait $qemu
   status=$?
@@ -48,6 +48,12 @@ run() {
   [ "$status" -eq 0 ] || { echo "$name: QEMU run failed with status $status"; exit 1; }
   grep -q '^ok pong$' "$dir/uart.txt" || { echo "$name: no answer to ping"; exit 1; }
   grep -q '^err 8 value out of range$' "$dir/uart.txt" || { echo "$name: bad set not rejected"; exit 1; }
+  # Settings in the (RAM-backed) settings flash: save, load back, defaults; no save while
+  # the loop drives the stage.
+  grep -Eq '^ok save [0-9]+ settings [0-9]+ B$' "$dir/uart.txt" || { echo "$name: save failed"; exit 1; }
+  [ "$(grep -A1 -E '^ok load [0-9]+ settings$' "$dir/uart.txt" | tail -1)" = "ok pid_kp 0.75" ] || { echo "$name: load did not restore pid_kp"; exit 1; }
+  [ "$(grep -A1 '^ok defaults$' "$dir/uart.txt" | tail -1)" = "ok pid_kp 0.5" ] || { echo "$name: defaults did not restore pid_kp"; exit 1; }
+  [ "$(grep -A1 '^ok wave sine' "$dir/uart.txt" | tail -1)" = "err 12 not possible in the current state" ] || { echo "$name: save not refused while driving"; exit 1; }
   grep -q '^ok mode ff+hgo-robust$' "$dir/uart.txt" || { echo "$name: mode switch failed"; exit 1; }
   grep -q '^ok rec sel ref_um y_um u_volts error_um$' "$dir/uart.txt" || { echo "$name: recorder setup failed"; exit 1; }
   grep -q '^ok fault none sensor 0 nonfinite 0 dac 0$' "$dir/uart.txt" || { echo "$name: fault state not clean"; exit 1; }

@@ -33,12 +33,18 @@ pub enum Error {
     Unsupported,
     /// A number with more than [`MAX_DIGITS`](super::MAX_DIGITS) significant digits.
     TooManyDigits,
+    /// `load`: the flash holds no settings record.
+    NoSettings,
+    /// `load`: the stored record is damaged or of another version; nothing was changed.
+    BadSettings,
+    /// The settings flash failed (erase/program/read error).
+    Flash,
 }
 
 impl Error {
     /// Every error, in code order: hosts map a reply's code back with [`Error::from_code`].
     /// A new variant breaks the exhaustive match of [`Error::is_listed`] until it is added here.
-    pub const ALL: [Error; 14] = {
+    pub const ALL: [Error; 17] = {
         use Error::*;
         [
             LineTooLong,
@@ -55,6 +61,9 @@ impl Error {
             Busy,
             Unsupported,
             TooManyDigits,
+            NoSettings,
+            BadSettings,
+            Flash,
         ]
     };
 
@@ -70,7 +79,7 @@ impl Error {
         match self {
             LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
             | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
-            | Busy | Unsupported | TooManyDigits => {}
+            | Busy | Unsupported | TooManyDigits | NoSettings | BadSettings | Flash => {}
         }
     }
 
@@ -91,6 +100,9 @@ impl Error {
             Error::Busy => 12,
             Error::Unsupported => 13,
             Error::TooManyDigits => 14,
+            Error::NoSettings => 15,
+            Error::BadSettings => 16,
+            Error::Flash => 17,
         }
     }
 
@@ -111,6 +123,9 @@ impl Error {
             Error::Busy => "not possible in the current state",
             Error::Unsupported => "not supported on this board",
             Error::TooManyDigits => "number has more than 19 significant digits",
+            Error::NoSettings => "no settings stored",
+            Error::BadSettings => "stored settings damaged or stale; nothing changed",
+            Error::Flash => "settings flash failed",
         }
     }
 }

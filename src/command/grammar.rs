@@ -162,6 +162,12 @@ pub enum Command<'a> {
     Bench,
     /// Exercise the converters and the safe-state hardware and report (board-specific).
     Selftest,
+    /// `save`: store the settings in flash (only while the loop does not drive the stage).
+    Save,
+    /// `load`: the stored settings, checked, all installed or none.
+    Load,
+    /// `defaults`: the built-in settings (the flash keeps what it holds).
+    Defaults,
 }
 
 /// Up to [`MAX_WORDS`] words of a line, without allocation.
@@ -281,6 +287,14 @@ fn parse_words<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
         "selftest" => {
             w.at_most(1)?;
             Command::Selftest
+        }
+        "save" | "load" | "defaults" => {
+            w.at_most(1)?;
+            match cmd {
+                "save" => Command::Save,
+                "load" => Command::Load,
+                _ => Command::Defaults,
+            }
         }
         "get" => {
             w.at_most(2)?;
@@ -543,6 +557,10 @@ mod tests {
     fn parses_every_command() {
         assert_eq!(p("ping"), Ok(Command::Ping));
         assert_eq!(p("selftest"), Ok(Command::Selftest));
+        assert_eq!(p("save"), Ok(Command::Save));
+        assert_eq!(p("load"), Ok(Command::Load));
+        assert_eq!(p("defaults"), Ok(Command::Defaults));
+        assert_eq!(p("save now"), Err(Error::TooManyArguments));
         assert!(p("selftest now").is_err());
         assert_eq!(p("  ping \r"), Ok(Command::Ping));
         assert_eq!(p(""), Ok(Command::Empty));

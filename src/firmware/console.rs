@@ -5,6 +5,7 @@ use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
 use super::execute::{push_stats, run, stream_frames};
+use super::storage::{decode, stored, Boot, SettingsFlash, MAX_RECORD};
 use super::target::{R, REPLY_LEN};
 use crate::command::{self, Command, Error, LineBuffer, RecCmd};
 use crate::pipeline::Parts;
@@ -23,6 +24,16 @@ pub trait Port {
     /// what it found to `reply` (after `ok selftest`). Boards without one answer
     /// [`Error::Unsupported`].
     fn selftest(&mut self, _reply: &mut command::Reply<REPLY_LEN>) -> Result<(), Error> {
+        Err(Error::Unsupported)
+    }
+    /// `save`: keeps the settings record in the board's settings flash. Boards without
+    /// one answer [`Error::Unsupported`].
+    fn save(&mut self, _record: &[u8]) -> Result<(), Error> {
+        Err(Error::Unsupported)
+    }
+    /// `load`: the stored settings record copied into `out`, its length (`None`: nothing
+    /// stored).
+    fn load(&mut self, _out: &mut [u8; MAX_RECORD]) -> Result<Option<usize>, Error> {
         Err(Error::Unsupported)
     }
     /// A line of the board's own, outside the protocol (the QEMU test harness' `exit`):
@@ -81,6 +92,40 @@ impl<C: Converters> CommandLine<C> {
         }
     }
 
+    /// Installs a checked settings record on the replica and hands it to the live loop (all
+    /// or nothing: a refused record changes neither).
+    fn apply<M: Mutex<T = Ctl<C>>>(
+        &mut self,
+        rec: &super::Record,
+        ctl: &mut M,
+    ) -> Result<(), Error> {
+        let r = &mut self.replica;
+        ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
+        r.lp.apply_settings(rec)?;
+        ctl.lock(|live| live.lp.adopt(&r.lp, Parts::MODEL.union(Parts::LIMITS)));
+        Ok(())
+    }
+
+    /// At power-up: the stored settings if a valid record is there (installed like `load`),
+    /// else the defaults stay.
+    pub fn boot_settings<M, F>(&mut self, ctl: &mut M, flash: &mut SettingsFlash<F>) -> Boot
+    where
+        M: Mutex<T = Ctl<C>>,
+        F: embedded_storage::nor_flash::NorFlash,
+    {
+        let mut buf = [0u8; MAX_RECORD];
+        let got = flash
+            .load(&mut buf)
+            .and_then(|n| n.ok_or(Error::NoSettings))
+            .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
+            .and_then(|rec| self.apply(&rec, ctl));
+        match got {
+            Ok(()) => Boot::Loaded,
+            Err(Error::NoSettings) => Boot::Empty,
+            Err(e) => Boot::Refused(e),
+        }
+    }
+
     /// Takes one received byte; at the end of a line runs the command and sends its reply.
     /// Returns true when a reply went out (empty lines and harness lines get none).
     pub fn byte<M, P>(&mut self, byte: u8, ctl: &mut M, port: &mut P) -> bool
@@ -121,6 +166,41 @@ impl<C: Converters> CommandLine<C> {
                     |l| port.send(l),
                 );
                 return true;
+            }
+            Ok(Command::Save) => {
+                let r = &mut self.replica;
+                ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
+                let mut buf = [0u8; MAX_RECORD];
+                let saved =
+                    r.lp.settings_record(&mut buf)
+                        .and_then(|n| buf.get(..n).ok_or(Error::Flash))
+                        .and_then(|rec| port.save(rec).map(|()| rec.len()));
+                match saved {
+                    Ok(n) => {
+                        reply.push_str("ok save ");
+                        reply.push_usize(stored().count());
+                        reply.push_str(" settings ");
+                        reply.push_usize(n);
+                        reply.push_str(" B");
+                    }
+                    Err(e) => reply.push_error(e),
+                }
+            }
+            Ok(Command::Load) => {
+                let mut buf = [0u8; MAX_RECORD];
+                let loaded = port
+                    .load(&mut buf)
+                    .and_then(|n| n.ok_or(Error::NoSettings))
+                    .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
+                    .and_then(|rec| self.apply(&rec, ctl).map(|()| rec.len()));
+                match loaded {
+                    Ok(n) => {
+                        reply.push_str("ok load ");
+                        reply.push_usize(n);
+                        reply.push_str(" settings");
+                    }
+                    Err(e) => reply.push_error(e),
+                }
             }
             Ok(Command::Stats) => push_stats(&mut reply, &ctl.lock(|c| c.timing)),
             Ok(c @ (Command::StatsReset | Command::Rec(_))) => {

@@ -200,7 +200,7 @@ impl<C: Converters> Loop<C> {
     }
 
     /// Validates `p` and, when valid, rebuilds and installs everything from it.
-    fn install(&mut self, p: Params) -> Result<(), Error> {
+    pub(super) fn install(&mut self, p: Params) -> Result<(), Error> {
         validate(&p, self.sample_hz)?;
         // The selected law must build too (validate() covers its parts; checked before
         // anything changes).

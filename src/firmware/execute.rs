@@ -290,7 +290,15 @@ pub(super) fn run<C: Converters, const N: usize>(
             parts = Parts::CLEAR_FAULT;
             push_fault(out, &lp.p);
         }
-        Command::Bench | Command::Selftest => return Err(Error::Unsupported),
+        Command::Defaults => {
+            lp.default_settings()?;
+            parts = Parts::MODEL.union(Parts::LIMITS);
+            out.push_str("ok defaults");
+        }
+        // The board's own: the command line runs them (see `Port`).
+        Command::Bench | Command::Selftest | Command::Save | Command::Load => {
+            return Err(Error::Unsupported)
+        }
     }
     Ok(parts)
 }
@@ -515,7 +523,10 @@ pub const PARAMS: [&str; 18] = [
     "pid_ki",
 ];
 
-fn get_param<C: Converters>(lp: &Loop<C>, name: &str) -> Result<R, Error> {
+/// The parameters of [`PARAMS`] that only `get` reads.
+pub const READ_ONLY: [&str; 3] = ["um_per_code", "volts_per_code", "sample_hz"];
+
+pub(super) fn get_param<C: Converters>(lp: &Loop<C>, name: &str) -> Result<R, Error> {
     let cfg = lp.p.config();
     let a = &cfg.axes[0];
     Ok(match name {
@@ -551,7 +562,7 @@ fn set_param<C: Converters>(lp: &mut Loop<C>, name: &str, v: R) -> Result<(), Er
             check(v > c(0.0))?;
             lp.set_limits(|l| l.slew_volts_per_s = v)
         }
-        "um_per_code" | "volts_per_code" | "sample_hz" => Err(Error::Busy),
+        _ if READ_ONLY.contains(&name) => Err(Error::Busy),
         _ => lp.set_params(name, v),
     }
 }

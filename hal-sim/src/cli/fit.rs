@@ -15,7 +15,8 @@ pub struct Args {
     #[arg(long, required_unless_present = "list")]
     pub model: Option<String>,
     /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yn`). The state-space models
-    /// (`ss`, `hammerstein-ss`) take several (repeat `--train`): one model for all.
+    /// (`ss`, `hammerstein-ss`, `scheduled-ss`) take several (repeat `--train`): one model
+    /// for all.
     #[arg(long, required_unless_present = "list")]
     pub train: Vec<PathBuf>,
     /// State-space models: order (number of states) or `auto` (chosen by validation on
@@ -29,6 +30,9 @@ pub struct Args {
     /// State-space models: iterations of the joint (hysteresis + linear) refinement.
     #[arg(long, default_value_t = 30)]
     pub joint_iterations: usize,
+    /// `scheduled-ss`: time constant of the running input RMS that schedules the model (s).
+    #[arg(long, default_value_t = 0.15)]
+    pub schedule_tau_s: f64,
     /// Unit of the input columns, written to fit.json.
     #[arg(long, default_value = "V")]
     pub input_unit: String,
@@ -340,7 +344,7 @@ pub fn run(args: Args) -> Result<()> {
         [one] => one,
         [] => anyhow::bail!("--model and --train are required (see --help)"),
         more => anyhow::bail!(
-            "model `{model}` takes one --train record, {} given (several: --model ss or hammerstein-ss)",
+            "model `{model}` takes one --train record, {} given (several: --model ss, hammerstein-ss or scheduled-ss)",
             more.len()
         ),
     };

@@ -1,5 +1,6 @@
-//! `piezo fit --model ss | hammerstein-ss`: one multivariable state-space model (with a
-//! hysteresis per actuator) for several training records.
+//! `piezo fit --model ss | hammerstein-ss | scheduled-ss`: one multivariable state-space
+//! model (with a hysteresis per actuator, or scheduled by the input level) for several
+//! training records.
 use super::fit::Args;
 use super::predict::{score_last_period, Loaded};
 use crate::ident::fit::models;
@@ -11,7 +12,7 @@ use anyhow::{Context, Result};
 
 /// True for the model names this module fits.
 pub fn handles(model: &str) -> bool {
-    matches!(model, "ss" | "hammerstein-ss")
+    matches!(model, "ss" | "hammerstein-ss" | "scheduled-ss")
 }
 
 fn read_all(args: &Args) -> Result<Vec<Record>> {
@@ -36,7 +37,7 @@ pub fn run(args: &Args) -> Result<()> {
         ),
     };
     let hysteresis = match (model, args.hysteresis.as_str()) {
-        ("ss", _) | (_, "none") => None,
+        ("ss" | "scheduled-ss", _) | (_, "none") => None,
         (_, name) => Some(models::find(name)?),
     };
     let opts = SsOptions {
@@ -44,6 +45,7 @@ pub fn run(args: &Args) -> Result<()> {
         hysteresis,
         iterations: args.lm_iterations,
         joint_iterations: args.joint_iterations,
+        schedule: (model == "scheduled-ss").then_some(args.schedule_tau_s),
         progress: !args.quiet,
         ..Default::default()
     };
@@ -65,6 +67,7 @@ pub fn run(args: &Args) -> Result<()> {
         "order_scan": fit.order_scan,
         "train_rms_linear": fit.linear_rms,
         "train_rms_hammerstein": fit.hammerstein_rms,
+        "train_rms_scheduled_bla": fit.scheduled_rms,
         "bla_levels": levels,
         "seconds": seconds,
     });
@@ -73,7 +76,8 @@ pub fn run(args: &Args) -> Result<()> {
         fit.fs_hz,
         (&args.input_unit, &args.output_unit),
         serde_json::Value::Null,
-    );
+    )
+    .with_schedule(fit.schedule.clone());
     let loaded = Loaded::Ss(Box::new(saved.clone()));
     if let Some(v) = &args.valid {
         let rec = Record::read(v)?;

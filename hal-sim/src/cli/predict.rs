@@ -168,7 +168,7 @@ impl Loaded {
                     "the record is sampled at {fs:.6} Hz, the model at {:.6} Hz",
                     s.sample_rate_hz
                 );
-                s.to_model()?.simulate(&rec.u, rec.dt())
+                s.simulate(&rec.u, rec.dt())
             }
             Self::MultiBw(m) => m.simulate(&rec.u),
             Self::Parts { parts, outputs } => {

@@ -8,6 +8,7 @@ pub mod hammerstein;
 pub mod model;
 pub mod pem;
 pub mod saved;
+pub mod scheduled;
 pub mod subspace;
 
 use crate::ident::fit::models::ModelDef;
@@ -31,6 +32,8 @@ pub struct SsOptions {
     pub joint_iterations: usize,
     /// Welch segment of non-periodic records (samples).
     pub segment: usize,
+    /// Amplitude schedule (local model per level) with this running-RMS time constant (s).
+    pub schedule: Option<f64>,
     pub progress: bool,
 }
 
@@ -43,6 +46,7 @@ impl Default for SsOptions {
             iterations: 40,
             joint_iterations: 30,
             segment: 1024,
+            schedule: None,
             progress: false,
         }
     }
@@ -62,6 +66,12 @@ pub struct SsFit {
     /// state, mean over records and outputs of the mean square, then root).
     pub linear_rms: f64,
     pub hammerstein_rms: Option<f64>,
+    /// The amplitude schedule (local models per level; `model.linear` stays the model of
+    /// all records).
+    pub schedule: Option<scheduled::Schedule>,
+    /// RMS output error of the scheduled model, each level's BLA against the model at
+    /// that level (steady state, excited lines).
+    pub scheduled_rms: Option<f64>,
 }
 
 fn progress(on: bool, msg: impl FnOnce() -> String) {
@@ -230,7 +240,29 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
         order_scan,
         linear_rms,
         hammerstein_rms: None,
+        schedule: None,
+        scheduled_rms: None,
     };
+    if let Some(tau_s) = opts.schedule {
+        // `model.linear` stays the model of all records (`piezo sim --stage`) and is one
+        // start of every local refinement.
+        anyhow::ensure!(
+            opts.hysteresis.is_none(),
+            "the amplitude schedule and a hysteresis front are not combined"
+        );
+        let cfg = PemConfig {
+            iterations: opts.iterations,
+            progress: opts.progress.then(|| format!("local order {order}")),
+            ..Default::default()
+        };
+        let (sched, c) = scheduled::identify(recs, &spectra, &linear, tau_s, &cfg)?;
+        let rms = (c / records).sqrt();
+        progress(opts.progress, || {
+            format!("scheduled model: RMS output error {rms:.4e} at the BLA lines")
+        });
+        fit.schedule = Some(sched);
+        fit.scheduled_rms = Some(rms);
+    }
     if let Some(def) = opts.hysteresis {
         anyhow::ensure!(
             !spectra.is_empty(),

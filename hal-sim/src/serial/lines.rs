@@ -96,6 +96,9 @@ pub fn format_command(cmd: &Command<'_>) -> String {
         Command::FaultClear => "fault clear".into(),
         Command::Bench => "bench".into(),
         Command::Selftest => "selftest".into(),
+        Command::Save => "save".into(),
+        Command::Load => "load".into(),
+        Command::Defaults => "defaults".into(),
     }
 }
 

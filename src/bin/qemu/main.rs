@@ -66,10 +66,24 @@ mod board {
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
     use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
+    use piezo_core::firmware::{RamNor, SettingsFlash, MAX_RECORD};
     use {cortex_m_rt as _, defmt_semihosting as _};
 
     /// The control state over this board's converters (the SPI pair, on mock chips).
     pub type Ctl = firmware::Ctl<SpiPair>;
+
+    /// The settings flash: 4 sectors of 2 KiB, programmed and read in 32-byte words like the
+    /// H743's flash (the sector is smaller: QEMU's RAM is the flash).
+    pub type SettingsNor = RamNor<8192, 2048, 32>;
+
+    /// The settings flash over all of [`SettingsNor`].
+    pub fn settings_flash() -> SettingsFlash<SettingsNor> {
+        match SettingsFlash::new(SettingsNor::new(), 0..8192) {
+            Ok(f) => f,
+            // A compile-time geometry: unreachable, but no panic path for it.
+            Err(_) => semihosting::process::exit(1),
+        }
+    }
 
     /// SysTick clock of QEMU's mps2 machines (Hz).
     pub const SYSTICK_HZ: u32 = 25_000_000;
@@ -180,6 +194,8 @@ mod board {
     /// harness' `exit` and `panic`.
     pub struct Uart {
         pub table: bench::Table,
+        /// The settings flash (RAM-backed: QEMU keeps nothing across runs).
+        pub settings: SettingsFlash<SettingsNor>,
         /// A harness line asked to start (true) or stop (false) a flood.
         pub flood: Option<bool>,
     }
@@ -191,6 +207,12 @@ mod board {
         fn bench(&mut self) -> Result<usize, Error> {
             bench::print(&self.table, false);
             Ok(bench::ROWS)
+        }
+        fn save(&mut self, record: &[u8]) -> Result<(), Error> {
+            self.settings.save(record)
+        }
+        fn load(&mut self, out: &mut [u8; MAX_RECORD]) -> Result<Option<usize>, Error> {
+            self.settings.load(out)
         }
         fn harness(&mut self, line: &[u8]) -> bool {
             match line {
@@ -306,13 +328,13 @@ mod board {
 mod app {
     use super::io::SimIo;
     use super::{
-        bench, chips, uart, Ctl, SysTickClock, Uart, ANSWERED, EXIT, INSTR_PER_TICK, PANIC,
-        PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ,
+        bench, chips, settings_flash, uart, Ctl, SysTickClock, Uart, ANSWERED, EXIT,
+        INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
     use piezo_core::command::Reply;
-    use piezo_core::firmware::{c, control_period, CommandLine, AXES, SAMPLE_HZ};
+    use piezo_core::firmware::{c, control_period, Boot, CommandLine, AXES, SAMPLE_HZ};
     use piezo_core::firmware::{Converters, SpiPair, Timing};
     use piezo_core::pipeline::Wave;
 
@@ -367,13 +389,30 @@ mod app {
         for axis in 0..AXES {
             ctl.lp.p.set_wave(axis, Wave::Hold { y_um: c(10.0) }).ok();
         }
-        let cli = CommandLine::new(&ctl.lp);
+        let mut cli = CommandLine::new(&ctl.lp);
+        // The stored settings, if any (QEMU's flash is RAM: none at power-up).
+        let mut settings = settings_flash();
+        match cli.boot_settings(&mut rtic_core::Exclusive(&mut ctl), &mut settings) {
+            Boot::Loaded => defmt::info!("settings: stored settings loaded"),
+            Boot::Empty => defmt::info!("settings: none stored, defaults"),
+            Boot::Refused(e) => {
+                defmt::warn!(
+                    "settings: stored record refused (err {=u8}), defaults",
+                    e.code()
+                );
+                uart::line("warn settings: stored record refused, defaults in use");
+            }
+        }
         (
             Shared { ctl },
             Local {
                 io,
                 cli,
-                port: Uart { table, flood: None },
+                port: Uart {
+                    table,
+                    settings,
+                    flood: None,
+                },
                 flood_from: 0,
             },
         )

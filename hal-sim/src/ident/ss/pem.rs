@@ -67,7 +67,7 @@ impl Default for PemConfig {
     fn default() -> Self {
         Self {
             iterations: 50,
-            ftol: 1e-6,
+            ftol: 1e-9,
             progress: None,
         }
     }
@@ -228,7 +228,7 @@ fn re_dot(jac: &DMatrix<C64>, row: usize, b: &DMatrix<C64>) -> f64 {
 }
 
 /// Gauss-Newton normal equations `(J^T J, J^T e)` of all parameters at `(model, theta)`.
-fn normal_equations(
+pub fn normal_equations(
     model: &Modal,
     stats: &[LineStats],
     n_theta: usize,

@@ -2,6 +2,7 @@
 
 use super::hammerstein::{Front, Hammerstein};
 use super::model::{Modal, ModalJson};
+use super::scheduled::Schedule;
 use crate::ident::fit::models::{self, Scales};
 use serde::{Deserialize, Serialize};
 
@@ -19,7 +20,7 @@ pub struct FrontJson {
 pub struct SsJson {
     /// `piezo-fit/1`.
     pub format: String,
-    /// `ss` or `hammerstein-ss`.
+    /// `ss`, `hammerstein-ss` or `scheduled-ss`.
     pub model: String,
     /// The linear block is discrete time at this rate; inputs must be sampled at it.
     pub sample_rate_hz: f64,
@@ -32,6 +33,10 @@ pub struct SsJson {
     pub hysteresis: Vec<FrontJson>,
     /// `x[k+1] = A x + B v`, `y = C x + D v`, `A` block diagonal (see `blocks`).
     pub linear: ModalJson,
+    /// `scheduled-ss`: local models per input level, blended by the running input RMS
+    /// (`linear` is then the model of all records, used by `piezo sim --stage`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedule: Option<Schedule>,
     /// Training range `[min, max]` of each input and output (model units): what
     /// `piezo sim --stage` scales the converters to.
     #[serde(default)]
@@ -79,6 +84,7 @@ impl SsJson {
                 })
                 .collect(),
             linear: model.linear.to_json(),
+            schedule: None,
             input_range: Vec::new(),
             output_range: Vec::new(),
             modes_hz: model.linear.modes_hz(fs_hz),
@@ -86,7 +92,25 @@ impl SsJson {
         }
     }
 
-    /// The model, checked.
+    /// With an amplitude schedule (`scheduled-ss`).
+    pub fn with_schedule(mut self, schedule: Option<Schedule>) -> Self {
+        if schedule.is_some() {
+            self.model = "scheduled-ss".into();
+        }
+        self.schedule = schedule;
+        self
+    }
+
+    /// Simulates the saved model from rest on inputs `u` sampled every `dt` s.
+    pub fn simulate(&self, u: &[Vec<f64>], dt: f64) -> anyhow::Result<Vec<Vec<f64>>> {
+        let model = self.to_model()?;
+        match &self.schedule {
+            Some(s) => s.simulate(&model.linear, u, dt),
+            None => model.simulate(u, dt),
+        }
+    }
+
+    /// The model, checked (with a schedule: the block at its center level).
     pub fn to_model(&self) -> anyhow::Result<Hammerstein> {
         anyhow::ensure!(
             self.sample_rate_hz.is_finite() && self.sample_rate_hz > 0.0,
@@ -132,6 +156,13 @@ impl SsJson {
                 })
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
+        if let Some(s) = &self.schedule {
+            anyhow::ensure!(
+                fronts.is_empty(),
+                "fit.json: a schedule and hysteresis fronts are not combined"
+            );
+            s.models(&linear)?;
+        }
         Ok(Hammerstein { fronts, linear })
     }
 }
