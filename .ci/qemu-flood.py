@@ -40,11 +40,12 @@ def round_():
     return out
 
 
-# The recorder captures 1024 periods from the start; the later rounds' `rec read` stream
-# its frames (the earlier ones are refused while it fills).
+# The recorder captures 1024 periods from the start; the harness line `wait 1100` holds
+# the input for 1100 control periods (virtual time, whatever the host's speed), so every
+# round's `rec read` streams its frames.
 lines = ["mode ff+hgo-robust", "ff ims-cbw", "wave sine 5 100 10",
          "rec sel ref_um y_um u_volts error_um", "rec div 1", "rec trig now", "rec arm",
-         "flood start"]
+         "wait 1100", "flood start"]
 for _ in range(ROUNDS):
     lines += round_()
 lines += ["rec sel ref_um y_um u_volts error_um", "rec trig now", "rec arm", "rec stop"]

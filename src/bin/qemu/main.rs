@@ -112,6 +112,12 @@ mod board {
     /// ends it (prints the flood line).
     const FLOOD_START: &[u8] = b"flood start";
     const FLOOD_STOP: &[u8] = b"flood stop";
+    /// The harness line `wait <n>`: the serial task reads no further byte until `n` more
+    /// control periods have run (the host blocks on the UART meanwhile). A script that needs
+    /// the recorder full waits in virtual time, whatever the host's speed.
+    const WAIT_PREFIX: &[u8] = b"wait ";
+    /// The period at which a `wait` ends (0: none); idle pends the serial task then.
+    pub static WAIT_UNTIL: AtomicU32 = AtomicU32::new(0);
 
     /// The "device" RTIC needs: SysTick and the UART0 receive interrupt.
     pub mod pac {
@@ -198,6 +204,21 @@ mod board {
         pub settings: SettingsFlash<SettingsNor>,
         /// A harness line asked to start (true) or stop (false) a flood.
         pub flood: Option<bool>,
+        /// A harness line asked to wait this many control periods.
+        pub wait: Option<u32>,
+    }
+
+    /// The periods of a `wait <n>` line (decimal, 1 ..= [`PERIODS_MAX`]).
+    fn wait_periods(line: &[u8]) -> Option<u32> {
+        let digits = line.strip_prefix(WAIT_PREFIX)?;
+        if digits.is_empty() || digits.len() > 6 {
+            return None;
+        }
+        let mut n = 0u32;
+        for &d in digits {
+            n = n * 10 + u32::from(d.checked_sub(b'0').filter(|d| *d <= 9)?);
+        }
+        (1..=PERIODS_MAX).contains(&n).then_some(n)
     }
 
     impl Port for Uart {
@@ -220,7 +241,10 @@ mod board {
                 PANIC_LINE => PANIC.store(true, Relaxed),
                 FLOOD_START => self.flood = Some(true),
                 FLOOD_STOP => self.flood = Some(false),
-                _ => return false,
+                _ => match wait_periods(line) {
+                    Some(n) => self.wait = Some(n),
+                    None => return false,
+                },
             }
             true
         }
@@ -329,7 +353,7 @@ mod app {
     use super::io::SimIo;
     use super::{
         bench, chips, settings_flash, uart, Ctl, SysTickClock, Uart, ANSWERED, EXIT,
-        INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ,
+        INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ, WAIT_UNTIL,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
@@ -412,6 +436,7 @@ mod app {
                     table,
                     settings,
                     flood: None,
+                    wait: None,
                 },
                 flood_from: 0,
             },
@@ -432,6 +457,10 @@ mod app {
     #[task(binds = UARTRX0, priority = 1, shared = [ctl], local = [cli, port, flood_from])]
     fn serial_rx(mut cx: serial_rx::Context) {
         uart::clear_rx_interrupt();
+        if WAIT_UNTIL.load(Relaxed) != 0 {
+            // A `wait` runs: the byte stays in the UART (idle pends this task at the end).
+            return;
+        }
         while let Some(byte) = uart::try_read() {
             if cx.local.cli.byte(byte, &mut cx.shared.ctl, cx.local.port) {
                 ANSWERED.fetch_add(1, Relaxed);
@@ -458,6 +487,13 @@ mod app {
                 }
                 None => {}
             }
+            if let Some(n) = cx.local.port.wait.take() {
+                let now = cx.shared.ctl.lock(|c| c.periods);
+                // Leave the rest in the UART: idle pends this task again when the periods
+                // have run (0 is "no wait", so the end is at least 1).
+                WAIT_UNTIL.store(now.saturating_add(n).max(1), Relaxed);
+                return;
+            }
         }
     }
 
@@ -476,6 +512,11 @@ mod app {
                     t.step.min, t.step.max, t.step.last, t.isr.min, t.isr.max, t.isr.last,
                     t.isr.count, t.overruns
                 );
+            }
+            let until = WAIT_UNTIL.load(Relaxed);
+            if until != 0 && periods >= until {
+                WAIT_UNTIL.store(0, Relaxed);
+                rtic::pend(crate::board::pac::Interrupt::UARTRX0);
             }
             let answered = ANSWERED.load(Relaxed);
             if PANIC.load(Relaxed) && periods >= PERIODS_MIN {
