@@ -16,6 +16,13 @@ import subprocess
 import sys
 
 
+def thunk_target(name):
+    """A linker range-extension thunk (`__Thumbv7ABSLongThunk_<f>`: a call between the H743's
+    ITCM at 0 and its flash at 0x0800_0000) stands for a call of `f`."""
+    m = re.match(r"^__\w*LongThunk_(.+)$", name)
+    return m.group(1) if m else name
+
+
 def tool(name):
     sysroot = subprocess.check_output(["rustc", "--print", "sysroot"], text=True).strip()
     host = next(l.split(": ")[1] for l in subprocess.check_output(["rustc", "-vV"], text=True).splitlines() if l.startswith("host"))
@@ -83,7 +90,7 @@ def main():
             inlined[cur].add(name)
         m = re.search(r"\t(bl|blx|b|b\.w|b\w\w|b\w\w\.w)\s.*<([^>+]+)(\+0x[0-9a-f]+)?>", line)
         if m and m.group(2) != cur:
-            calls[cur].add(m.group(2))
+            calls[cur].add(thunk_target(m.group(2)))
     if handler not in calls:
         sys.exit(f"firmware code: no function {handler} in {elf}")
     seen, todo = set(), [handler]

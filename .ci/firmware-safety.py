@@ -43,12 +43,22 @@ PANIC = re.compile(r"rust_begin_unwind|panicking|panic_bounds_check|panic_fmt|sl
 # no frame beyond their pushed registers (assumed <= 32 bytes, stated in the output).
 BUILTIN = re.compile(r"^(__aeabi_|__udiv|__div|__mod|__umod|__floatun|__float|__fix|memcpy|memmove|memset|memcmp|__addsf|__adddf|__subdf|__muldf|__divdf)|compiler_builtins")
 BUILTIN_FRAME = 32
+# Made by the linker, no frame: a range-extension thunk (a jump to its target) and the label
+# of the ITCM section's padding words (build.rs), which is no code.
+LINKER = re.compile(r"^(__\w*LongThunk_.+|__sitcm)$")
 HEAP = re.compile(r"__rust_alloc|__rg_alloc|__rust_alloc_error_handler|__rdl_alloc")
 INDIRECT = re.compile(r"\t(blx\s+r\d+|bx\s+r\d+|mov\s+pc,|ldr(\.w)?\s+pc,)")
 # Exception entry with lazy FPU stacking: 8 core + 18 FPU words.
 EXC_FRAME = 104
 # Priorities of the RTIC tasks bound to interrupts (src/bin/h743/main.rs), for the system bound.
 PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1}
+
+
+def thunk_target(name):
+    """A linker range-extension thunk (`__Thumbv7ABSLongThunk_<f>`: a call between the H743's
+    ITCM at 0 and its flash at 0x0800_0000) stands for a call of `f`."""
+    m = re.match(r"^__\w*LongThunk_(.+)$", name)
+    return m.group(1) if m else name
 
 
 def tool(name):
@@ -60,7 +70,8 @@ def tool(name):
 def build(features):
     with open(os.path.join(ROOT, ".cargo", "config.toml"), "rb") as f:
         cfg = tomllib.load(f)
-    flags = cfg["target"][TARGET].get("rustflags", []) + ["-Z", "emit-stack-sizes"]
+    # The H743 build's own flag (`cargo h743`, .cargo/config.toml's alias).
+    flags = cfg["target"][TARGET].get("rustflags", []) + ["-C", "target-cpu=cortex-m7", "-Z", "emit-stack-sizes"]
     env = dict(os.environ, RUSTFLAGS=" ".join(flags), CARGO_TARGET_DIR=TDIR)
     cmd = ["cargo", "+nightly", "build", "--release", "--target", TARGET, "--bin", "h743"]
     if features:
@@ -137,7 +148,7 @@ def call_graph(elf):
         # after a function's last branch that happens to decode as a branch (seen after
         # h743::safe::halt's `wfi` loop: `bmi <h743::app::idle+0x15e>`).
         if m and m.group(2) != cur and m.group(3) is None:
-            graph[cur].add(m.group(2))
+            graph[cur].add(thunk_target(m.group(2)))
         m = re.match(r"^\s*([0-9a-f]+):\s*\t(\S+)\s*([^@]*)", line)
         if m and m.group(2).startswith("adr"):  # pc-relative address: counted as taken
             t = ((int(m.group(1), 16) + 4) & ~3) + int(m.group(3).split("#")[1].split()[0], 0)
@@ -149,6 +160,10 @@ def call_graph(elf):
         if INDIRECT.search(line) and not re.search(r"\tbx\s+lr", line) and not re.search(r"\t(bl|b)\s.*<", line):
             indirect.setdefault(cur, []).append(line.split("\t", 1)[-1].strip())
     consts[cur] = {h << 16 | low for h in hi for low in lo}
+    for f in graph:
+        if LINKER.match(f):
+            graph[f] = {thunk_target(f)} - {f}
+            indirect.pop(f, None)
     local = {f: local_targets(code.get(f, [])) for f in indirect}
     return graph, indirect, consts, local
 
@@ -309,6 +324,8 @@ def main():
         own = sizes.get(f)
         if own is None and BUILTIN.search(f):
             own = BUILTIN_FRAME
+        if own is None and LINKER.match(f):
+            own = 0
         if own is None:
             memo[f, nopanic] = None
             return None
@@ -333,7 +350,7 @@ def main():
         """The deepest call chain from f with each frame's size."""
         out = []
         while f is not None:
-            out.append(f"{name(f)} {sizes.get(f, BUILTIN_FRAME)}")
+            out.append(f"{name(f)} {sizes.get(f, 0 if LINKER.match(f) else BUILTIN_FRAME)}")
             f = deepest.get(f)
         return " -> ".join(out)
 
@@ -365,7 +382,7 @@ def main():
         for f in ind[:4]:
             print(f"  indirect call `{indirect[f][0]}` in: {chain(r, f)}")
         if w is None:
-            missing = sorted(f for f in r if f not in sizes and not BUILTIN.search(f))
+            missing = sorted(f for f in r if f not in sizes and not BUILTIN.search(f) and not LINKER.match(f))
             if missing:
                 print(f"  no stack record: {', '.join(name(f) for f in missing[:6])}")
     # Indirect calls: every site may reach any address-taken function (sound, not precise).

@@ -6,8 +6,9 @@ use super::target::{c, AXES, FIXED, R, SAFE_VOLTS};
 use crate::drivers::{Ad4000Config, Ad5791Config};
 use crate::pipeline::{AxisConfig, Config, DacScale, OutputLimits, Sensor};
 
-/// Span and centre of the SPI ADC's full scale (um): -10..110 um, so the stage at rest
-/// (0 um) and at full stroke stays inside the sensor window.
+/// Span and centre of the position ADC's full scale (um), on-chip and SPI: -10..110 um, so
+/// the stage at rest (0 um) and at full stroke stays inside the sensor window, and a code at
+/// either rail (sensor unplugged, saturated or shorted) is outside it: a sensor fault.
 pub const SPI_SPAN_UM: f64 = 120.0;
 pub const SPI_CENTER_UM: f64 = 50.0;
 
@@ -48,20 +49,20 @@ pub trait Converters {
     fn sensor() -> Sensor<R>;
 }
 
-/// The H743's on-chip 16-bit ADC (straight binary from 0 um over 0..100 um) and 12-bit
-/// DAC.
+/// The H743's on-chip 16-bit ADC (straight binary over [`SPI_SPAN_UM`] around
+/// [`SPI_CENTER_UM`]; the rail codes are outside the window) and 12-bit DAC.
 pub struct OnChip;
 
 impl Converters for OnChip {
     const ADC_BITS: u32 = 16;
     const DAC_BITS: u32 = 12;
     fn sensor() -> Sensor<R> {
-        let codes = (65_535 >> Self::ADC_SHIFT) as f64;
+        let top = 65_535 >> Self::ADC_SHIFT;
         Sensor {
-            um_per_code: c(100.0 / codes),
-            offset_um: c(0.0),
-            code_min: 0,
-            code_max: codes as i32,
+            um_per_code: c(SPI_SPAN_UM / (top + 1) as f64),
+            offset_um: c(SPI_CENTER_UM - SPI_SPAN_UM / 2.0),
+            code_min: 1,
+            code_max: top - 1,
         }
     }
 }
@@ -108,5 +109,30 @@ pub fn converter_config<C: Converters>(sample_hz: R) -> Config<R, AXES> {
             },
             safe_volts: c(SAFE_VOLTS),
         }; AXES],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rail codes are sensor faults; the stage at rest and at full stroke is inside the
+    /// window, on both converter pairs (issue 15 item 5).
+    fn window<C: Converters>(rail_lo: i32, rail_hi: i32) {
+        let s = C::sensor();
+        assert_eq!(s.position_um(rail_lo), None, "low rail must be a fault");
+        assert_eq!(s.position_um(rail_hi), None, "high rail must be a fault");
+        for um in [0.0, 100.0] {
+            let code = ((um - s.offset_um as f64) / s.um_per_code as f64).round() as i32;
+            let y = s.position_um(code).expect("inside the window") as f64;
+            assert!((y - um).abs() < 0.01, "{um} um read as {y}");
+        }
+    }
+
+    #[test]
+    fn rails_are_faults_rest_and_stroke_are_not() {
+        window::<OnChip>(0, 65_535 >> OnChip::ADC_SHIFT);
+        let half = 1 << (SpiPair::ADC_BITS - SpiPair::ADC_SHIFT - 1);
+        window::<SpiPair>(-half, half - 1);
     }
 }

@@ -86,6 +86,35 @@ mod board {
     /// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
     pub const WATCHDOG_MS: u32 = 10;
 
+    /// Copies the control interrupt's code (build.rs's `.itcm`: the handlers, the pipeline
+    /// step and its callees) from flash into ITCM, before anything runs from there.
+    #[allow(unsafe_code)]
+    pub fn load_itcm() {
+        extern "C" {
+            static mut __sitcm: u32;
+            static mut __eitcm: u32;
+            static __siitcm: u32;
+        }
+        // ITCM is on at reset on the H7 (CM7_ITCMCR.EN); set it anyway, as stabilizer does.
+        const ITCMCR: *mut u32 = 0xE000_EF90 as *mut u32;
+        // SAFETY: ITCMCR is the core's TCM control register; the linker symbols bound the
+        // `.itcm` output section (word aligned, at 8 or above: never null) and its load
+        // image in flash; no code in ITCM has run yet.
+        unsafe {
+            ITCMCR.write_volatile(ITCMCR.read_volatile() | 1);
+            cortex_m::asm::dsb();
+            let dst = core::ptr::addr_of_mut!(__sitcm);
+            let end = core::ptr::addr_of_mut!(__eitcm);
+            let src = core::ptr::addr_of!(__siitcm);
+            let words = (end as usize - dst as usize) / 4;
+            for i in 0..words {
+                dst.add(i).write_volatile(src.add(i).read_volatile());
+            }
+        }
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+    }
+
     /// The converters of this build, and the control state over them.
     #[cfg(not(feature = "spi-converters"))]
     pub use super::onchip::Io;
@@ -184,6 +213,11 @@ mod app {
         // amplifier off, on-chip DAC at the safe code (0: SAFE_VOLTS = 0 V at the DAC
         // scale's 0 V code; the pipeline's own value is checked below).
         safe::early(&dp.IWDG, &dp.DBGMCU, &dp.RCC, 0);
+        // The control interrupt's code into ITCM, then the caches on (DTCM, which holds the
+        // stack and the control state, is never cached; no DMA shares memory with the CPU).
+        super::load_itcm();
+        cp.SCB.enable_icache();
+        cp.SCB.enable_dcache(&mut cp.CPUID);
         let safe_code = safe::safe_code::<Conv>();
         safe::SAFE_CODE.store(safe_code, Relaxed);
         #[cfg(not(feature = "spi-converters"))]
@@ -203,6 +237,10 @@ mod app {
         let mut ccdr = dp
             .RCC
             .constrain()
+            // The ST-LINK's 8 MHz MCO into PH0 (HSE bypass, Nucleo-144 default solder
+            // bridges): a crystal-accurate sample rate instead of HSI's +-1 %.
+            .use_hse(8.MHz())
+            .bypass_hse()
             .sys_ck(SYSCLK_HZ.Hz())
             .pll1_q_ck(100.MHz())
             .pll2_p_ck(72.MHz())
@@ -264,6 +302,7 @@ mod app {
                 .TIM2
                 .timer(SAMPLE_HZ.Hz(), ccdr.peripheral.TIM2, &ccdr.clocks);
             timer.pause();
+            exact_period(timer.inner_mut(), ccdr.clocks.timx_ker_ck().raw());
             timer.inner_mut().cr2.modify(|_, w| w.mms().update());
             Io {
                 adc,
@@ -344,6 +383,7 @@ mod app {
                 .TIM2
                 .timer(SAMPLE_HZ.Hz(), ccdr.peripheral.TIM2, &ccdr.clocks);
             timer.pause();
+            exact_period(timer.inner_mut(), ccdr.clocks.timx_ker_ck().raw());
             let tim = timer.inner_mut();
             let arr = tim.arr.read().arr().bits();
             tim.ccr1().write(|w| w.ccr().bits(arr / 20 + 1));
@@ -379,6 +419,9 @@ mod app {
         let mut watchdog = IndependentWatchdog::new(dp.IWDG);
         watchdog.start(stm32h7xx_hal::time::MilliSeconds::from_ticks(WATCHDOG_MS));
 
+        // The on-chip DAC loads its output on TIM2's trigger from now on.
+        #[cfg(not(feature = "spi-converters"))]
+        safe::dac1::trigger_from_tim2();
         // TIM2 last: from here on samples arrive.
         let mut io = io;
         io.timer.resume();
@@ -406,6 +449,22 @@ mod app {
                 cli: CommandLine::for_new(c(SAMPLE_HZ as f64)),
             },
         )
+    }
+
+    /// TIM2's period to exactly 1 / SAMPLE_HZ: the HAL loads ARR with the tick count, but
+    /// the period is ARR + 1 ticks (RM0433 "upcounting mode"): 2001 ticks of 200 MHz, 99.95
+    /// kHz. Prescaler 1 (the HAL's for these rates).
+    fn exact_period(tim: &pac::tim2::RegisterBlock, ker_hz: u32) {
+        let ticks = ker_hz / SAMPLE_HZ;
+        if ticks * SAMPLE_HZ != ker_hz {
+            defmt::warn!(
+                "TIM2 kernel clock {=u32} Hz is no multiple of the {=u32} Hz sample rate",
+                ker_hz,
+                SAMPLE_HZ
+            );
+        }
+        tim.psc.write(|w| w.psc().bits(0));
+        tim.arr.write(|w| w.arr().bits(ticks.saturating_sub(1)));
     }
 
     /// ADC1 (or ADC2): external trigger TIM2_TRGO (EXTSEL 11, RM0433 table 205), rising

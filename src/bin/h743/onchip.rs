@@ -66,16 +66,21 @@ impl firmware::Io for Io {
         let [x] = codes;
         #[cfg(feature = "xy")]
         let [x, y] = codes;
+        // DOR took last period's DHR on this period's TIM2 trigger: the read-back.
+        match selftest::STATE.load(Relaxed) {
+            selftest::WRITTEN => {
+                selftest::READ.store(dac1::output(0) as i32, Relaxed);
+                selftest::STATE.store(selftest::DONE, Relaxed);
+            }
+            selftest::REQUESTED => {
+                selftest::WROTE.store(x & 0x0FFF, Relaxed);
+                selftest::STATE.store(selftest::WRITTEN, Relaxed);
+            }
+            _ => {}
+        }
         dac1::set(0, x as u16);
         #[cfg(feature = "xy")]
         dac1::set(1, y as u16);
-        if selftest::STATE.load(Relaxed) == selftest::REQUESTED {
-            // DOR takes DHR one APB clock after the write (no trigger): read it back.
-            cortex_m::asm::delay(8);
-            selftest::WROTE.store(x & 0x0FFF, Relaxed);
-            selftest::READ.store(dac1::output(0) as i32, Relaxed);
-            selftest::STATE.store(selftest::DONE, Relaxed);
-        }
         [None; AXES]
     }
 

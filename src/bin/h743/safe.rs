@@ -89,6 +89,7 @@ pub fn halt() -> ! {
     let code = SAFE_CODE.load(Relaxed);
     #[cfg(not(feature = "spi-converters"))]
     {
+        dac1::untriggered();
         dac1::set(0, code as u16);
         dac1::set(1, code as u16);
     }
@@ -190,23 +191,64 @@ pub mod dac1 {
         unsafe { &*pac::DAC::ptr() }
     }
 
+    /// DAC_CR: EN1, TEN1, TSEL1[3:0] (bits 5:2); channel 2 the same 16 bits up.
+    const EN: u32 = 1 | 1 << 16;
+    const TEN: u32 = 1 << 1 | 1 << 17;
+    const TSEL: u32 = 0b1111 << 2 | 0b1111 << 18;
+    /// TSEL = 2: dac_chx_trg2 = tim2_trgo (RM0433 "DAC interconnection"; the PAC's 3-bit
+    /// field is too narrow, hence raw bits).
+    const TSEL_TIM2: u32 = 2 << 2 | 2 << 18;
+    #[cfg(not(feature = "xy"))]
+    const CHANNELS: u32 = 0xFFFF;
+    #[cfg(feature = "xy")]
+    const CHANNELS: u32 = 0xFFFF_FFFF;
+
     /// Clock on (RCC_APB1LENR.DAC12EN), holding registers at `code`, normal mode with the
-    /// output buffer on the pin (DAC_MCR.MODEx = 000), channel(s) enabled (DAC_CR.ENx), no
-    /// trigger: DHR moves to the output one APB clock after each write.
+    /// output buffer off (DAC_MCR.MODEx = 010: the full 0..VREF+ range, so code 0 really
+    /// is 0 V; the buffered output stops about 0.2 V from either rail, DS12110), channel(s)
+    /// enabled (DAC_CR.ENx), no trigger yet: DHR moves to the output one APB clock after
+    /// each write.
     #[allow(unsafe_code)]
     pub fn init(rcc: &pac::RCC, code: u16) {
         rcc.apb1lenr.modify(|_, w| w.dac12en().set_bit());
         let _ = rcc.apb1lenr.read();
         set(0, code);
         set(1, code);
-        // SAFETY: MODE1 = MODE2 = 0 is a valid mode (normal, buffer on, external pin).
+        // SAFETY: MODE = 0b010 is a valid mode (normal, buffer off, external pin).
         regs()
             .mcr
-            .modify(|_, w| unsafe { w.mode1().bits(0).mode2().bits(0) });
-        #[cfg(not(feature = "xy"))]
-        regs().cr.modify(|_, w| w.en1().set_bit());
-        #[cfg(feature = "xy")]
-        regs().cr.modify(|_, w| w.en1().set_bit().en2().set_bit());
+            .modify(|_, w| unsafe { w.mode1().bits(0b010).mode2().bits(0b010) });
+        // SAFETY: EN bits of the build's channels.
+        regs()
+            .cr
+            .modify(|r, w| unsafe { w.bits(r.bits() | (EN & CHANNELS)) });
+    }
+
+    /// Reconfigures DAC_CR (TENx/TSELx only change while the channel is off, RM0433): the
+    /// channel is off for the few cycles between the two writes, its output register keeps
+    /// its code, and the board's pull-down holds the line meanwhile.
+    #[allow(unsafe_code)]
+    fn reconfigure(trigger: u32) {
+        let cr = &regs().cr;
+        // SAFETY: raw DAC_CR bits of the build's channels: EN, TEN, TSEL fields only.
+        cr.modify(|r, w| unsafe { w.bits(r.bits() & !(EN & CHANNELS)) });
+        cr.modify(|r, w| unsafe {
+            w.bits((r.bits() & !((TEN | TSEL) & CHANNELS)) | (trigger & CHANNELS))
+        });
+        cr.modify(|r, w| unsafe { w.bits(r.bits() | (EN & CHANNELS)) });
+    }
+
+    /// The loop's mode: DHR moves to the output on TIM2's update (TRGO), the edge that
+    /// also starts the ADC: a fixed one-period ADC-to-DAC latency, whatever the step's
+    /// length. Set before TIM2 starts.
+    pub fn trigger_from_tim2() {
+        reconfigure(TEN | TSEL_TIM2);
+    }
+
+    /// The halt path's mode: no trigger, so the safe code goes out at once even with TIM2
+    /// stopped.
+    pub fn untriggered() {
+        reconfigure(0);
     }
 
     /// Channel `ch` (0 or 1) to `code` (12 bit, right aligned: DAC_DHR12R1/2).

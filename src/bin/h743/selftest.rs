@@ -1,6 +1,6 @@
 //! `selftest`: the command line asks, the next control period reads axis 0's DAC back after
-//! its write (the on-chip DAC's output register, or the AD5791's DAC register at the
-//! read-back SCLK) and answers; the reply adds the last ADC code against the sensor window,
+//! its write (the on-chip DAC's output register one period later, after the trigger that
+//! loads it; or the AD5791's DAC register at the read-back SCLK) and answers; the reply adds the last ADC code against the sensor window,
 //! the amplifier enable line and the reset cause.
 
 use crate::safe::{amp, reset_cause, RESET_FLAGS};
@@ -11,6 +11,10 @@ use piezo_core::firmware::{Converters, REPLY_LEN};
 pub const IDLE: u8 = 0;
 pub const REQUESTED: u8 = 1;
 pub const DONE: u8 = 2;
+/// The period wrote its code; the next one reads the output register (the DAC loads it on
+/// the next TIM2 trigger; on-chip only).
+#[cfg(not(feature = "spi-converters"))]
+pub const WRITTEN: u8 = 3;
 pub static STATE: AtomicU8 = AtomicU8::new(IDLE);
 /// The code the period wrote and the one it read back (`i32::MIN`: the read failed).
 pub static WROTE: AtomicI32 = AtomicI32::new(0);
