@@ -13,6 +13,7 @@
 //! state: the output slews to `safe_volts` and stays there until [`Pipeline::clear_fault`].
 
 mod adopt;
+pub mod excitation;
 mod fused;
 pub mod output;
 pub mod reference;

@@ -31,7 +31,7 @@ run() {
     -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$dir/defmt.bin" &
   local qemu=$!
-  printf 'ping\nbench\nget u_max\nset slew 0\nset pid_kp 0.75\nsave\nset pid_kp 0.25\nload\nget pid_kp\ndefaults\nget pid_kp\nmode ff+hgo-robust\nwave sine 5 100 10\nsave\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nexit\n' \
+  printf 'ping\nbench\nget u_max\nset slew 0\nset pid_kp 0.75\nsave\nset pid_kp 0.25\nload\nget pid_kp\ndefaults\nget pid_kp\nmode ff+hgo-robust\nwave sine 5 100 10\nsave\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nwave prbs 9 11 10 5000\nwait 500\nwave chirp 1 10 2000 0.05 10\nwait 500\nwave multisine 1 100 32 10 3\nwait 500\nfault\nexit\n' \
     >"$dir/uart.in"
   wait $qemu
   status=$?
@@ -57,6 +57,13 @@ run() {
   grep -q '^ok mode ff+hgo-robust$' "$dir/uart.txt" || { echo "$name: mode switch failed"; exit 1; }
   grep -q '^ok rec sel ref_um y_um u_volts error_um$' "$dir/uart.txt" || { echo "$name: recorder setup failed"; exit 1; }
   grep -q '^ok fault none sensor 0 nonfinite 0 dac 0$' "$dir/uart.txt" || { echo "$name: fault state not clean"; exit 1; }
+  # The identification excitations (issue 17 item 1) run in closed loop, 500 periods each
+  # (harness line `wait`: virtual time), without a fault.
+  for w in 'prbs 9 11 10 5000 1 1023' 'chirp 1 10 2000 0.05' 'multisine 1 100 32 10 3'; do
+    grep -q "^ok wave $w" "$dir/uart.txt" || { echo "$name: 'wave ${w%% *}' refused"; exit 1; }
+  done
+  [ "$(grep -c '^ok fault none sensor 0 nonfinite 0 dac 0$' "$dir/uart.txt")" -eq 2 ] ||
+    { echo "$name: a fault after the excitations"; exit 1; }
   periods=$(sed -n 's/^done periods \([0-9]*\) .*/\1/p' "$dir/uart.txt")
   [ -n "$periods" ] && [ "$periods" -ge 10000 ] || { echo "$name: too few control periods: '$periods'"; exit 1; }
   echo "=== $name: $periods control periods, commands answered"

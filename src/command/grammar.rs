@@ -3,6 +3,7 @@
 use super::error::Error;
 use super::number::{parse_f32, parse_usize};
 use super::{MAX_LEVELS, MAX_LINE, MAX_LINES, MAX_WORDS, TABLE_ADD_MAX};
+use crate::pipeline::excitation::{MULTISINE_MAX, PRBS_ORDER_MAX, PRBS_ORDER_MIN};
 
 /// Waveform shapes of the `wave` command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -129,6 +130,30 @@ pub enum Command<'a> {
     },
     /// Periodic spline through the point table, at this frequency (Hz).
     WaveTable(f32),
+    /// PRBS between `low_um` and `high_um`: an LFSR of `order` bits, `bit_hz` bits/s.
+    WavePrbs {
+        low_um: f32,
+        high_um: f32,
+        order: u8,
+        bit_hz: f32,
+        seed: u32,
+    },
+    /// Linear chirp `f0_hz` -> `f1_hz` over `duration_s`, repeated.
+    WaveChirp {
+        amp_um: f32,
+        f0_hz: f32,
+        f1_hz: f32,
+        duration_s: f32,
+        offset_um: f32,
+    },
+    /// Multisine: `harmonics` equal harmonics of `f0_hz`, peak `amp_um` around `offset_um`.
+    WaveMultisine {
+        amp_um: f32,
+        f0_hz: f32,
+        harmonics: u8,
+        offset_um: f32,
+        seed: u32,
+    },
     /// 2-axis raster: x triangle over `span_um[0]` at `line_hz`, y triangle over
     /// `span_um[1]` at `line_hz / (2 lines)`, around `center_um`.
     WaveRaster {
@@ -454,6 +479,66 @@ fn parse_wave<'a>(w: &Words<'a>) -> Result<Command<'a>, Error> {
                 center_um,
             });
         }
+        "prbs" => {
+            w.at_most(7)?;
+            let (low_um, high_um) = (w.num(2)?, w.num(3)?);
+            let order = w.index(4)?;
+            let bit_hz = w.num(5)?;
+            let seed = if w.len() > 6 { w.index(6)? } else { 1 };
+            let ok = (PRBS_ORDER_MIN as usize..=PRBS_ORDER_MAX as usize).contains(&order)
+                && bit_hz > 0.0
+                && seed <= u32::MAX as usize;
+            if !ok {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WavePrbs {
+                low_um,
+                high_um,
+                order: order as u8,
+                bit_hz,
+                seed: seed as u32,
+            });
+        }
+        "chirp" => {
+            w.at_most(7)?;
+            let amp_um = w.num(2)?;
+            let (f0_hz, f1_hz) = (w.num(3)?, w.num(4)?);
+            let duration_s = w.num(5)?;
+            let offset_um = if w.len() > 6 { w.num(6)? } else { 0.0 };
+            let ok = amp_um >= 0.0 && f0_hz >= 0.0 && f1_hz >= 0.0 && duration_s > 0.0;
+            if !ok {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveChirp {
+                amp_um,
+                f0_hz,
+                f1_hz,
+                duration_s,
+                offset_um,
+            });
+        }
+        "multisine" => {
+            w.at_most(7)?;
+            let amp_um = w.num(2)?;
+            let f0_hz = w.num(3)?;
+            let harmonics = w.index(4)?;
+            let offset_um = if w.len() > 5 { w.num(5)? } else { 0.0 };
+            let seed = if w.len() > 6 { w.index(6)? } else { 0 };
+            let ok = amp_um >= 0.0
+                && f0_hz > 0.0
+                && (1..=MULTISINE_MAX).contains(&harmonics)
+                && seed <= u32::MAX as usize;
+            if !ok {
+                return Err(Error::OutOfRange);
+            }
+            return Ok(Command::WaveMultisine {
+                amp_um,
+                f0_hz,
+                harmonics: harmonics as u8,
+                offset_um,
+                seed: seed as u32,
+            });
+        }
         "sine" => Shape::Sine,
         "triangle" => Shape::Triangle,
         "square" => Shape::Square,
@@ -706,6 +791,49 @@ mod tests {
             Error::UnknownParam.to_string(),
             "err 7 unknown parameter".to_string()
         );
+    }
+
+    #[test]
+    fn parses_excitations() {
+        assert_eq!(
+            p("wave prbs 10 30 12 1000"),
+            Ok(Command::WavePrbs {
+                low_um: 10.0,
+                high_um: 30.0,
+                order: 12,
+                bit_hz: 1000.0,
+                seed: 1
+            })
+        );
+        assert_eq!(p("wave prbs 10 30 12 1000 9").map(|_| ()), Ok(()));
+        assert_eq!(p("wave prbs 10 30 21 1000"), Err(Error::OutOfRange));
+        assert_eq!(p("wave prbs 10 30 1 1000"), Err(Error::OutOfRange));
+        assert_eq!(p("wave prbs 10 30 8 0"), Err(Error::OutOfRange));
+        assert_eq!(p("wave prbs 10 30 8"), Err(Error::MissingArgument));
+        assert_eq!(
+            p("wave chirp 5 1 200 10 50"),
+            Ok(Command::WaveChirp {
+                amp_um: 5.0,
+                f0_hz: 1.0,
+                f1_hz: 200.0,
+                duration_s: 10.0,
+                offset_um: 50.0
+            })
+        );
+        assert_eq!(p("wave chirp 5 1 200 0"), Err(Error::OutOfRange));
+        assert_eq!(p("wave chirp 5 1 200 1 2 3"), Err(Error::TooManyArguments));
+        assert_eq!(
+            p("wave multisine 5 2 32 50 7"),
+            Ok(Command::WaveMultisine {
+                amp_um: 5.0,
+                f0_hz: 2.0,
+                harmonics: 32,
+                offset_um: 50.0,
+                seed: 7
+            })
+        );
+        assert_eq!(p("wave multisine 5 2 33"), Err(Error::OutOfRange));
+        assert_eq!(p("wave multisine 5 0 3"), Err(Error::OutOfRange));
     }
 
     #[test]

@@ -193,6 +193,76 @@ pub(super) fn run<C: Converters, const N: usize>(
             out.push_str(" ");
             push_real(out, f);
         }
+        Command::WavePrbs {
+            low_um,
+            high_um,
+            order,
+            bit_hz,
+            seed,
+        } => {
+            let (lo, hi, f) = (c(low_um as f64), c(high_um as f64), c(bit_hz as f64));
+            let wave = Wave::Prbs {
+                low_um: lo,
+                high_um: hi,
+                order,
+                bit_hz: f,
+                seed,
+            };
+            lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
+            parts = Parts::wave(axis);
+            out.push_str("ok wave prbs ");
+            for v in [lo, hi] {
+                push_real(out, v);
+                out.push_str(" ");
+            }
+            out.push_u32(order as u32);
+            out.push_str(" ");
+            push_real(out, f);
+            out.push_str(" ");
+            out.push_u32(seed);
+            // Bits per period.
+            out.push_str(" ");
+            out.push_u32((1u32 << order) - 1);
+        }
+        Command::WaveChirp {
+            amp_um,
+            f0_hz,
+            f1_hz,
+            duration_s,
+            offset_um,
+        } => {
+            let v = [amp_um, f0_hz, f1_hz, duration_s, offset_um].map(|v| c(v as f64));
+            let wave = Wave::chirp(v[4], v[0], v[1], v[2], v[3]).map_err(|_| Error::OutOfRange)?;
+            lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
+            parts = Parts::wave(axis);
+            out.push_str("ok wave chirp");
+            for x in v {
+                out.push_str(" ");
+                push_real(out, x);
+            }
+        }
+        Command::WaveMultisine {
+            amp_um,
+            f0_hz,
+            harmonics,
+            offset_um,
+            seed,
+        } => {
+            let (a, f, o) = (c(amp_um as f64), c(f0_hz as f64), c(offset_um as f64));
+            let wave = Wave::multisine(o, a, f, harmonics, seed).map_err(|_| Error::OutOfRange)?;
+            lp.p.set_wave(axis, wave).map_err(|_| Error::OutOfRange)?;
+            parts = Parts::wave(axis);
+            out.push_str("ok wave multisine ");
+            push_real(out, a);
+            out.push_str(" ");
+            push_real(out, f);
+            out.push_str(" ");
+            out.push_u32(harmonics as u32);
+            out.push_str(" ");
+            push_real(out, o);
+            out.push_str(" ");
+            out.push_u32(seed);
+        }
         Command::TableClear => {
             table.len = 0;
             out.push_str("ok table 0");

@@ -3,6 +3,7 @@
 //! The phase is a 32-bit accumulator (as in a DDS): it wraps exactly once per period and
 //! never loses precision, so an `f32` generator runs for days without drifting.
 
+use super::excitation;
 use super::ConfigError;
 use crate::real::Real;
 use crate::signals::Setpoint;
@@ -49,6 +50,42 @@ pub enum Wave<T> {
         len: usize,
         freq_hz: T,
     },
+    /// Pseudo-random binary sequence between `low_um` and `high_um`: a maximal LFSR of
+    /// `order` bits ([`excitation::PRBS_ORDER_MIN`]..=[`excitation::PRBS_ORDER_MAX`];
+    /// `2^order - 1` bits per period), `bit_hz` bits per second, start state from `seed`.
+    /// Zero derivatives. Stateful: [`WaveGen`] holds the register ([`Wave::at`] gives
+    /// `low_um`).
+    Prbs {
+        low_um: T,
+        high_um: T,
+        order: u8,
+        bit_hz: T,
+        seed: u32,
+    },
+    /// Linear sweep `f0_hz` -> `f1_hz` over `duration_s`, repeated: `offset + amplitude
+    /// sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T)))`. Build it with [`Wave::chirp`] (the phase
+    /// coefficients in fixed point, `a_fx`, `b_fx`).
+    Chirp {
+        offset_um: T,
+        amplitude_um: T,
+        f0_hz: T,
+        f1_hz: T,
+        duration_s: T,
+        a_fx: i64,
+        b_fx: i64,
+    },
+    /// Multisine: harmonics 1..=`harmonics` of `f0_hz` (one period is `1 / f0_hz`), equal
+    /// amplitudes, phases from a seed (Schroeder's for seed 0), scaled so the peak deviation
+    /// from `offset_um` is the requested amplitude. Build it with [`Wave::multisine`].
+    Multisine {
+        offset_um: T,
+        per_harmonic_um: T,
+        f0_hz: T,
+        harmonics: u8,
+        seed: u32,
+        cos_phi: [T; excitation::MULTISINE_MAX],
+        sin_phi: [T; excitation::MULTISINE_MAX],
+    },
 }
 
 impl<T: Real> Wave<T> {
@@ -68,6 +105,65 @@ impl<T: Real> Wave<T> {
         })
     }
 
+    /// A linear chirp `f0_hz` -> `f1_hz` over `duration_s` (repeated), around `offset_um`.
+    pub fn chirp(
+        offset_um: T,
+        amplitude_um: T,
+        f0_hz: T,
+        f1_hz: T,
+        duration_s: T,
+    ) -> Result<Self, ConfigError> {
+        if !(duration_s.to_f64() > 0.0 && duration_s.to_f64() <= 3600.0) {
+            return Err(ConfigError::new(
+                "reference.chirp: duration_s must be in (0, 3600]",
+            ));
+        }
+        let (a_fx, b_fx) =
+            excitation::chirp_coeffs(f0_hz.to_f64(), f1_hz.to_f64(), duration_s.to_f64());
+        Ok(Wave::Chirp {
+            offset_um,
+            amplitude_um,
+            f0_hz,
+            f1_hz,
+            duration_s,
+            a_fx,
+            b_fx,
+        })
+    }
+
+    /// A multisine of `harmonics` (1..=[`excitation::MULTISINE_MAX`]) equal harmonics of
+    /// `f0_hz`, peak deviation `amplitude_um` from `offset_um`, phases from `seed`.
+    pub fn multisine(
+        offset_um: T,
+        amplitude_um: T,
+        f0_hz: T,
+        harmonics: u8,
+        seed: u32,
+    ) -> Result<Self, ConfigError> {
+        if !(1..=excitation::MULTISINE_MAX).contains(&(harmonics as usize)) {
+            return Err(ConfigError::new(
+                "reference.multisine: harmonics must be in 1..=32",
+            ));
+        }
+        if !amplitude_um.is_finite() {
+            return Err(ConfigError::new("reference: every value must be finite"));
+        }
+        let (cos_phi, sin_phi) = excitation::multisine_phases(harmonics as usize, seed);
+        let per_harmonic_um =
+            excitation::multisine_scale(amplitude_um, harmonics, &cos_phi, &sin_phi);
+        Ok(Wave::Multisine {
+            offset_um,
+            per_harmonic_um,
+            f0_hz,
+            harmonics,
+            seed,
+            cos_phi,
+            sin_phi,
+        })
+    }
+
+    /// The phase accumulator's rate: the wave's frequency, a PRBS's bit rate, a chirp's
+    /// sweep rate (1 / duration), a multisine's base frequency.
     fn freq_hz(&self) -> T {
         match *self {
             Wave::Hold { .. } => T::ZERO,
@@ -75,6 +171,28 @@ impl<T: Real> Wave<T> {
             | Wave::Triangle { freq_hz, .. }
             | Wave::Steps { freq_hz, .. }
             | Wave::Table { freq_hz, .. } => freq_hz,
+            Wave::Prbs { bit_hz, .. } => bit_hz,
+            Wave::Chirp { duration_s, .. } => {
+                if duration_s > T::ZERO {
+                    T::ONE / duration_s
+                } else {
+                    T::ZERO
+                }
+            }
+            Wave::Multisine { f0_hz, .. } => f0_hz,
+        }
+    }
+
+    /// The highest frequency in the wave (Hz): what must stay below Nyquist.
+    fn top_hz(&self) -> T {
+        match *self {
+            Wave::Chirp { f0_hz, f1_hz, .. } => f0_hz.max(f1_hz),
+            Wave::Multisine {
+                f0_hz, harmonics, ..
+            } => f0_hz * T::from_usize(harmonics as usize),
+            // One bit per sample at most: the sample rate itself (checked below).
+            Wave::Prbs { .. } => T::ZERO,
+            _ => self.freq_hz(),
         }
     }
 
@@ -87,11 +205,21 @@ impl<T: Real> Wave<T> {
 
     /// Checks the wave for a generator running at `sample_hz`.
     pub fn validate(&self, sample_hz: T) -> Result<(), ConfigError> {
-        let f = self.freq_hz();
-        if !(f >= T::ZERO && f < sample_hz * T::HALF) {
+        let (f, top) = (self.freq_hz(), self.top_hz());
+        if !(f >= T::ZERO && top >= T::ZERO && top < sample_hz * T::HALF) {
             return Err(ConfigError::new(
                 "reference: freq_hz must be in [0, sample_hz / 2)",
             ));
+        }
+        if let Wave::Prbs { order, bit_hz, .. } = *self {
+            if !(bit_hz > T::ZERO && bit_hz.to_f64() < sample_hz.to_f64()) {
+                return Err(ConfigError::new(
+                    "reference.prbs: bit_hz must be in (0, sample_hz)",
+                ));
+            }
+            if !(excitation::PRBS_ORDER_MIN..=excitation::PRBS_ORDER_MAX).contains(&order) {
+                return Err(ConfigError::new("reference.prbs: order must be in 2..=20"));
+            }
         }
         let finite = match *self {
             Wave::Hold { y_um } => y_um.is_finite(),
@@ -123,6 +251,35 @@ impl<T: Real> Wave<T> {
                     return Err(ConfigError::new("reference.table: len must be in 2..=64"));
                 }
                 points.iter().all(|p| p.is_finite())
+            }
+            Wave::Prbs {
+                low_um, high_um, ..
+            } => low_um.is_finite() && high_um.is_finite(),
+            Wave::Chirp {
+                offset_um,
+                amplitude_um,
+                duration_s,
+                ..
+            } => {
+                if !(duration_s > T::ZERO) {
+                    return Err(ConfigError::new(
+                        "reference.chirp: duration_s must be positive",
+                    ));
+                }
+                offset_um.is_finite() && amplitude_um.is_finite()
+            }
+            Wave::Multisine {
+                offset_um,
+                per_harmonic_um,
+                harmonics,
+                ..
+            } => {
+                if !(1..=excitation::MULTISINE_MAX).contains(&(harmonics as usize)) {
+                    return Err(ConfigError::new(
+                        "reference.multisine: harmonics must be in 1..=32",
+                    ));
+                }
+                offset_um.is_finite() && per_harmonic_um.is_finite()
             }
         };
         if finite {
@@ -192,6 +349,46 @@ impl<T: Real> Wave<T> {
                 len,
                 freq_hz,
             } => catmull_rom(points, len, x, freq_hz),
+            Wave::Prbs { low_um, .. } => Setpoint::hold(low_um),
+            Wave::Chirp {
+                offset_um,
+                amplitude_um,
+                f0_hz,
+                f1_hz,
+                duration_s,
+                a_fx,
+                b_fx,
+            } => {
+                // The sweep fraction back in 2^-32 units (exact for the generator's phase).
+                let turns = (x.to_f64() * TURN) as u32;
+                excitation::chirp_at(
+                    turns,
+                    offset_um,
+                    amplitude_um,
+                    f0_hz,
+                    f1_hz,
+                    duration_s,
+                    a_fx,
+                    b_fx,
+                )
+            }
+            Wave::Multisine {
+                offset_um,
+                per_harmonic_um,
+                f0_hz,
+                harmonics,
+                ref cos_phi,
+                ref sin_phi,
+                ..
+            } => excitation::multisine_at(
+                x,
+                offset_um,
+                per_harmonic_um,
+                f0_hz,
+                harmonics,
+                cos_phi,
+                sin_phi,
+            ),
         }
     }
 }
@@ -293,6 +490,9 @@ pub struct WaveGen<T> {
     phase: u32,
     step: u32,
     phasor: Option<Phasor<T>>,
+    /// A PRBS's shift register (unused by the other waves): the next bit on each wrap of
+    /// the phase.
+    lfsr: u32,
 }
 
 impl<T: Real> WaveGen<T> {
@@ -332,11 +532,16 @@ impl<T: Real> WaveGen<T> {
             }
             _ => None,
         };
+        let lfsr = match wave {
+            Wave::Prbs { order, seed, .. } => excitation::prbs_start(order, seed),
+            _ => 0,
+        };
         let mut g = Self {
             wave,
             phase,
             step,
             phasor,
+            lfsr,
         };
         g.resync();
         Ok(g)
@@ -349,7 +554,39 @@ impl<T: Real> WaveGen<T> {
     /// The current setpoint, without advancing.
     #[inline]
     pub fn current(&self) -> Setpoint<T> {
-        self.wave.at(T::from_turns(self.phase))
+        self.at_phase(self.phase)
+    }
+
+    /// The setpoint at `phase` (2^-32 turns); a PRBS at its register's current bit.
+    #[inline]
+    fn at_phase(&self, phase: u32) -> Setpoint<T> {
+        match self.wave {
+            Wave::Prbs {
+                low_um,
+                high_um,
+                order,
+                ..
+            } => excitation::prbs_level(self.lfsr, order, low_um, high_um),
+            Wave::Chirp {
+                offset_um,
+                amplitude_um,
+                f0_hz,
+                f1_hz,
+                duration_s,
+                a_fx,
+                b_fx,
+            } => excitation::chirp_at(
+                phase,
+                offset_um,
+                amplitude_um,
+                f0_hz,
+                f1_hz,
+                duration_s,
+                a_fx,
+                b_fx,
+            ),
+            _ => self.wave.at(T::from_turns(phase)),
+        }
     }
 
     /// Phasor exactly at the current phase.
@@ -364,7 +601,8 @@ impl<T: Real> WaveGen<T> {
     /// The current setpoint; then advance one sample.
     #[inline]
     pub fn next_setpoint(&mut self) -> Setpoint<T> {
-        self.phase = self.phase.wrapping_add(self.step);
+        let (phase, wrapped) = self.phase.overflowing_add(self.step);
+        self.phase = phase;
         match self.phasor.as_mut() {
             Some(p) => {
                 let sp = Setpoint {
@@ -382,9 +620,13 @@ impl<T: Real> WaveGen<T> {
                 }
                 sp
             }
-            None => self
-                .wave
-                .at(T::from_turns(self.phase.wrapping_sub(self.step))),
+            None => {
+                let sp = self.at_phase(self.phase.wrapping_sub(self.step));
+                if let (true, Wave::Prbs { order, .. }) = (wrapped, &self.wave) {
+                    self.lfsr = excitation::prbs_next(self.lfsr, *order);
+                }
+                sp
+            }
         }
     }
 }
@@ -484,6 +726,56 @@ mod tests {
         );
         let pts: Vec<f64> = (0..12).map(|k| (k as f64 * 0.7).sin() * 30.0).collect();
         check_derivatives(Wave::table(&pts, 5.0).unwrap(), fs);
+    }
+
+    #[test]
+    fn chirp_and_multisine_derivatives_are_exact() {
+        let fs = 10_000.0;
+        check_derivatives(Wave::chirp(50.0, 20.0, 2.0, 40.0, 0.3).unwrap(), fs);
+        check_derivatives(Wave::multisine(50.0, 20.0, 3.0, 8, 7).unwrap(), fs);
+    }
+
+    #[test]
+    fn prbs_generator_holds_each_bit_and_repeats_its_sequence() {
+        let fs = 1000.0f32;
+        let w = Wave::Prbs {
+            low_um: 10.0,
+            high_um: 30.0,
+            order: 5,
+            bit_hz: 250.0,
+            seed: 3,
+        };
+        let mut g = WaveGen::new(w, fs).unwrap();
+        let ys: Vec<f32> = (0..4 * 31 * 2).map(|_| g.next_setpoint().y_um).collect();
+        for bit in ys.chunks(4) {
+            assert!(bit.iter().all(|y| *y == bit[0]), "{bit:?}");
+            assert!(bit[0] == 10.0 || bit[0] == 30.0);
+        }
+        assert_eq!(ys[..124], ys[124..], "period 31 bits");
+        let highs = ys[..124].iter().filter(|y| **y == 30.0).count();
+        assert_eq!(highs, 16 * 4);
+        let prbs = |order, bit_hz| Wave::Prbs {
+            low_um: 10.0f32,
+            high_um: 30.0,
+            order,
+            bit_hz,
+            seed: 3,
+        };
+        assert!(WaveGen::new(prbs(21, 250.0), fs).is_err());
+        assert!(WaveGen::new(prbs(1, 250.0), fs).is_err());
+        assert!(WaveGen::new(prbs(5, 1000.0), fs).is_err());
+    }
+
+    #[test]
+    fn excitations_refuse_bad_parameters() {
+        assert!(Wave::chirp(0.0, 1.0, 1.0, 6000.0, 1.0)
+            .and_then(|w| w.validate(10_000.0))
+            .is_err());
+        assert!(Wave::chirp(0.0f64, 1.0, 1.0, 10.0, 0.0).is_err());
+        assert!(Wave::multisine(0.0f64, 1.0, 1.0, 33, 0).is_err());
+        assert!(Wave::multisine(0.0, 1.0, 200.0, 32, 0)
+            .and_then(|w| w.validate(10_000.0))
+            .is_err());
     }
 
     #[test]

@@ -33,6 +33,27 @@ pub fn format_command(cmd: &Command<'_>) -> String {
             freq_hz,
         } => format!("wave steps {low_um} {high_um} {levels} {freq_hz}"),
         Command::WaveTable(freq_hz) => format!("wave table {freq_hz}"),
+        Command::WavePrbs {
+            low_um,
+            high_um,
+            order,
+            bit_hz,
+            seed,
+        } => format!("wave prbs {low_um} {high_um} {order} {bit_hz} {seed}"),
+        Command::WaveChirp {
+            amp_um,
+            f0_hz,
+            f1_hz,
+            duration_s,
+            offset_um,
+        } => format!("wave chirp {amp_um} {f0_hz} {f1_hz} {duration_s} {offset_um}"),
+        Command::WaveMultisine {
+            amp_um,
+            f0_hz,
+            harmonics,
+            offset_um,
+            seed,
+        } => format!("wave multisine {amp_um} {f0_hz} {harmonics} {offset_um} {seed}"),
         Command::WaveRaster {
             span_um: [sx, sy],
             lines,
@@ -268,7 +289,7 @@ mod tests {
         /// parser (or the host refuses it before sending).
         #[test]
         fn every_built_command_round_trips(
-            which in 0usize..32, a in finite(), b in finite(), d in finite(),
+            which in 0usize..35, a in finite(), b in finite(), d in finite(),
             n in name(), i in 0usize..5000, k in 0usize..5000,
         ) {
             let shape = [Shape::Sine, Shape::Triangle, Shape::Square][which % 3];
@@ -317,6 +338,27 @@ mod tests {
                 28 => Command::Rec(RecCmd::Divider([None, Some(k)][i % 2])),
                 29 => Command::Cbw([a, b, d, -a]),
                 30 => Command::Selftest,
+                32 => Command::WavePrbs {
+                    low_um: a,
+                    high_um: d,
+                    order: 2 + (i % 19) as u8,
+                    bit_hz: b.abs().max(1e-3),
+                    seed: k as u32,
+                },
+                33 => Command::WaveChirp {
+                    amp_um: a.abs(),
+                    f0_hz: b.abs(),
+                    f1_hz: d.abs(),
+                    duration_s: a.abs().max(1e-3),
+                    offset_um: d,
+                },
+                34 => Command::WaveMultisine {
+                    amp_um: a.abs(),
+                    f0_hz: b.abs().max(1e-3),
+                    harmonics: 1 + (i % 32) as u8,
+                    offset_um: d,
+                    seed: k as u32,
+                },
                 _ => Command::Bench,
             };
             let line = format_command(&cmd);

@@ -57,6 +57,15 @@ pub fn parse_hz(s: &str) -> Result<f64, String> {
     )
 }
 
+/// Duration in s (`10`, `10s`, `500ms`, `2min`).
+pub fn parse_seconds(s: &str) -> Result<f64, String> {
+    quantity(
+        s,
+        "duration",
+        &[("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("min", 60.0)],
+    )
+}
+
 /// Voltage in V (`120`, `120V`, `500mV`).
 pub fn parse_volts(s: &str) -> Result<f64, String> {
     quantity(s, "voltage", &[("V", 1.0), ("mV", 1e-3), ("kV", 1e3)])

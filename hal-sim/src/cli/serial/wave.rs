@@ -4,11 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
 use piezo_core::command::{Command, Shape, MAX_LEVELS, MAX_LINES};
+use piezo_core::pipeline::excitation::{MULTISINE_MAX, PRBS_ORDER_MAX, PRBS_ORDER_MIN};
 
 use crate::serial::lines::table_lines;
 use crate::serial::Client;
 
-use super::units::{f32_of, parse_hz, parse_um};
+use super::units::{f32_of, parse_hz, parse_seconds, parse_um};
 
 #[derive(clap::Subcommand, Debug)]
 pub enum WaveCmd {
@@ -35,6 +36,52 @@ pub enum WaveCmd {
     /// --freq 10Hz --points 0,20,5,15` or `--file points.csv`). Loads the firmware's table
     /// (`table clear`, `table add ...`) and starts it (`wave table`).
     Table(TableArgs),
+    /// Pseudo-random binary sequence between LOW and HIGH for identifying the linear part:
+    /// a maximal LFSR of ORDER bits (2 to 20: 2^ORDER - 1 bits per period) at BIT_RATE
+    /// bits/s (below the sample rate) (`wave prbs 10um 12um 12 10kHz`).
+    Prbs {
+        #[arg(value_parser = parse_um, allow_hyphen_values = true)]
+        low: f64,
+        #[arg(value_parser = parse_um, allow_hyphen_values = true)]
+        high: f64,
+        #[arg(value_parser = clap::value_parser!(u8).range(PRBS_ORDER_MIN as i64..=PRBS_ORDER_MAX as i64))]
+        order: u8,
+        #[arg(value_parser = parse_hz)]
+        bit_rate: f64,
+        /// Start state of the register (any non-zero pattern; the same seed, the same
+        /// sequence).
+        #[arg(long, default_value_t = 1)]
+        seed: u32,
+    },
+    /// Linear sine sweep from F0 to F1 over DURATION, repeated, around --offset
+    /// (`wave chirp 2um 1Hz 2kHz 10s --offset 50um`).
+    Chirp {
+        #[arg(value_parser = parse_um)]
+        amplitude: f64,
+        #[arg(value_parser = parse_hz)]
+        f0: f64,
+        #[arg(value_parser = parse_hz)]
+        f1: f64,
+        #[arg(value_parser = parse_seconds)]
+        duration: f64,
+        #[arg(long, default_value = "0um", value_parser = parse_um, allow_hyphen_values = true)]
+        offset: f64,
+    },
+    /// Multisine: HARMONICS (1 to 32) equal harmonics of F0 (the period is 1/F0), peak
+    /// AMPLITUDE around --offset; --seed 0 gives Schroeder's low-crest phases, others
+    /// random phases (`wave multisine 2um 10Hz 32 --offset 50um --seed 3`).
+    Multisine {
+        #[arg(value_parser = parse_um)]
+        amplitude: f64,
+        #[arg(value_parser = parse_hz)]
+        f0: f64,
+        #[arg(value_parser = clap::value_parser!(u8).range(1..=MULTISINE_MAX as i64))]
+        harmonics: u8,
+        #[arg(long, default_value = "0um", value_parser = parse_um, allow_hyphen_values = true)]
+        offset: f64,
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+    },
     /// Hold a position (`wave hold 12.5um`).
     Hold {
         #[arg(value_parser = parse_um, allow_hyphen_values = true)]
@@ -171,6 +218,45 @@ pub fn run(c: &mut Client, w: WaveCmd, out: &mut impl Write) -> Result<()> {
             freq_hz: [f32_of(fx), f32_of(fy)],
             phase_deg: f32_of(phase),
             center_um: center_of(&center, [x_amp, y_amp])?,
+        },
+        WaveCmd::Prbs {
+            low,
+            high,
+            order,
+            bit_rate,
+            seed,
+        } => Command::WavePrbs {
+            low_um: f32_of(low),
+            high_um: f32_of(high),
+            order,
+            bit_hz: f32_of(bit_rate),
+            seed,
+        },
+        WaveCmd::Chirp {
+            amplitude,
+            f0,
+            f1,
+            duration,
+            offset,
+        } => Command::WaveChirp {
+            amp_um: f32_of(amplitude),
+            f0_hz: f32_of(f0),
+            f1_hz: f32_of(f1),
+            duration_s: f32_of(duration),
+            offset_um: f32_of(offset),
+        },
+        WaveCmd::Multisine {
+            amplitude,
+            f0,
+            harmonics,
+            offset,
+            seed,
+        } => Command::WaveMultisine {
+            amp_um: f32_of(amplitude),
+            f0_hz: f32_of(f0),
+            harmonics,
+            offset_um: f32_of(offset),
+            seed,
         },
         WaveCmd::Steps {
             low,
