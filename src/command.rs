@@ -14,8 +14,8 @@
 //! | `get <param>` | read a parameter | `ok <param> <value>` |
 //! | `set <param> <value>` | write a parameter (range-checked) | `ok <param> <value>` |
 //! | `cbw <d> <alpha> <beta> <gamma>` | the CBW model (um/V, um/V, 1/V, 1/V) at once, as `piezo fit --model cbw` reports it | `ok cbw <d> <alpha> <beta> <gamma>` |
-//! | `mode <law>` | select the feedback law (bumpless) | `ok mode <law>` |
-//! | `ff <compensator>` | select the feedforward compensator | `ok ff <name>` |
+//! | `mode <law>` | select the feedback law (bumpless); `err 18` when its worst-case step with the current compensator does not fit the control period at the board's rate ([`crate::firmware::Budget`]), nothing changed | `ok mode <law>` |
+//! | `ff <compensator>` | select the feedforward compensator; `err 18` as for `mode` | `ok ff <name>` |
 //! | `wave off` / `wave hold <um>` | stop the waveform (every axis) / hold a position | `ok wave ...` |
 //! | `wave sine\|triangle\|square <amp_um> <freq_hz> [<offset_um>]` | start a waveform | `ok wave ...` |
 //! | `wave steps <low_um> <high_um> <levels> <freq_hz>` | staircase low..high..low, `levels` in 2..=[`MAX_LEVELS`] (2: square) | `ok wave steps ...` |

@@ -17,6 +17,7 @@
 //! features: `f32` at 100 kHz with an FPU (and on the host), Q16.16 at 16 384 Hz without
 //! one; two axes with feature `xy`.
 
+mod budget;
 mod console;
 mod control_loop;
 mod converters;
@@ -30,6 +31,7 @@ mod storage;
 mod target;
 mod timing;
 
+pub use budget::{Budget, WORST_M4F};
 pub use console::{CommandLine, Port, Replica};
 pub use control_loop::Loop;
 pub use converters::{
@@ -43,5 +45,7 @@ pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;
 pub use period::{control_period, Clock, Io};
 pub use storage::{decode, encode, stored, Boot, Record, SettingsFlash, MAX_RECORD, VERSION};
-pub use target::{c, LoopPipeline, AXES, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ};
+pub use target::{
+    c, LoopPipeline, AXES, FIXED, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ,
+};
 pub use timing::{CycleStats, Timing};

@@ -79,3 +79,51 @@ fn the_replica_path_answers_and_steps_as_the_direct_executor() {
         assert_eq!((a.lp.law, a.lp.ff), (b.lp.law, b.lp.ff));
     }
 }
+
+/// A mode whose worst step does not fit the board's period (issue 15 item 4) is refused
+/// with `err 18` and changes nothing: the live loop keeps its law and compensator and runs
+/// the same codes as a loop that never got the command.
+#[test]
+fn a_mode_over_budget_is_refused_and_changes_nothing() {
+    use piezo_core::firmware::Budget;
+    let hz = c(SAMPLE_HZ as f64);
+    let mut live = Ctl::<OnChip>::new(hz);
+    let mut twin = Ctl::<OnChip>::new(hz);
+    // The QEMU M4F's period (10 000 instructions at 100 kHz), the SPI path's overhead.
+    let mut cli = CommandLine::new(&live.lp);
+    cli.set_budget(Budget::m4f(10_000, 1_200));
+    let mut port = Lines::default();
+    let mut send = |ctl: &mut Ctl<OnChip>, line: &str| {
+        for b in line.bytes().chain([b'\n']) {
+            cli.byte(b, &mut Exclusive(ctl), &mut port);
+        }
+    };
+    for line in [
+        "mode ff+hgo-robust",
+        "ff ims-cbw",
+        "mode nmpc",
+        "mode nmpc-gbw",
+        "mode fts",
+    ] {
+        send(&mut live, line);
+    }
+    for line in ["mode ff+hgo-robust", "ff ims-cbw", "mode fts"] {
+        direct(&mut twin, line);
+    }
+    let refused = "err 18 mode does not fit the control period at this rate";
+    assert_eq!(
+        port.0,
+        [
+            "ok mode ff+hgo-robust",
+            "ok ff ims-cbw",
+            refused,
+            refused,
+            "ok mode fts"
+        ]
+    );
+    assert_eq!((live.lp.law, live.lp.ff), ("fts", "ims-cbw"));
+    let mid = 1 << (OnChip::ADC_BITS - 1);
+    for _ in 0..200 {
+        assert_eq!(live.lp.step([mid]), twin.lp.step([mid]));
+    }
+}

@@ -39,12 +39,15 @@ pub enum Error {
     BadSettings,
     /// The settings flash failed (erase/program/read error).
     Flash,
+    /// The law with this feedforward does not fit the control period at this rate
+    /// ([`crate::firmware::Budget`]); nothing changed.
+    OverBudget,
 }
 
 impl Error {
     /// Every error, in code order: hosts map a reply's code back with [`Error::from_code`].
     /// A new variant breaks the exhaustive match of [`Error::is_listed`] until it is added here.
-    pub const ALL: [Error; 17] = {
+    pub const ALL: [Error; 18] = {
         use Error::*;
         [
             LineTooLong,
@@ -64,6 +67,7 @@ impl Error {
             NoSettings,
             BadSettings,
             Flash,
+            OverBudget,
         ]
     };
 
@@ -79,7 +83,8 @@ impl Error {
         match self {
             LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
             | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
-            | Busy | Unsupported | TooManyDigits | NoSettings | BadSettings | Flash => {}
+            | Busy | Unsupported | TooManyDigits | NoSettings | BadSettings | Flash
+            | OverBudget => {}
         }
     }
 
@@ -103,6 +108,7 @@ impl Error {
             Error::NoSettings => 15,
             Error::BadSettings => 16,
             Error::Flash => 17,
+            Error::OverBudget => 18,
         }
     }
 
@@ -126,6 +132,7 @@ impl Error {
             Error::NoSettings => "no settings stored",
             Error::BadSettings => "stored settings damaged or stale; nothing changed",
             Error::Flash => "settings flash failed",
+            Error::OverBudget => "mode does not fit the control period at this rate",
         }
     }
 }

@@ -3,13 +3,15 @@
 use super::error::Error;
 use super::MAX_LINE;
 
-/// Collects bytes from the serial port into lines of at most [`MAX_LINE`] bytes.
-/// An overlong line is dropped whole and reported once, at its end.
+/// Collects bytes from the serial port into lines of at most [`MAX_LINE`] bytes (plus a
+/// `\r`). An overlong line is dropped whole and reported once, at its end. The bytes sit in
+/// a `heapless::Vec` (the design card's fixed-capacity collections).
 #[derive(Debug, Clone)]
 pub struct LineBuffer {
-    buf: [u8; MAX_LINE + 1],
-    len: usize,
+    buf: heapless::Vec<u8, { MAX_LINE + 1 }>,
     overflow: bool,
+    /// The last call returned a completed line from `buf`: empty it before the next byte.
+    done: bool,
 }
 
 impl Default for LineBuffer {
@@ -21,31 +23,28 @@ impl Default for LineBuffer {
 impl LineBuffer {
     pub const fn new() -> Self {
         Self {
-            buf: [0; MAX_LINE + 1],
-            len: 0,
+            buf: heapless::Vec::new(),
             overflow: false,
+            done: false,
         }
     }
 
     /// Adds one byte; at `\n` returns the completed line (without `\n`), or
     /// [`Error::LineTooLong`] if it did not fit.
     pub fn push(&mut self, byte: u8) -> Option<Result<&[u8], Error>> {
+        if core::mem::take(&mut self.done) {
+            self.buf.clear();
+        }
         if byte == b'\n' {
-            let len = core::mem::take(&mut self.len);
+            self.done = true;
             if core::mem::take(&mut self.overflow) {
                 return Some(Err(Error::LineTooLong));
             }
-            return Some(Ok(self.buf.get(..len).unwrap_or(&[])));
+            return Some(Ok(self.buf.as_slice()));
         }
-        match self.buf.get_mut(self.len) {
-            Some(slot) if !self.overflow => {
-                *slot = byte;
-                self.len += 1;
-            }
-            _ => {
-                self.overflow = true;
-                self.len = 0;
-            }
+        if self.overflow || self.buf.push(byte).is_err() {
+            self.overflow = true;
+            self.buf.clear();
         }
         None
     }

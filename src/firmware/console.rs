@@ -1,6 +1,7 @@
 //! The serial command line, written once for every board: the board supplies its port
 //! ([`Port`]).
 
+use super::budget::Budget;
 use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
@@ -55,6 +56,8 @@ pub trait Port {
 pub struct CommandLine<C> {
     line: LineBuffer,
     replica: Replica<C>,
+    /// What the board's control period affords each mode (`mode`/`ff` beyond it: err 18).
+    budget: Budget,
 }
 
 /// The command task's replica of the loop, with what only commands use (the point table of
@@ -76,12 +79,14 @@ impl<C: Converters> CommandLine<C> {
                 table: PointTable::new(),
                 axis: 0,
             },
+            budget: Budget::UNLIMITED,
         }
     }
 
     /// The command line of a control state fresh from [`Ctl::new`]`(sample_hz)` (its
-    /// replica built the same way: no copy of the live state on the caller's stack).
-    pub fn for_new(sample_hz: R) -> Self {
+    /// replica built the same way: no copy of the live state on the caller's stack), with
+    /// the board's mode budget.
+    pub fn for_new(sample_hz: R, budget: Budget) -> Self {
         Self {
             line: LineBuffer::new(),
             replica: Replica {
@@ -89,7 +94,13 @@ impl<C: Converters> CommandLine<C> {
                 table: PointTable::new(),
                 axis: 0,
             },
+            budget,
         }
+    }
+
+    /// The board's mode budget ([`Budget::UNLIMITED`] until set).
+    pub fn set_budget(&mut self, budget: Budget) {
+        self.budget = budget;
     }
 
     /// Installs a checked settings record on the replica and hands it to the live loop (all
@@ -208,6 +219,17 @@ impl<C: Converters> CommandLine<C> {
             }
             Ok(c) => {
                 let r = &mut self.replica;
+                // A mode that does not fit the period is refused before anything changes.
+                let fits = match &c {
+                    Command::Mode(law) => self.budget.check(law, r.lp.ff),
+                    Command::Feedforward(ff) => self.budget.check(r.lp.law, ff),
+                    _ => Ok(()),
+                };
+                if let Err(e) = fits {
+                    reply.push_error(e);
+                    port.send(reply.as_str());
+                    return true;
+                }
                 ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
                 match run(&mut r.lp, &mut r.table, &mut r.axis, c, &mut reply) {
                     Ok(parts) if parts != Parts::NONE => {

@@ -12,7 +12,7 @@ pub type R = f32;
 pub type R = crate::fixed::Q16;
 
 /// The number type is Q16.16 (no FPU): it holds values below 32768, so codes keep 15 bits.
-pub(super) const FIXED: bool = cfg!(not(any(target_abi = "eabihf", not(target_os = "none"))));
+pub const FIXED: bool = cfg!(not(any(target_abi = "eabihf", not(target_os = "none"))));
 
 /// Axes the firmware drives: 2 with feature `xy` (an XY scanner: raster and Lissajous
 /// scans), else 1.

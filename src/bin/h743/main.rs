@@ -83,6 +83,13 @@ mod board {
 
     /// Core clock (Hz): DWT cycle counts are in these cycles.
     pub const SYSCLK_HZ: u32 = 400_000_000;
+    /// Core cycles per control period besides the step (interrupt entry and exit, timing,
+    /// recorder, converters): on-chip a few register accesses; the SPI pair clocks 2 x 24
+    /// bits at 25 MHz (about 2 us) and waits out t_CONV in hardware.
+    #[cfg(not(feature = "spi-converters"))]
+    pub const OVERHEAD_CYCLES: u32 = 400;
+    #[cfg(feature = "spi-converters")]
+    pub const OVERHEAD_CYCLES: u32 = 1_200;
     /// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
     pub const WATCHDOG_MS: u32 = 10;
 
@@ -179,10 +186,10 @@ mod board {
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32h7xx_hal::pac, peripherals = true)]
 mod app {
-    use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, SYSCLK_HZ, WATCHDOG_MS};
+    use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, OVERHEAD_CYCLES, SYSCLK_HZ, WATCHDOG_MS};
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::DWT;
-    use piezo_core::firmware::{c, control_period, CommandLine, SAMPLE_HZ};
+    use piezo_core::firmware::{c, control_period, Budget, CommandLine, SAMPLE_HZ};
     use stm32h7xx_hal::{
         delay::Delay, independent_watchdog::IndependentWatchdog, pac, prelude::*, serial,
     };
@@ -446,7 +453,13 @@ mod app {
                 hw_spi: hw,
                 rx,
                 port: Usart3 { tx },
-                cli: CommandLine::for_new(c(SAMPLE_HZ as f64)),
+                // Modes whose worst step (the M4F's instructions, taken as M7 cycles: one
+                // per cycle from ITCM/DTCM, not measured on a board) does not fit the
+                // period are refused (err 18).
+                cli: CommandLine::for_new(
+                    c(SAMPLE_HZ as f64),
+                    Budget::m4f(SYSCLK_HZ / SAMPLE_HZ, OVERHEAD_CYCLES),
+                ),
             },
         )
     }

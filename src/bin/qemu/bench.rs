@@ -5,7 +5,7 @@ use super::{chips, uart, Ctl};
 use core::hint::black_box;
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use piezo_core::command::Reply;
-use piezo_core::firmware::{c, AXES, FFS, LAWS, SAMPLE_HZ};
+use piezo_core::firmware::{c, Budget, AXES, FFS, LAWS, SAMPLE_HZ, WORST_M4F};
 use piezo_core::pipeline::Wave;
 
 /// Steps per benchmark row.
@@ -37,7 +37,8 @@ pub struct Row {
     pub ff: &'static str,
     /// Instructions per step x 100.
     pub instr_x100: u32,
-    /// Worst single step (instructions, SysTick resolution).
+    /// Worst single step (instructions, SysTick resolution): every step of the run, from
+    /// rest and across a parameter change.
     pub max_instr: u32,
     /// The law or compensator could not be configured for this number type.
     pub unsupported: bool,
@@ -145,8 +146,20 @@ pub fn run(syst: &mut SYST) -> Table {
             let Some(mut ctl) = configured(law, ff) else {
                 continue;
             };
+            // The worst single step: every step timed, from rest (the first step after
+            // the law's start) and across a parameter change halfway (the law rebuilt and
+            // restarted bumplessly, as `mode` or `set` do), each step's two SysTick reads
+            // included.
             let mut worst = 0;
-            for c in codes.iter().take(50) {
+            for (i, c) in codes.iter().enumerate() {
+                if i == BENCH_STEPS / 2 {
+                    let name = if law == "open-loop" {
+                        "feedforward"
+                    } else {
+                        law
+                    };
+                    ctl.lp.set_law(name).ok();
+                }
                 let t = SYST::get_current();
                 black_box(ctl.lp.step(black_box([*c; AXES])));
                 worst = worst.max(ticks(t, SYST::get_current()));
@@ -194,9 +207,51 @@ pub fn run(syst: &mut SYST) -> Table {
     }
 }
 
+/// Instructions per control period under `-icount shift=0` (1 instruction per ns).
+pub const PERIOD_INSTR: u32 = 1_000_000_000 / SAMPLE_HZ;
+/// Per period besides the step and the drivers: interrupt entry and exit, timing, recorder
+/// (the defmt timing line's interrupt maximum less the step's and the drivers': about 300).
+const OVERHEAD_INSTR: u32 = 400;
+
+/// This board's mode budget from its own measurement: each row's worst step against the
+/// period, less the driver path and [`OVERHEAD_INSTR`].
+pub fn budget(t: &Table) -> Budget {
+    let mut worst = [[0u32; FFS.len()]; LAWS.len()];
+    for (i, row) in t.rows.iter().enumerate() {
+        if let Some(w) = worst
+            .get_mut(i / FFS.len())
+            .and_then(|r| r.get_mut(i % FFS.len()))
+        {
+            *w = if row.unsupported {
+                0
+            } else {
+                row.max_instr.max(1)
+            };
+        }
+    }
+    Budget::measured(PERIOD_INSTR, t.drivers_x100 / 100 + OVERHEAD_INSTR, worst)
+}
+
+/// Rows whose measured worst step exceeds the library's [`WORST_M4F`] (the H743's budget):
+/// their count and the first. Only meaningful for the f32 build on the M4F.
+fn above_table(t: &Table) -> (usize, Option<&Row>) {
+    let over = |(i, row): &(usize, &Row)| {
+        let stated = WORST_M4F
+            .get(i / FFS.len())
+            .and_then(|r| r.get(i % FFS.len()))
+            .copied()
+            .unwrap_or(0);
+        !row.unsupported && row.max_instr > stated
+    };
+    let mut rows = t.rows.iter().enumerate().filter(over);
+    let first = rows.next().map(|(_, r)| r);
+    (first.map_or(0, |_| 1) + rows.count(), first)
+}
+
 /// The table as text lines (UART) and, with `log`, defmt (semihosting stops the core,
 /// so not while the loop runs).
 pub fn print(t: &Table, log: bool) {
+    let b = budget(t);
     let mut r = Reply::<160>::new();
     r.push_str("bench: instructions per control step (ADC code -> DAC code), ");
     r.push_usize(BENCH_STEPS);
@@ -211,7 +266,7 @@ pub fn print(t: &Table, log: bool) {
     r.push_fixed(t.drivers_x100, 2);
     r.push_str(" instr");
     uart::line(r.as_str());
-    uart::line("mode               feedforward        instr/step  first-50-max");
+    uart::line("mode               feedforward        instr/step     worst  budget");
     for row in &t.rows {
         r.clear();
         r.push_padded(row.law, 19);
@@ -228,6 +283,11 @@ pub fn print(t: &Table, log: bool) {
         n.push_u32(row.max_instr);
         r.push_str("  ");
         r.push_right(n.as_str(), 8);
+        r.push_str(if b.check(row.law, row.ff).is_ok() {
+            "  fits"
+        } else {
+            "  refused"
+        });
         uart::line(r.as_str());
         if !log {
             continue;
@@ -239,5 +299,38 @@ pub fn print(t: &Table, log: bool) {
             row.instr_x100 / 100,
             row.instr_x100 % 100
         );
+    }
+    r.clear();
+    r.push_str("budget: ");
+    r.push_u32(PERIOD_INSTR);
+    r.push_str(" instr per period, a step may take ");
+    r.push_u32(b.allowance());
+    let refused = t
+        .rows
+        .iter()
+        .filter(|row| b.check(row.law, row.ff).is_err())
+        .count();
+    r.push_str("; refused ");
+    r.push_usize(refused);
+    r.push_str(" of ");
+    r.push_usize(ROWS);
+    uart::line(r.as_str());
+    if !piezo_core::firmware::FIXED {
+        let (n, first) = above_table(t);
+        r.clear();
+        r.push_str("budget table: ");
+        r.push_usize(n);
+        r.push_str(" of ");
+        r.push_usize(ROWS);
+        r.push_str(" combinations above WORST_M4F");
+        if let Some(row) = first {
+            r.push_str(", first ");
+            r.push_str(row.law);
+            r.push_str(" ");
+            r.push_str(row.ff);
+            r.push_str(" ");
+            r.push_u32(row.max_instr);
+        }
+        uart::line(r.as_str());
     }
 }

@@ -414,6 +414,8 @@ mod app {
             ctl.lp.p.set_wave(axis, Wave::Hold { y_um: c(10.0) }).ok();
         }
         let mut cli = CommandLine::new(&ctl.lp);
+        // Modes whose measured worst step does not fit the period are refused (err 18).
+        cli.set_budget(bench::budget(&table));
         // The stored settings, if any (QEMU's flash is RAM: none at power-up).
         let mut settings = settings_flash();
         match cli.boot_settings(&mut rtic_core::Exclusive(&mut ctl), &mut settings) {
