@@ -207,6 +207,71 @@ pub fn run(syst: &mut SYST) -> Table {
     }
 }
 
+/// Instructions per call x 100 of the per-sample math the step uses against micromath's
+/// (issue 15 item 7; accuracy: `tests/micromath.rs`), over 1000 varied arguments.
+#[cfg(target_abi = "eabihf")]
+pub fn math(syst: &mut SYST, instr_per_tick_x1000: u32) {
+    use micromath::F32Ext;
+    use piezo_core::pipeline::reference::sin_cos_turns;
+    use piezo_core::real::Real;
+    syst.disable_interrupt();
+    syst.set_reload(0x00FF_FFFF);
+    syst.clear_current();
+    syst.enable_counter();
+    const N: u32 = 1000;
+    let cost = |f: &dyn Fn(f32) -> f32| {
+        let t0 = SYST::get_current();
+        let mut acc = 0.0f32;
+        for i in 0..N {
+            acc += f(black_box(i as f32 * 1e-3));
+        }
+        black_box(acc);
+        let dt = ticks(t0, SYST::get_current());
+        (dt as u64 * instr_per_tick_x1000 as u64 / (10 * N as u64)) as u32
+    };
+    let tau = core::f32::consts::TAU;
+    let rows: [(&str, u32); 10] = [
+        ("loop alone", cost(&|x| x)),
+        (
+            "sin_cos_turns (ours, sin and cos)",
+            cost(&|x| {
+                let (s, c) = sin_cos_turns(x);
+                s + c
+            }),
+        ),
+        (
+            "micromath sin + cos",
+            cost(&|x| F32Ext::sin(x * tau) + F32Ext::cos(x * tau)),
+        ),
+        (
+            "exp_m1 (ours, libm expm1f)",
+            cost(&|x| <f32 as Real>::exp_m1(-20.0 * x)),
+        ),
+        ("micromath exp - 1", cost(&|x| F32Ext::exp(-20.0 * x) - 1.0)),
+        ("libm expf", cost(&|x| <f32 as Real>::exp(-20.0 * x))),
+        (
+            "libm powf(x, 1.5)",
+            cost(&|x| <f32 as Real>::powf(x + 1e-3, 1.5)),
+        ),
+        (
+            "micromath powf(x, 1.5)",
+            cost(&|x| F32Ext::powf(x + 1e-3, 1.5)),
+        ),
+        ("libm logf", cost(&|x| <f32 as Real>::ln(x + 1e-3))),
+        ("micromath ln", cost(&|x| F32Ext::ln(x + 1e-3))),
+    ];
+    let mut r = Reply::<160>::new();
+    for (name, x100) in rows {
+        r.clear();
+        r.push_str("bench: math ");
+        r.push_str(name);
+        r.push_str(": ");
+        r.push_fixed(x100, 2);
+        r.push_str(" instr/call");
+        uart::line(r.as_str());
+    }
+}
+
 /// Instructions per control period under `-icount shift=0` (1 instruction per ns).
 pub const PERIOD_INSTR: u32 = 1_000_000_000 / SAMPLE_HZ;
 /// Per period besides the step and the drivers: interrupt entry and exit, timing, recorder

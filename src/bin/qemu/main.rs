@@ -398,6 +398,8 @@ mod app {
         defmt::info!("qemu board: bench");
         let table = bench::run(&mut syst);
         bench::print(&table, true);
+        #[cfg(target_abi = "eabihf")]
+        bench::math(&mut syst, table.instr_per_tick_x1000);
         if option_env!("PIEZO_BENCH_ONLY").is_some() {
             semihosting::process::exit(0);
         }
