@@ -65,6 +65,14 @@ pub struct BeamConfig {
     pub nno_e_mod: f64,
     /// Plant CBW differs from the observers' (000 set 2 vs set 1) when true.
     pub mismatch: bool,
+    /// The observers' beam model against the plant's: first natural frequency and damping
+    /// ratio scaled by these (1, 1: the plant's own; the truncation to two modes stays).
+    pub model_f1_scale: f64,
+    pub model_damping_scale: f64,
+    /// The observers are denied the hysteresis model: they get a CBW whose loop is 1 % of
+    /// the nominal one's (`alpha` / 100), so the HGO's state `h` and the NNO's network must
+    /// account for the hysteresis.
+    pub deny_hysteresis: bool,
     pub duration_s: f64,
     pub seed: u64,
 }
@@ -86,6 +94,9 @@ impl Default for BeamConfig {
             nno_learning_rate: 1000.0,
             nno_e_mod: 1.0,
             mismatch: true,
+            model_f1_scale: 1.0,
+            model_damping_scale: 1.0,
+            deny_hysteresis: false,
             duration_s: 1.5,
             seed: 5,
         }
@@ -198,9 +209,21 @@ pub fn nominal_cbw() -> Cbw<f64> {
     Cbw::with_n1(0.16, 0.07, 0.02, 0.01).expect("000 set 1 is valid")
 }
 
-/// The observers' two-mode model (same `q0` as the plant: truncation is a model error).
+/// The hysteresis model the observers get: [`nominal_cbw`], or (denied) one with 1 % of its
+/// loop.
+pub fn observer_cbw(cfg: &BeamConfig) -> Result<Cbw<f64>> {
+    Ok(if cfg.deny_hysteresis {
+        Cbw::with_n1(0.16, 0.0007, 0.02, 0.01)?
+    } else {
+        nominal_cbw()
+    })
+}
+
+/// The observers' two-mode model (same `q0` as the plant: truncation is a model error;
+/// `model_f1_scale` and `model_damping_scale` add a beam mismatch).
 pub fn observer_model(cfg: &BeamConfig) -> ModalModel<f64, { 2 * OBS_MODES }> {
-    let (omega, g) = modal_gains(cfg.f1_hz, SIM_MODES);
+    let (omega, g) = modal_gains(cfg.f1_hz * cfg.model_f1_scale, SIM_MODES);
+    let zeta = cfg.damping_ratio * cfg.model_damping_scale;
     let mut m = ModalModel {
         a: [[0.0; 2 * OBS_MODES]; 2 * OBS_MODES],
         b: [0.0; 2 * OBS_MODES],
@@ -211,7 +234,7 @@ pub fn observer_model(cfg: &BeamConfig) -> ModalModel<f64, { 2 * OBS_MODES }> {
         let w = omega[i];
         m.a[2 * i][2 * i + 1] = 1.0;
         m.a[2 * i + 1][2 * i] = -w * w;
-        m.a[2 * i + 1][2 * i + 1] = -2.0 * cfg.damping_ratio * w;
+        m.a[2 * i + 1][2 * i + 1] = -2.0 * zeta * w;
         m.b[2 * i + 1] = g[i];
         m.c_tip[2 * i] = mode_shape(i, 1.0);
         m.c_out[2 * i] = mode_shape(i, cfg.x_c);
@@ -224,6 +247,121 @@ pub fn beam_input(t: f64) -> f64 {
     let tau = std::f64::consts::TAU;
     let ramp = (t / 0.05).min(1.0);
     ramp * (60.0 + 45.0 * (tau * 4.0 * t).sin() + 8.0 * (tau * 55.0 * t).sin())
+}
+
+/// One set of conditions for the HGO-against-NNO comparison: sensor noise, the observers'
+/// beam model against the plant's, the hysteresis model denied or given.
+#[derive(Debug, Clone, Copy)]
+pub struct BeamCondition {
+    pub name: &'static str,
+    pub noise_y_um: f64,
+    pub model_f1_scale: f64,
+    pub model_damping_scale: f64,
+    pub deny_hysteresis: bool,
+}
+
+impl BeamCondition {
+    pub fn apply(&self, cfg: &BeamConfig) -> BeamConfig {
+        BeamConfig {
+            noise_y_um: self.noise_y_um,
+            model_f1_scale: self.model_f1_scale,
+            model_damping_scale: self.model_damping_scale,
+            deny_hysteresis: self.deny_hysteresis,
+            ..*cfg
+        }
+    }
+}
+
+/// What 000 Part V leaves open about its comparison (sensor at the tip, estimate at
+/// `x_c = L/2`, CBW mismatch as in the `beam` scenario), varied where a neural observer
+/// could be ahead: more sensor noise (a high-gain observer amplifies it), a wrong beam model
+/// (first mode 20 % low, damping doubled), the hysteresis model denied, and all at once.
+pub const BEAM_CONDITIONS: [BeamCondition; 5] = [
+    BeamCondition {
+        name: "nominal",
+        noise_y_um: 0.005,
+        model_f1_scale: 1.0,
+        model_damping_scale: 1.0,
+        deny_hysteresis: false,
+    },
+    BeamCondition {
+        name: "noise-50nm",
+        noise_y_um: 0.05,
+        model_f1_scale: 1.0,
+        model_damping_scale: 1.0,
+        deny_hysteresis: false,
+    },
+    BeamCondition {
+        name: "model-off",
+        noise_y_um: 0.005,
+        model_f1_scale: 0.8,
+        model_damping_scale: 2.0,
+        deny_hysteresis: false,
+    },
+    BeamCondition {
+        name: "hysteresis-denied",
+        noise_y_um: 0.005,
+        model_f1_scale: 1.0,
+        model_damping_scale: 1.0,
+        deny_hysteresis: true,
+    },
+    BeamCondition {
+        name: "all-three-100nm",
+        noise_y_um: 0.1,
+        model_f1_scale: 0.8,
+        model_damping_scale: 2.0,
+        deny_hysteresis: true,
+    },
+];
+
+/// Each observer's best rms error (um) over the same sweep, and its settings.
+#[derive(Debug, Clone, Copy)]
+pub struct BestOfSweep {
+    pub hgo_um: f64,
+    pub hgo_hz: f64,
+    pub nno_um: f64,
+    pub nno_hz: f64,
+    pub nno_eta: f64,
+    /// The NNO's observer without learning at the NNO's best bandwidth.
+    pub luenberger_um: f64,
+}
+
+/// Observer bandwidths (Hz) and NNO learning rates of the sweep: the same grid for both.
+pub const SWEEP_HZ: [f64; 4] = [75.0, 150.0, 300.0, 600.0];
+pub const SWEEP_ETA: [f64; 3] = [300.0, 1000.0, 3000.0];
+
+/// Runs `cfg` over [`SWEEP_HZ`] x [`SWEEP_ETA`]: the HGO's error poles and the NNO's
+/// observer at each bandwidth, the NNO at each learning rate; each observer's best.
+pub fn best_of_sweep(cfg: &BeamConfig) -> Result<BestOfSweep> {
+    let mut b = BestOfSweep {
+        hgo_um: f64::INFINITY,
+        hgo_hz: 0.0,
+        nno_um: f64::INFINITY,
+        nno_hz: 0.0,
+        nno_eta: 0.0,
+        luenberger_um: f64::INFINITY,
+    };
+    for hz in SWEEP_HZ {
+        for (k, eta) in SWEEP_ETA.into_iter().enumerate() {
+            let c = BeamConfig {
+                hgo_hz: hz,
+                nno_observer_hz: hz,
+                nno_learning_rate: eta,
+                ..*cfg
+            };
+            let r = run_beam(&c)?;
+            let h = est_errors(&r, &r.hgo).0;
+            if k == 0 && h < b.hgo_um {
+                (b.hgo_um, b.hgo_hz) = (h, hz);
+            }
+            let n = est_errors(&r, &r.nno).0;
+            if n < b.nno_um {
+                (b.nno_um, b.nno_hz, b.nno_eta) = (n, hz, eta);
+                b.luenberger_um = est_errors(&r, &r.luenberger).0;
+            }
+        }
+    }
+    Ok(b)
 }
 
 /// Traces and errors of one beam run.
@@ -264,9 +402,10 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
     let model = observer_model(cfg);
     let dt = 1.0 / cfg.rate_hz;
     let input = VoltageInput::new(0.0, cfg.u_play_volts, dt)?;
+    let obs_cbw = observer_cbw(cfg)?;
     let hgo: Hgo<f64, { 2 * OBS_MODES + 1 }> = Hgo::new(
         &model,
-        nominal_cbw(),
+        obs_cbw,
         1.0 / (std::f64::consts::TAU * cfg.hgo_hz),
         input,
         cfg.rate_hz,
@@ -282,10 +421,10 @@ pub fn run_beam(cfg: &BeamConfig) -> Result<BeamRun> {
         seed: 12345,
     };
     let nno: Nno<f64, { 2 * OBS_MODES }, NNO_HIDDEN> =
-        Nno::new(&model, nominal_cbw(), nno_cfg, input, cfg.rate_hz)?;
+        Nno::new(&model, obs_cbw, nno_cfg, input, cfg.rate_hz)?;
     let lue: Nno<f64, { 2 * OBS_MODES }, NNO_HIDDEN> = Nno::new(
         &model,
-        nominal_cbw(),
+        obs_cbw,
         NnoConfig {
             learning_rate: 0.0,
             ..nno_cfg

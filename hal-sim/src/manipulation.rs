@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::Result;
 use serde::Serialize;
 
-use crate::beam::{est_errors, run_beam, BeamConfig};
+use crate::beam::{est_errors, run_beam, BeamConfig, BEAM_CONDITIONS};
 use crate::numeric::rms;
 use crate::object::{
     blf_errors, blf_force, force_errors, identify, indentation, BlfConfig, ManipConfig, Object,
@@ -91,7 +91,12 @@ impl ManipRow {
 }
 
 /// Names of the manipulation scenarios of `piezo sim` (000 Part V).
-pub const SCENARIOS: [&str; 3] = ["object-characterisation", "blf-force", "beam"];
+pub const SCENARIOS: [&str; 4] = [
+    "object-characterisation",
+    "blf-force",
+    "beam",
+    "beam-conditions",
+];
 
 /// Runs the named manipulation scenarios (all of [`SCENARIOS`] if `names` is empty); plots
 /// go into `out` when given.
@@ -114,6 +119,9 @@ pub fn run_manipulation(names: &[String], out: Option<&Path>) -> Result<Vec<Mani
     }
     if want(SCENARIOS[2]) {
         rows.extend(beam_scenario(&BeamConfig::default(), out)?);
+    }
+    if want(SCENARIOS[3]) {
+        rows.extend(beam_conditions_scenario(&BeamConfig::default())?);
     }
     Ok(rows)
 }
@@ -311,6 +319,36 @@ pub fn beam_scenario(cfg: &BeamConfig, out: Option<&Path>) -> Result<Vec<ManipRo
     }
     if let Some(out) = out {
         write_grid(out.join("beam_observers.svg"), &plots, 2)?;
+    }
+    Ok(rows)
+}
+
+/// The HGO against the NNO under the conditions the seed's comparison may have had (000
+/// Part V; [`BEAM_CONDITIONS`]), each observer at its best of the same sweep: three rows
+/// per condition (HGO, NNO, NNO without learning), the observer settings in the name.
+pub fn beam_conditions_scenario(cfg: &BeamConfig) -> Result<Vec<ManipRow>> {
+    let mut rows = Vec::new();
+    // The range of y(x_c) after the warm-up (the same input in every run): the % columns.
+    let run = run_beam(cfg)?;
+    let r = &run.y_c[run.skip..];
+    let range = r.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        - r.iter().copied().fold(f64::INFINITY, f64::min);
+    for cond in BEAM_CONDITIONS {
+        let best = crate::beam::best_of_sweep(&cond.apply(cfg))?;
+        let tag = format!("beam-{}", cond.name);
+        for (name, rms) in [
+            (format!("hgo@{}Hz", best.hgo_hz), best.hgo_um),
+            (
+                format!("nno@{}Hz,eta={}", best.nno_hz, best.nno_eta),
+                best.nno_um,
+            ),
+            (format!("luenberger@{}Hz", best.nno_hz), best.luenberger_um),
+        ] {
+            let mut row = ManipRow::new(&tag, &name);
+            row.rmse_um = rms;
+            row.rmse_pct = 100.0 * rms / range.max(1e-12);
+            rows.push(row);
+        }
     }
     Ok(rows)
 }
