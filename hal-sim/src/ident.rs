@@ -5,4 +5,5 @@ pub mod fit;
 pub mod generate;
 pub mod multibw;
 pub mod optim;
+pub mod rate;
 pub mod ss;

@@ -17,7 +17,9 @@ use crate::numeric::{lowpass, rmse, solve_spd};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Cause {
-    /// Linear dynamics after the hysteresis (004 eq. 8): loop rotation with rate (001).
+    /// Linear dynamics after the hysteresis (004 eq. 8, a Hammerstein structure): a phase
+    /// lag that grows with rate. Not the loop rotation of rate-dependent hysteresis: 001
+    /// finds that a Hammerstein model cannot reproduce it (re-run in `ident::rate`).
     Dynamics,
     /// Asymmetric loop: output polynomial in the input and input-weighted hysteresis.
     Asymmetry,
