@@ -10,8 +10,8 @@ use hal_sim::ident::rate::{compare, RateStage, FREQS_001};
 fn a_hammerstein_model_cannot_follow_rate_dependent_hysteresis() {
     let rate_hz = 10_000.0;
     let gens = 40;
-    let on = compare(&RateStage::new(true), rate_hz, gens).unwrap();
-    let off = compare(&RateStage::new(false), rate_hz, gens).unwrap();
+    let on = compare(&RateStage::new(true, rate_hz), rate_hz, gens).unwrap();
+    let off = compare(&RateStage::new(false, rate_hz), rate_hz, gens).unwrap();
     let (lin, on, off) = (on.linear, on.rows, off.rows);
     println!("linear part from the step: {lin:?}");
     println!("model   rate-dependent stage (um) {FREQS_001:?} Hz   | without the rate dependence");
@@ -28,24 +28,25 @@ fn a_hammerstein_model_cannot_follow_rate_dependent_hysteresis() {
         );
     }
     for (a, b) in on.iter().zip(&off) {
+        let [e1, e50, e100] = a.rmse_um;
+        // The error grows with the rate ...
+        assert!(e1 < e50 && e50 < e100, "{}: {:?}", a.model, a.rmse_um);
+        // ... and the growth is the rate dependence: without it the same models grow at
+        // most half as much from 1 to 100 Hz, and end at least 0.3 um better.
+        let (grow_on, grow_off) = (e100 - e1, b.rmse_um[2] - b.rmse_um[0]);
         assert!(
-            a.rmse_um[2] > 3.0 * a.rmse_um[0].max(0.01),
-            "{}: {:?}",
-            a.model,
-            a.rmse_um
-        );
-        assert!(
-            a.rmse_um[2] > a.rmse_um[1],
-            "{}: error grows with rate {:?}",
-            a.model,
-            a.rmse_um
-        );
-        assert!(
-            b.rmse_um[2] < 0.5 * a.rmse_um[2],
+            grow_on > 2.0 * grow_off.max(0.0),
             "{}: {:?} vs {:?}",
             a.model,
-            b.rmse_um,
-            a.rmse_um
+            a.rmse_um,
+            b.rmse_um
+        );
+        assert!(
+            e100 > b.rmse_um[2] + 0.3,
+            "{}: {:?} vs {:?}",
+            a.model,
+            a.rmse_um,
+            b.rmse_um
         );
     }
 }
