@@ -51,4 +51,4 @@ python3 .ci/firmware-code.py "$work/on-chip.elf" ADC1_2 "piezo_core::pipeline::P
 python3 .ci/firmware-code.py "$work/xy.elf" ADC1_2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}"
 python3 .ci/firmware-code.py "$work/spi-converters.elf" TIM2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
   "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode|piezo_core::drivers::ad4000::Ad4000Config::frame_bytes" \
-  piezo_core::drivers::ad5791::Ad5791::set_code
+  "piezo_core::drivers::ad5791::Ad5791::write_code|piezo_core::drivers::ad5791::Ad5791::set_code"

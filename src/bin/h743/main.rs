@@ -22,9 +22,12 @@
 //!   is driven by TIM2 channel 1 (PA0, PWM mode 1): high for the first 1/20 of every sample
 //!   period (500 ns at 100 kHz, > t_CONV 320 ns), so the conversion starts in hardware at
 //!   the period boundary. The CC1 interrupt (CNV falls: the conversion is done) is the
-//!   control task: `Ad4000::read`, the step, `Ad5791::set_code`.
-//! * AD5791 DAC on SPI4 (SCK PE2, SDO -> MISO PE5, SDIN <- MOSI PE6), SYNC on PE4, LDAC on
-//!   PE3.
+//!   control task: `Ad4000::read`, the step, `Ad5791::write_code`.
+//! * AD5791 DAC on SPI4 (SCK PE2, SDO -> MISO PE5, SDIN <- MOSI PE6), SYNC on PE4. Its LDAC
+//!   is TIM2 channel 2 (PB3, PWM mode 2: low for the first 1/40 of every period): the code
+//!   written in one period reaches the output at the next period's start, one period after
+//!   its sample, whatever the step's length. (A GPIO while the DAC is configured at the
+//!   safe code; PB3 is the ST-LINK's SWO, unused: telemetry is RTT.)
 //! * The SPI pair drives one axis; `xy` with `spi-converters` does not compile (a second
 //!   AD4020/AD5791 pair needs its own buses or chip selects, not wired here).
 //! * stm32h7xx-hal 0.16 implements embedded-hal 0.2 SPI; [`spi`] adapts it to the
@@ -321,14 +324,14 @@ mod app {
         #[cfg(feature = "spi-converters")]
         let io = {
             use crate::spi::{CycleDelay, Gpio, HardwarePin, SpiDev};
-            use crate::spi_pair::{Adc, AdcSetup, Dac};
+            use crate::spi_pair::{Adc, AdcSetup, Dac, DacSetup};
             use piezo_core::firmware::{ADC_CONFIG, DAC_CONFIG};
             use stm32h7xx_hal::spi;
             let gpiob = dp.GPIOB.split(ccdr.peripheral.GPIOB);
             let gpioe = dp.GPIOE.split(ccdr.peripheral.GPIOE);
             // SYNC and LDAC high (idle) before SPI4 clocks anything.
             let sync = Gpio(gpioe.pe4.into_push_pull_output());
-            let ldac = Gpio(gpioe.pe3.into_push_pull_output());
+            let ldac = Gpio(gpiob.pb3.into_push_pull_output());
             let dac_bus: spi::Spi<_, _, u8> = dp.SPI4.spi(
                 (
                     gpioe.pe2.into_alternate::<5>(),
@@ -343,7 +346,7 @@ mod app {
             let spi4_hz = spi::Spi::<pac::SPI4, spi::Enabled, u8>::kernel_clk_unwrap(&ccdr.clocks);
             // The DAC first: released from its power-on clamp only at the safe code (read
             // back); on failure it stays clamped (0 V) and the board halts in the safe state.
-            let mut dac = Dac::new(
+            let mut dac = DacSetup::new(
                 SpiDev::new(dac_bus, sync, spi4_hz.raw()),
                 ldac,
                 CycleDelay,
@@ -398,6 +401,17 @@ mod app {
                 .modify(|_, w| w.oc1m().pwm_mode1().oc1pe().set_bit());
             tim.ccer.modify(|_, w| w.cc1e().set_bit());
             tim.dier.modify(|_, w| w.cc1ie().set_bit());
+            // CH2 in PWM mode 2 is LDAC: low from the update event for 1/40 of the period
+            // (250 ns at 100 kHz, > the AD5791's 13 ns), high while the control task writes
+            // the DAC register; paused at 0 it is low (the safe code, already loaded, stays).
+            tim.ccr2().write(|w| w.ccr().bits(arr / 40 + 1));
+            tim.ccmr1_output()
+                .modify(|_, w| w.oc2m().pwm_mode2().oc2pe().set_bit());
+            tim.ccer.modify(|_, w| w.cc2e().set_bit());
+            let (dac_bus, ldac, delay) = dac.release();
+            let _ldac = ldac.0.into_alternate::<1>();
+            let dac =
+                Dac::new(dac_bus, HardwarePin, delay, DAC_CONFIG).unwrap_or_else(|_| safe::halt());
             Io {
                 adc,
                 dac,

@@ -219,7 +219,9 @@ impl OutputPin for HardwarePin {
 /// (RM0433 SPI registers; `GPIOE_BSRR` for SYNC). It keeps the divider the bus had: 25 MHz,
 /// or 6.25 MHz if a read-back was under way, both within the AD5791's write limit.
 pub struct PanicSpi4;
-/// The AD5791's LDAC (PE3) at register level (`GPIOE_BSRR`).
+/// The AD5791's LDAC (PB3) at register level: taken back from TIM2 CH2 as a GPIO output
+/// (`GPIOB_MODER`), then driven through `GPIOB_BSRR`, so the safe code loads even with
+/// TIM2 stopped.
 pub struct PanicLdac;
 
 #[allow(unsafe_code)]
@@ -231,8 +233,21 @@ fn spi4() -> &'static pac::spi1::RegisterBlock {
 
 #[allow(unsafe_code)]
 fn gpioe_bsrr(bits: u32) {
-    // SAFETY: a BSRR write sets or resets only the named pins (PE3, PE4).
+    // SAFETY: a BSRR write sets or resets only the named pins (PE4).
     unsafe { (*pac::GPIOE::ptr()).bsrr.write(|w| w.bits(bits)) }
+}
+
+/// PB3 as a push-pull output at `high`, whatever drove it.
+#[allow(unsafe_code)]
+fn ldac_gpio(high: bool) {
+    // SAFETY: halt path only (interrupts masked); BSRR and MODER bits of PB3 alone.
+    unsafe {
+        let b = &*pac::GPIOB::ptr();
+        b.bsrr
+            .write(|w| w.bits(if high { 1 << 3 } else { 1 << (3 + 16) }));
+        b.moder
+            .modify(|r, w| w.bits((r.bits() & !(0b11 << 6)) | (0b01 << 6)));
+    }
 }
 
 impl ErrorType for PanicSpi4 {
@@ -293,11 +308,11 @@ impl PinErrorType for PanicLdac {
 
 impl OutputPin for PanicLdac {
     fn set_low(&mut self) -> Result<(), Infallible> {
-        gpioe_bsrr(1 << (3 + 16));
+        ldac_gpio(false);
         Ok(())
     }
     fn set_high(&mut self) -> Result<(), Infallible> {
-        gpioe_bsrr(1 << 3);
+        ldac_gpio(true);
         Ok(())
     }
 }

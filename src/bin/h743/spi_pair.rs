@@ -1,12 +1,12 @@
-//! The external SPI pair: AD4020 (CNV from TIM2 CH1) and AD5791, through the core's
-//! drivers.
+//! The external SPI pair: AD4020 (CNV from TIM2 CH1) and AD5791 (LDAC from TIM2 CH2),
+//! through the core's drivers.
 
 use super::spi::{CycleDelay, Gpio, HardwarePin, SpiDev};
 use crate::safe::amp;
 use crate::selftest;
 use core::sync::atomic::Ordering::Relaxed;
 use piezo_core::firmware::{self, ActuatorDac, PositionAdc, AXES};
-use stm32h7xx_hal::gpio::{Output, PushPull, PA0, PE3, PE4};
+use stm32h7xx_hal::gpio::{Output, PushPull, PA0, PB3, PE4};
 use stm32h7xx_hal::{pac, spi::Enabled, spi::Spi, timer::Timer};
 
 pub type AdcBus = SpiDev<Spi<pac::SPI1, Enabled, u8>, HardwarePin>;
@@ -15,7 +15,10 @@ pub type DacBus = SpiDev<Spi<pac::SPI4, Enabled, u8>, Gpio<PE4<Output<PushPull>>
 /// needs CNV frames); afterwards [`Adc`] with CNV from TIM2 CH1.
 pub type AdcSetup = PositionAdc<AdcBus, Gpio<PA0<Output<PushPull>>>, CycleDelay>;
 pub type Adc = PositionAdc<AdcBus, HardwarePin, CycleDelay>;
-pub type Dac = ActuatorDac<DacBus, Gpio<PE3<Output<PushPull>>>, CycleDelay>;
+/// The AD5791 while configuring: LDAC (PB3) as a GPIO the driver pulses (`init` loads the
+/// safe code); afterwards [`Dac`] with LDAC from TIM2 CH2.
+pub type DacSetup = ActuatorDac<DacBus, Gpio<PB3<Output<PushPull>>>, CycleDelay>;
+pub type Dac = ActuatorDac<DacBus, HardwarePin, CycleDelay>;
 
 /// AD4020 (CNV from TIM2 CH1) and AD5791 through the core's drivers.
 pub struct Io {
@@ -41,11 +44,12 @@ impl firmware::Io for Io {
         ([code; AXES], overrun)
     }
 
-    /// Writes and loads the DAC; on failure returns the code it still holds.
+    /// Writes the DAC register (TIM2 CH2's LDAC edge loads it at the next period's start);
+    /// on failure returns the code it still holds.
     #[inline(always)]
     fn write(&mut self, codes: [i32; AXES]) -> [Option<i32>; AXES] {
         let [code] = codes;
-        let held = match self.dac.set_code(code) {
+        let held = match self.dac.write_code(code) {
             Ok(()) => {
                 self.held = code;
                 [None]
