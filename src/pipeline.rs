@@ -177,6 +177,9 @@ pub struct Pipeline<T: Real, const N: usize> {
     /// [`Pipeline::step`] takes the fused path of `fused.rs` (decided when the mode, the
     /// feedforward or the feedback changes).
     fused: bool,
+    /// A configuration handed over by [`Pipeline::adopt`] waits for its bumpless restart:
+    /// the next step runs it first (in the control task, not under the command's lock).
+    restart_due: bool,
 }
 
 impl<T: Real, const N: usize> Pipeline<T, N> {
@@ -228,6 +231,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                 },
             },
             fused: false,
+            restart_due: false,
         };
         for i in 0..N {
             let (o, a) = (&p.output[i], &p.config.axes[i]);
@@ -437,6 +441,10 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     /// can run it as the reference of the fused step.
     #[inline]
     pub fn step_generic(&mut self, adc: [i32; N]) -> [i32; N] {
+        if self.restart_due {
+            self.restart_due = false;
+            self.restart();
+        }
         let st = &mut self.state;
         st.counters.samples = st.counters.samples.saturating_add(1);
 

@@ -1,7 +1,8 @@
 //! Hand-over of a configuration built elsewhere: the firmware's command task validates and
 //! builds a change on its own replica of the pipeline (outside the control task's lock),
 //! then [`Pipeline::adopt`] copies the changed parts into the live pipeline under the lock:
-//! a copy and one bumpless restart, never a law rebuild or a validation.
+//! a copy, never a law rebuild, a validation or the restart (the next step restarts
+//! bumplessly, in the control task).
 
 use super::Pipeline;
 use crate::real::Real;
@@ -47,9 +48,9 @@ impl Parts {
 
 impl<T: Real, const N: usize> Pipeline<T, N> {
     /// Takes `parts` of `from`'s configuration (a replica with this pipeline's configuration
-    /// that a change was validated and built on) and restarts once, bumplessly, from this
-    /// pipeline's state. A copy and a restart: bounded, no panic, nothing validated here
-    /// (`from` was built through the checked setters).
+    /// that a change was validated and built on); the next step restarts once, bumplessly,
+    /// from this pipeline's state. A copy: bounded, no panic, nothing validated here (`from`
+    /// was built through the checked setters).
     pub fn adopt(&mut self, from: &Self, parts: Parts) {
         if parts.contains(Parts::FEEDFORWARD) {
             self.feedforward.clone_from(&from.feedforward);
@@ -99,7 +100,11 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             .union(Parts::MODE)
             .union(Parts::CLEAR_FAULT);
         if parts.any(restart) {
-            self.restart();
+            // The restart (the IMS inverse from the setpoint, the observer's reset) runs at
+            // the next step: this stays a copy. The generic step takes it first (it is the
+            // path while the flag is up) and decides the fused path again.
+            self.restart_due = true;
+            self.fused = false;
         } else if parts.contains(Parts::LIMITS) {
             self.fused = self.fusable();
         }
