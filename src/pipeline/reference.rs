@@ -203,6 +203,32 @@ impl<T: Real> Wave<T> {
         }
     }
 
+    /// A chirp's setpoint at sweep fraction `phase` (2^-32 units); other waves: none.
+    #[inline]
+    fn chirp_at(&self, phase: u32) -> Setpoint<T> {
+        match *self {
+            Wave::Chirp {
+                offset_um,
+                amplitude_um,
+                f0_hz,
+                f1_hz,
+                duration_s,
+                a_fx,
+                b_fx,
+            } => excitation::chirp_at(
+                phase,
+                offset_um,
+                amplitude_um,
+                f0_hz,
+                f1_hz,
+                duration_s,
+                a_fx,
+                b_fx,
+            ),
+            _ => Setpoint::default(),
+        }
+    }
+
     /// Checks the wave for a generator running at `sample_hz`.
     pub fn validate(&self, sample_hz: T) -> Result<(), ConfigError> {
         let (f, top) = (self.freq_hz(), self.top_hz());
@@ -350,28 +376,8 @@ impl<T: Real> Wave<T> {
                 freq_hz,
             } => catmull_rom(points, len, x, freq_hz),
             Wave::Prbs { low_um, .. } => Setpoint::hold(low_um),
-            Wave::Chirp {
-                offset_um,
-                amplitude_um,
-                f0_hz,
-                f1_hz,
-                duration_s,
-                a_fx,
-                b_fx,
-            } => {
-                // The sweep fraction back in 2^-32 units (exact for the generator's phase).
-                let turns = (x.to_f64() * TURN) as u32;
-                excitation::chirp_at(
-                    turns,
-                    offset_um,
-                    amplitude_um,
-                    f0_hz,
-                    f1_hz,
-                    duration_s,
-                    a_fx,
-                    b_fx,
-                )
-            }
+            // The sweep fraction back in 2^-32 units (exact for the generator's phase).
+            Wave::Chirp { .. } => self.chirp_at((x.to_f64() * TURN) as u32),
             Wave::Multisine {
                 offset_um,
                 per_harmonic_um,
@@ -582,24 +588,7 @@ impl<T: Real> WaveGen<T> {
                 order,
                 ..
             } => excitation::prbs_level(self.lfsr, order, low_um, high_um),
-            Wave::Chirp {
-                offset_um,
-                amplitude_um,
-                f0_hz,
-                f1_hz,
-                duration_s,
-                a_fx,
-                b_fx,
-            } => excitation::chirp_at(
-                phase,
-                offset_um,
-                amplitude_um,
-                f0_hz,
-                f1_hz,
-                duration_s,
-                a_fx,
-                b_fx,
-            ),
+            Wave::Chirp { .. } => self.wave.chirp_at(phase),
             _ => self.wave.at(T::from_turns(phase)),
         }
     }
