@@ -45,13 +45,32 @@
 //! | `load` | the stored record, checked (magic, version, CRC-32, exactly the stored settings, values as `set` checks them) and installed bumplessly, all or none; nothing stored `err 15`, refused `err 16`, flash failed `err 17` | `ok load <n> settings` |
 //! | `defaults` | the built-in settings (the stored record stays) | `ok defaults` |
 //!
-//! Parameters (the firmware's `help` lists them): `u_min`, `u_max` (V), `slew` (V/s);
-//! read-only `um_per_code`, `volts_per_code`, `sample_hz`; the hysteresis model and gains
-//! the laws and compensators are built from: `cbw_d`, `cbw_alpha` (um/V), `cbw_beta`,
-//! `cbw_gamma` (1/V) of the CBW (n = 1) that `piezo fit --model cbw` identifies,
-//! `gbw_b` (1/V, the asymmetry `B` of the GBW that `fts-gbw` and `nmpc-gbw` predict with:
-//! the CBW's loop tilted, 000 eq. 3), `um_per_volt`, `offset_um` (open-loop scaling), `hgo_eps` (s), `lambda1`, `lambda2`
-//! (1/s, robust law), `pid_kp` (V/um), `pid_ki` (V/(um s)). A model or gain `set` is
+//! Parameters (the firmware's `help` lists them; one table in the firmware,
+//! [`crate::firmware::SETTINGS`], which `tests/settings_table.rs` checks this one against):
+//!
+//! | name | unit | sets | access |
+//! |---|---|---|---|
+//! | `u_min` | V | lowest output voltage | limit |
+//! | `u_max` | V | highest output voltage (at most 150) | limit |
+//! | `slew` | V/s | output slew-rate limit | limit |
+//! | `um_per_code` | um | position per ADC code | read-only |
+//! | `volts_per_code` | V | output voltage per DAC code | read-only |
+//! | `sample_hz` | Hz | control rate | read-only |
+//! | `cbw_d` | um/V | CBW piezo gain d (000 eq. 1) | model |
+//! | `cbw_alpha` | um/V | CBW alpha (000 eq. 2) | model |
+//! | `cbw_beta` | 1/V | CBW beta | model |
+//! | `cbw_gamma` | 1/V | CBW gamma | model |
+//! | `gbw_b` | 1/V | GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3) | model |
+//! | `um_per_volt` | um/V | open-loop scaling | model |
+//! | `offset_um` | um | open-loop offset | model |
+//! | `hgo_eps` | s | HGO epsilon (000 eq. 6) | model |
+//! | `lambda1` | 1/s | robust law gain (000 eq. 7) | model |
+//! | `lambda2` | 1/s | robust law gain (000 eq. 7) | model |
+//! | `pid_kp` | V/um | PID proportional gain | model |
+//! | `pid_ki` | V/(um s) | PID integral gain | model |
+//!
+//! The CBW (n = 1) is the one `piezo fit --model cbw` identifies; `gbw_b` tilts its loop
+//! (`set gbw_b` refuses `|B| >= cbw_beta + cbw_gamma`). A model or gain `set` is
 //! checked by the core's constructors and installs the rebuilt law and compensator
 //! bumplessly; a refused value (`err 8`) changes nothing. `save` stores all of them except
 //! the read-only ones; at power-up a stored record is loaded (a refused one leaves the

@@ -27,6 +27,7 @@ mod laws;
 mod nor;
 mod params;
 mod period;
+mod settings;
 mod storage;
 mod target;
 mod timing;
@@ -44,6 +45,7 @@ pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;
 pub use period::{control_period, Clock, Io};
+pub use settings::{setting, Access, Setting, SETTINGS};
 pub use storage::{decode, encode, stored, Boot, Record, SettingsFlash, MAX_RECORD, VERSION};
 pub use target::{
     c, LoopPipeline, AXES, FIXED, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ,

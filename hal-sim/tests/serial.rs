@@ -668,6 +668,17 @@ fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
     assert_eq!(param(&before, "cbw_d"), 0.16, "{before}");
     assert_eq!(param(&before, "u_max"), 150.0);
     assert_eq!(param(&before, "pid_ki"), 2000.0);
+    // Units from the core's settings table.
+    for row in [
+        ["u_max", "150", "V"],
+        ["slew", "20000", "V/s"],
+        ["pid_ki", "2000", "V/(um"],
+    ] {
+        assert!(
+            before.lines().any(|l| l.split_whitespace().take(3).eq(row)),
+            "{row:?} in {before}"
+        );
+    }
 
     // gamma/beta 0.4 of beta 0.005: gamma 0.002.
     let good = fit_json(

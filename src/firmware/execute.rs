@@ -570,31 +570,7 @@ pub fn push_real<const N: usize>(out: &mut command::Reply<N>, v: R) {
     out.push_f32(v.to_f64() as f32);
 }
 
-/// Parameter names of `get`/`set` (`sample_hz` and the converter scalings are read-only;
-/// from `cbw_d` on they are the [`Params`]).
-pub const PARAMS: [&str; 18] = [
-    "u_min",
-    "u_max",
-    "slew",
-    "um_per_code",
-    "volts_per_code",
-    "sample_hz",
-    "cbw_d",
-    "cbw_alpha",
-    "cbw_beta",
-    "cbw_gamma",
-    "gbw_b",
-    "um_per_volt",
-    "offset_um",
-    "hgo_eps",
-    "lambda1",
-    "lambda2",
-    "pid_kp",
-    "pid_ki",
-];
-
-/// The parameters of [`PARAMS`] that only `get` reads.
-pub const READ_ONLY: [&str; 3] = ["um_per_code", "volts_per_code", "sample_hz"];
+pub use super::settings::{PARAMS, READ_ONLY};
 
 pub(super) fn get_param<C: Converters>(lp: &Loop<C>, name: &str) -> Result<R, Error> {
     let cfg = lp.p.config();

@@ -8,8 +8,8 @@ use crate::serial::Client;
 
 use super::units::f32_of;
 
-/// Every parameter with its value; the list comes from the firmware (`help` ends with
-/// `params: <names>`).
+/// Every parameter with its value and unit; the list comes from the firmware (`help` ends
+/// with `params: <names>`), the units from the core's settings table.
 pub fn print_params(c: &mut Client, out: &mut impl Write) -> Result<()> {
     let help = c.send(&Command::Help)?;
     let params: Vec<String> = help
@@ -25,7 +25,10 @@ pub fn print_params(c: &mut Client, out: &mut impl Write) -> Result<()> {
     }
     for p in &params {
         let v = c.get(p)?;
-        writeln!(out, "{p:<15} {v}")?;
+        // The unit from the core's settings table (a firmware newer than this host may
+        // name one it does not know).
+        let unit = piezo_core::firmware::setting(p).map_or("", |s| s.unit);
+        writeln!(out, "{p:<15} {v} {unit}")?;
     }
     Ok(())
 }

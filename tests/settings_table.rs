@@ -1,0 +1,67 @@
+//! One table of settings (issue 14 item 1): the firmware's `SETTINGS`, the protocol
+//! documentation's parameter table (`src/command.rs`), `help`'s list and `get` agree. A
+//! setting added, renamed or re-united in one place and not the others fails here.
+use piezo_core::command::{parse, Reply};
+use piezo_core::firmware::{c, Access, Ctl, OnChip, REPLY_LEN, SAMPLE_HZ, SETTINGS};
+
+fn ask(ctl: &mut Ctl<OnChip>, line: &str) -> String {
+    let mut r = Reply::<REPLY_LEN>::new();
+    match parse(line.as_bytes()) {
+        Ok(cmd) => ctl.execute(cmd, &mut r),
+        Err(e) => r.push_error(e),
+    }
+    r.as_str().to_string()
+}
+
+#[test]
+fn the_protocol_doc_help_and_get_follow_the_settings_table() {
+    let doc = include_str!("../src/command.rs");
+    let rows: Vec<Vec<String>> = doc
+        .lines()
+        .filter_map(|l| l.strip_prefix("//! | `"))
+        .map(|l| {
+            l.split('|')
+                .map(|c| c.trim().trim_matches('`').to_string())
+                .collect()
+        })
+        .filter(|r: &Vec<String>| r.len() == 5 && SETTINGS.iter().any(|s| s.name == r[0]))
+        .collect();
+    let access = |a: Access| match a {
+        Access::Limit => "limit",
+        Access::ReadOnly => "read-only",
+        Access::Model => "model",
+    };
+    let want: Vec<Vec<String>> = SETTINGS
+        .iter()
+        .map(|s| {
+            vec![s.name, s.unit, s.about, access(s.access), ""]
+                .into_iter()
+                .map(String::from)
+                .collect()
+        })
+        .collect();
+    assert_eq!(
+        rows, want,
+        "src/command.rs's parameter table differs from SETTINGS"
+    );
+    let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
+    let help = ask(&mut ctl, "help");
+    let listed: Vec<&str> = help
+        .split_once("params:")
+        .unwrap()
+        .1
+        .split_whitespace()
+        .collect();
+    let names: Vec<&str> = SETTINGS.iter().map(|s| s.name).collect();
+    assert_eq!(listed, names, "help lists other parameters");
+    for s in SETTINGS {
+        let r = ask(&mut ctl, &format!("get {}", s.name));
+        assert!(r.starts_with(&format!("ok {} ", s.name)), "{r}");
+        if s.access == Access::ReadOnly {
+            assert_eq!(
+                ask(&mut ctl, &format!("set {} 1", s.name)),
+                "err 12 not possible in the current state"
+            );
+        }
+    }
+}
