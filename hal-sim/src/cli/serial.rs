@@ -87,12 +87,13 @@ pub enum Action {
     Ping,
     /// List the firmware's commands and parameters (its `help` command).
     Commands,
-    /// Select the control mode: open-loop, feedforward or a feedback law (pid, ff+pid,
-    /// hgo-robust, ff+hgo-robust, fts, ff+fts, adrc, ff+adrc, nmpc, ff+nmpc); bumpless.
+    /// Select the control mode: open-loop, feedforward or a feedback law; bumpless. The
+    /// names are the firmware's own (`piezo_core::firmware::LAWS`, `FFS`).
     Mode {
+        #[arg(value_parser = law_names())]
         law: String,
-        /// Feedforward compensator to select first (linear, ims-cbw, ims-cbw-delayed).
-        #[arg(long)]
+        /// Feedforward compensator to select first.
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(piezo_core::firmware::FFS))]
         ff: Option<String>,
     },
     /// Set the output limits; with no option, print them.
@@ -335,4 +336,14 @@ mod tests {
         ])
         .is_err());
     }
+}
+
+/// The firmware's modes: its feedback laws and `feedforward` (open loop plus compensator).
+fn law_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(
+        piezo_core::firmware::LAWS
+            .iter()
+            .copied()
+            .chain(["feedforward"]),
+    )
 }
