@@ -256,6 +256,16 @@ fn firmware_line(e: &SerialError) -> String {
     }
 }
 
+/// The firmware's modes: its feedback laws and `feedforward` (open loop plus compensator).
+fn law_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(
+        piezo_core::firmware::LAWS
+            .iter()
+            .copied()
+            .chain(["feedforward"]),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -336,14 +346,4 @@ mod tests {
         ])
         .is_err());
     }
-}
-
-/// The firmware's modes: its feedback laws and `feedforward` (open loop plus compensator).
-fn law_names() -> clap::builder::PossibleValuesParser {
-    clap::builder::PossibleValuesParser::new(
-        piezo_core::firmware::LAWS
-            .iter()
-            .copied()
-            .chain(["feedforward"]),
-    )
 }
