@@ -3,8 +3,7 @@
 //! against the executor run directly on the live control state: the same replies, and the
 //! live loop runs the same DAC codes and state after every command.
 
-use piezo_core::command::{parse, Reply};
-use piezo_core::firmware::{c, CommandLine, Converters, Ctl, OnChip, Port, REPLY_LEN, SAMPLE_HZ};
+use piezo_core::firmware::{c, CommandLine, Converters, Ctl, OnChip, Port, SAMPLE_HZ};
 use rtic_core::Exclusive;
 
 #[derive(Default)]
@@ -17,12 +16,7 @@ impl Port for Lines {
 }
 
 fn direct(ctl: &mut Ctl<OnChip>, line: &str) -> String {
-    let mut r = Reply::<REPLY_LEN>::new();
-    match parse(line.as_bytes()) {
-        Ok(cmd) => ctl.execute(cmd, &mut r),
-        Err(e) => r.push_error(e),
-    }
-    r.as_str().to_string()
+    ctl.answer(line).as_str().to_string()
 }
 
 #[test]

@@ -11,15 +11,8 @@ mod control {
     pub const DAC_FULL: i32 = OnChip::DAC_FULL;
 }
 
-use piezo_core::command::{parse, Reply};
-
 fn ask(ctl: &mut control::Ctl, line: &str) -> String {
-    let mut r = Reply::<{ control::REPLY_LEN }>::new();
-    match parse(line.as_bytes()) {
-        Ok(c) => ctl.execute(c, &mut r),
-        Err(e) => r.push_error(e),
-    }
-    r.as_str().to_string()
+    ctl.answer(line).as_str().to_string()
 }
 
 #[test]

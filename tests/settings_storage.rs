@@ -3,10 +3,9 @@
 //! of saves leaves the old record or the new one, never a mix; damaged or stale records
 //! are refused and change nothing; a refused value changes no setting.
 
-use piezo_core::command::{parse, Error, Reply};
+use piezo_core::command::Error;
 use piezo_core::firmware::{
-    c, decode, encode, stored, Boot, Ctl, OnChip, RamNor, SettingsFlash, MAX_RECORD, REPLY_LEN,
-    SAMPLE_HZ,
+    c, decode, encode, stored, Boot, Ctl, OnChip, RamNor, SettingsFlash, MAX_RECORD, SAMPLE_HZ,
 };
 use proptest::prelude::*;
 
@@ -16,12 +15,7 @@ type Nor = RamNor<2048, 512, 32>;
 const RANGE: core::ops::Range<u32> = 0..2048;
 
 fn ask(ctl: &mut Ctl<OnChip>, line: &str) -> String {
-    let mut r = Reply::<REPLY_LEN>::new();
-    match parse(line.as_bytes()) {
-        Ok(cmd) => ctl.execute(cmd, &mut r),
-        Err(e) => r.push_error(e),
-    }
-    r.as_str().to_string()
+    ctl.answer(line).as_str().to_string()
 }
 
 /// A valid record whose every value depends on `i` (distinct records, all valid settings):

@@ -1,16 +1,10 @@
 //! One table of settings (issue 14 item 1): the firmware's `SETTINGS`, the protocol
 //! documentation's parameter table (`src/command.rs`), `help`'s list and `get` agree. A
 //! setting added, renamed or re-united in one place and not the others fails here.
-use piezo_core::command::{parse, Reply};
-use piezo_core::firmware::{c, Access, Ctl, OnChip, REPLY_LEN, SAMPLE_HZ, SETTINGS};
+use piezo_core::firmware::{c, Access, Ctl, OnChip, SAMPLE_HZ, SETTINGS};
 
 fn ask(ctl: &mut Ctl<OnChip>, line: &str) -> String {
-    let mut r = Reply::<REPLY_LEN>::new();
-    match parse(line.as_bytes()) {
-        Ok(cmd) => ctl.execute(cmd, &mut r),
-        Err(e) => r.push_error(e),
-    }
-    r.as_str().to_string()
+    ctl.answer(line).as_str().to_string()
 }
 
 #[test]

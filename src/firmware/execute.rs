@@ -4,7 +4,7 @@
 use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
-use super::target::{c, LoopPipeline, AXES, R, REC_CH, REC_N};
+use super::target::{c, LoopPipeline, AXES, R, REC_CH, REC_N, REPLY_LEN};
 use super::timing::Timing;
 use crate::command::{self, Command, Error, RecCmd, Shape, TriggerCmd};
 use crate::pipeline::{lissajous, raster, Parts, Wave};
@@ -21,6 +21,17 @@ impl<C: Converters> Ctl<C> {
             out.clear();
             out.push_error(e);
         }
+    }
+
+    /// Parses and runs one command line on this control state (no replica, no port): its
+    /// reply, or the parser's error as a reply. What host tests and tools ask with.
+    pub fn answer(&mut self, line: &str) -> command::Reply<REPLY_LEN> {
+        let mut r = command::Reply::new();
+        match command::parse(line.as_bytes()) {
+            Ok(cmd) => self.execute(cmd, &mut r),
+            Err(e) => r.push_error(e),
+        }
+        r
     }
 
     fn try_execute<const N: usize>(
