@@ -246,3 +246,18 @@ proptest! {
         }
     }
 }
+
+/// A non-finite value is refused when writing, as `decode` would refuse the record (the
+/// fuzz target `settings_record` found `encode` writing what `decode` then refused).
+#[test]
+fn encode_refuses_what_decode_would() {
+    let mut out = [0u8; MAX_RECORD];
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let values = stored()
+            .enumerate()
+            .map(|(i, n)| (n, if i == 3 { bad } else { 1.0 }));
+        assert_eq!(encode(values, &mut out), Err(Error::OutOfRange));
+    }
+    let n = encode(stored().map(|n| (n, 1.0)), &mut out).unwrap();
+    assert!(decode(&out[..n]).is_ok());
+}

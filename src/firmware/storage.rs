@@ -81,13 +81,17 @@ impl Record {
 }
 
 /// Writes the record of `values` ((name, value) pairs, at most [`MAX_SETTINGS`]) into
-/// `out`; returns its length.
+/// `out`; returns its length. A non-finite value is refused ([`Error::OutOfRange`]): it
+/// would write a record [`decode`] refuses (found by the `settings_record` fuzz target).
 pub fn encode<'a>(
     values: impl Iterator<Item = (&'a str, f32)>,
     out: &mut [u8; MAX_RECORD],
 ) -> Result<usize, Error> {
     let mut n = 0usize;
     for ((name, v), slot) in values.zip(out.chunks_exact_mut(ENTRY).skip(HEADER / ENTRY)) {
+        if !v.is_finite() {
+            return Err(Error::OutOfRange);
+        }
         let mut e = [0u8; ENTRY];
         let (k, x) = e.split_at_mut(4);
         k.copy_from_slice(&name_key(name).to_le_bytes());
