@@ -349,8 +349,9 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         a.limits = limits;
         a.safe_volts = safe_volts;
         self.clamp_code(axis);
-        // The fused step's guard proof covers the output range: decide again.
-        self.fused = self.fusable();
+        // The fused step's guard proof covers the output range: decide again (a restart
+        // still due keeps the generic path until it ran).
+        self.fused = !self.restart_due && self.fusable();
         Ok(())
     }
 
@@ -397,6 +398,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     }
 
     fn restart(&mut self) {
+        self.restart_due = false;
         let sp: [Setpoint<T>; N] = core::array::from_fn(|i| {
             self.reference
                 .get(i)
@@ -442,7 +444,6 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     #[inline]
     pub fn step_generic(&mut self, adc: [i32; N]) -> [i32; N] {
         if self.restart_due {
-            self.restart_due = false;
             self.restart();
         }
         let st = &mut self.state;

@@ -121,3 +121,42 @@ fn a_mode_over_budget_is_refused_and_changes_nothing() {
         assert_eq!(live.lp.step([mid]), twin.lp.step([mid]));
     }
 }
+
+/// Two commands inside one control period: a mode change (its restart waits for the next
+/// step) and then a limit change (no restart of its own). The step after them still runs
+/// the restart, as the direct executor did: the same codes and state.
+#[test]
+fn a_limit_change_after_a_mode_change_keeps_its_restart() {
+    let hz = c(SAMPLE_HZ as f64);
+    let mut a = Ctl::<OnChip>::new(hz);
+    let mut b = Ctl::<OnChip>::new(hz);
+    let mut cli = CommandLine::new(&b.lp);
+    let mut port = Lines::default();
+    let mid = 1i32 << (OnChip::ADC_BITS - 1);
+    let mut k = 0i32;
+    let mut steps = |a: &mut Ctl<OnChip>, b: &mut Ctl<OnChip>, n: usize| {
+        for _ in 0..n {
+            k += 1;
+            let code = [mid + (k * 37) % 900 - 450];
+            assert_eq!(a.lp.step(code), b.lp.step(code));
+        }
+    };
+    for burst in [
+        &["wave sine 5 100 10", "ff ims-cbw"][..],
+        &["mode ff+hgo-robust", "set u_max 140"],
+        &["mode pid", "set u_min 2"],
+        &["mode ff+hgo-robust", "set slew 30000", "set u_max 150"],
+        // In the fused main mode: a new compensator, then a limit.
+        &["ff ims-cbw", "set u_max 130"],
+        &["cbw 0.17 0.07 0.02 0.01", "set u_min 1"],
+    ] {
+        for line in burst {
+            direct(&mut a, line);
+            for byte in line.bytes().chain(Some(b'\n')) {
+                cli.byte(byte, &mut Exclusive(&mut b), &mut port);
+            }
+        }
+        steps(&mut a, &mut b, 300);
+        assert_eq!(a.lp.p.state(), b.lp.p.state(), "after {burst:?}");
+    }
+}

@@ -105,7 +105,8 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             // path while the flag is up) and decides the fused path again.
             self.restart_due = true;
             self.fused = false;
-        } else if parts.contains(Parts::LIMITS) {
+        } else if parts.contains(Parts::LIMITS) && !self.restart_due {
+            // A restart still due keeps the generic path until it ran.
             self.fused = self.fusable();
         }
     }
