@@ -79,6 +79,13 @@
 //! On a 2-axis (XY) board `mode`, `ff`, `set` (limits and model) and `wave off` act on every axis;
 //! `get` reads axis 0 (the axes are configured alike).
 //!
+//! Law and compensator names are the core's controller registry's ([`crate::registry`]),
+//! one spelling for the firmware, `piezo sim` and `piezo serial`
+//! (`hal-sim/tests/controller_names.rs` checks these lines against them):
+//!
+//! * `mode`: `open-loop` `pid` `ff+pid` `hgo-robust` `ff+hgo-robust` `fts` `ff+fts` `fts-gbw` `adrc` `ff+adrc` `nmpc` `ff+nmpc` `nmpc-gbw`
+//! * `ff`: `linear` `ims-cbw` `ims-cbw-delayed`
+//!
 //! Parameter, law and signal names are checked by whoever executes the command (the
 //! firmware), which answers [`Error::UnknownParam`], [`Error::UnknownMode`] or
 //! [`Error::UnknownSignal`].

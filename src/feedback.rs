@@ -33,6 +33,7 @@ pub use pid::{Pid, PidConfig};
 pub use robust::{Convergence, Robust, RobustConfig};
 
 use crate::real::Real;
+use crate::registry::{Family, Law, LawKind};
 use crate::signals::LoopSignals;
 
 /// The selectable feedback law. Its output is the voltage command (V) before the
@@ -96,44 +97,47 @@ impl<T: Real> Feedback<T> {
         g.restart();
     }
 
-    /// Short name for tables and logs; laws predicting with GBW (000 eq. 3) end in `-gbw`.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Feedback::OpenLoop => "open-loop",
-            Feedback::Pid(l) if l.config().feedforward => "ff+pid",
-            Feedback::Pid(_) => "pid",
+    /// The law in the controller registry ([`crate::registry`]).
+    pub fn law(&self) -> Law {
+        let gbw = |m: &ObserverModel<T>| match m {
+            ObserverModel::Gbw(_) => Family::Gbw,
+            _ => Family::Cbw,
+        };
+        let (kind, feedforward, family) = match self {
+            Feedback::OpenLoop => (LawKind::OpenLoop, false, Family::Cbw),
+            Feedback::Pid(l) => (LawKind::Pid, l.config().feedforward, Family::Cbw),
             Feedback::Robust(l) => {
-                let gbw = matches!(l.observer().model(), ObserverModel::Gbw(_));
-                match (l.config().convergence, l.config().feedforward, gbw) {
-                    (Convergence::Exponential, false, false) => "hgo-robust",
-                    (Convergence::Exponential, true, false) => "ff+hgo-robust",
-                    (Convergence::Exponential, false, true) => "hgo-robust-gbw",
-                    (Convergence::Exponential, true, true) => "ff+hgo-robust-gbw",
-                    (Convergence::FiniteTime { .. }, false, false) => "fts",
-                    (Convergence::FiniteTime { .. }, true, false) => "ff+fts",
-                    (Convergence::FiniteTime { .. }, false, true) => "fts-gbw",
-                    (Convergence::FiniteTime { .. }, true, true) => "ff+fts-gbw",
-                }
+                let kind = match l.config().convergence {
+                    Convergence::Exponential => LawKind::HgoRobust,
+                    Convergence::FiniteTime { .. } => LawKind::Fts,
+                };
+                (kind, l.config().feedforward, gbw(l.observer().model()))
             }
             Feedback::Adrc(l) => {
                 let c = l.config();
                 let known = c.a1 != T::ZERO || c.a2 != T::ZERO;
-                match (c.feedforward, known) {
-                    (false, false) => "adrc",
-                    (true, false) => "ff+adrc",
-                    (false, true) => "adrc-lin",
-                    (true, true) => "ff+adrc-lin",
-                }
+                let kind = if known {
+                    LawKind::AdrcLin
+                } else {
+                    LawKind::Adrc
+                };
+                (kind, c.feedforward, Family::Cbw)
             }
-            Feedback::Nmpc(l) => {
-                let gbw = matches!(l.observer().model(), ObserverModel::Gbw(_));
-                match (l.config().feedforward, gbw) {
-                    (false, false) => "nmpc",
-                    (true, false) => "ff+nmpc",
-                    (false, true) => "nmpc-gbw",
-                    (true, true) => "ff+nmpc-gbw",
-                }
-            }
+            Feedback::Nmpc(l) => (
+                LawKind::Nmpc,
+                l.config().feedforward,
+                gbw(l.observer().model()),
+            ),
+        };
+        Law {
+            kind,
+            feedforward,
+            family,
         }
+    }
+
+    /// Short name for tables and logs: the registry's ([`Law::name`]).
+    pub fn name(&self) -> &'static str {
+        self.law().name()
     }
 }

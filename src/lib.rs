@@ -22,6 +22,7 @@ pub mod manipulation;
 pub mod pipeline;
 pub mod real;
 pub mod recorder;
+pub mod registry;
 pub mod signals;
 
 pub use real::Real;

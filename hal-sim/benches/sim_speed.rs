@@ -3,7 +3,7 @@
 //! driver, the firmware pipeline, AD5791 driver + mock, and the default stage (`sine-10hz`:
 //! amplifier, hysteresis, creep, resonance, drift, noise, delay) at its default internal
 //! rate. Controllers: open loop, `hgo-robust` (the best feedback law on `sine-10hz`) and
-//! `ff-ims` (the solved IMS feedforward).
+//! `ims-cbw` (the solved IMS feedforward).
 //!
 //! `cargo bench -p hal-sim --bench sim_speed`; criterion's throughput is in loop samples
 //! per second, so real-time factor = samples/s / 100_000. The headline lines at the end
@@ -18,7 +18,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 const SAMPLES: u64 = 10_000; // 0.1 s simulated per iteration
-const CONTROLLERS: [&str; 3] = ["open-loop", "hgo-robust", "ff-ims"];
+const CONTROLLERS: [&str; 3] = ["open-loop", "hgo-robust", "ims-cbw"];
 
 fn bench_for(sc: &Scenario, controller: &str) -> Bench<1> {
     let lin = calibrate(sc).unwrap();

@@ -382,7 +382,12 @@ pub fn run(c: &Campaign, progress: &(dyn Fn(&str) + Sync)) -> Result<Report> {
     let linear = calibrate(&nominal)?;
     let entries: Vec<Entry> = registry()
         .into_iter()
-        .filter(|e| c.controllers.is_empty() || c.controllers.iter().any(|n| n == e.name))
+        .filter(|e| {
+            c.controllers.is_empty()
+                || c.controllers
+                    .iter()
+                    .any(|n| piezo_core::registry::canonical(n) == e.name)
+        })
         .collect();
     if entries.is_empty() {
         return Err(anyhow!(

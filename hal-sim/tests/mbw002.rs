@@ -1,6 +1,6 @@
 //! Seed 002 on a stage whose hysteresis is its MBW (`tests/feedforward-scenarios/
 //! mbw002-1hz.toml`): the ordering of its fits (RMSE of CBW > ABW > MBW, 002 table 2) on
-//! that stage's open-loop record, and `ff-mbw` with the MBW identified from it.
+//! that stage's open-loop record, and `mbw` with the MBW identified from it.
 
 use hal_sim::ident::fit::{fit_siso, models, FitOptions};
 use hal_sim::scenario::Scenario;
@@ -53,9 +53,9 @@ fn fits_order_as_in_002_and_ff_mbw_compensates() {
             .unwrap()
             .0
     };
-    let (ol, ff) = (run("open-loop"), run("ff-mbw"));
+    let (ol, ff) = (run("open-loop"), run("mbw"));
     eprintln!(
-        "open loop {:.3} %, ff-mbw {:.3} % of stroke",
+        "open loop {:.3} %, mbw {:.3} % of stroke",
         ol.rmse_pct, ff.rmse_pct
     );
     assert!(ff.rmse_pct < 0.7 * ol.rmse_pct, "{ff:?} vs {ol:?}");

@@ -4,33 +4,57 @@
 use super::params::Params;
 use super::target::{c, R};
 use crate::command::Error;
-use crate::feedback::{
-    hgo, Adrc, AdrcConfig, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, ObserverModel, Pid,
-    PidConfig, Robust, RobustConfig,
-};
+use crate::feedback::{Feedback, ObserverModel};
 use crate::feedforward::{Feedforward, Ims, ImsLoop};
+use crate::registry::{
+    AdrcGains, Family, FfKind, FtsGains, Law, LawKind, NmpcGains, PidGains, Tuning,
+};
 
-/// Names of the feedback laws `mode` accepts (the bench iterates over them); they are the
-/// laws' own [`Feedback::name`]s.
+/// The feedback laws `mode` accepts (the bench iterates over them), from the registry.
 /// The `-gbw` laws predict with [`Params::gbw_model`] (000 Part IV), the others with the CBW.
-pub const LAWS: [&str; 13] = [
-    "open-loop",
-    "pid",
-    "ff+pid",
-    "hgo-robust",
-    "ff+hgo-robust",
-    "fts",
-    "ff+fts",
-    "fts-gbw",
-    "adrc",
-    "ff+adrc",
-    "nmpc",
-    "ff+nmpc",
-    "nmpc-gbw",
-];
+pub const FIRMWARE_LAWS: [Law; 13] = {
+    use Family::{Cbw, Gbw};
+    use LawKind::*;
+    const fn l(kind: LawKind, feedforward: bool, family: Family) -> Law {
+        Law::new(kind, feedforward, family)
+    }
+    [
+        l(OpenLoop, false, Cbw),
+        l(Pid, false, Cbw),
+        l(Pid, true, Cbw),
+        l(HgoRobust, false, Cbw),
+        l(HgoRobust, true, Cbw),
+        l(Fts, false, Cbw),
+        l(Fts, true, Cbw),
+        l(Fts, false, Gbw),
+        l(Adrc, false, Cbw),
+        l(Adrc, true, Cbw),
+        l(Nmpc, false, Cbw),
+        l(Nmpc, true, Cbw),
+        l(Nmpc, false, Gbw),
+    ]
+};
 
-/// Names of the feedforward compensators `ff` accepts.
-pub const FFS: [&str; 3] = ["linear", "ims-cbw", "ims-cbw-delayed"];
+/// Names of [`FIRMWARE_LAWS`] (the registry's spelling).
+pub const LAWS: [&str; 13] = {
+    let mut n = [""; 13];
+    let mut i = 0;
+    while i < n.len() {
+        n[i] = FIRMWARE_LAWS[i].name();
+        i += 1;
+    }
+    n
+};
+
+/// The feedforward compensators `ff` accepts.
+pub const FIRMWARE_FFS: [FfKind; 3] = [FfKind::Linear, FfKind::ImsCbw, FfKind::ImsCbwDelayed];
+
+/// Names of [`FIRMWARE_FFS`].
+pub const FFS: [&str; 3] = [
+    FIRMWARE_FFS[0].name(),
+    FIRMWARE_FFS[1].name(),
+    FIRMWARE_FFS[2].name(),
+];
 
 /// Stage the laws are tuned for: CBW set 1 of the 000 backup slide, first-order linear part
 /// with pole [`STAGE_POLE_PER_S`], range 0..150 V.
@@ -58,94 +82,57 @@ pub fn law_by_name(name: &str, sample_hz: R) -> Option<Feedback<R>> {
     law_with(name, &Params::default(), sample_hz)
 }
 
-/// The feedback laws of the core, by name, with the model and gains of `p`.
-pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
-    let dt_s = c(1.0) / sample_hz;
-    let (ff, base) = match name.strip_prefix("ff+") {
-        Some(b) => (true, b),
-        None => (false, name),
-    };
-    // Only `fts-gbw` and `nmpc-gbw` of the GBW laws are in [`LAWS`].
-    let (gbw, base) = match base.strip_suffix("-gbw") {
-        Some(b @ ("fts" | "nmpc")) if !ff => (true, b),
-        Some(_) => return None,
-        None => (false, base),
-    };
-    let model = if gbw {
-        ObserverModel::Gbw(p.gbw_model()?)
-    } else {
-        ObserverModel::Cbw(p.model()?)
-    };
-    let hgo = || {
-        Hgo::new(
-            model,
-            c(STAGE_POLE_PER_S),
-            p.hgo_eps_s,
-            c(hgo::K1),
-            c(hgo::K2),
-            dt_s,
-        )
-        .ok()
-    };
-    let robust = |convergence| {
-        Robust::new(
-            hgo()?,
-            RobustConfig {
-                lambda1: p.lambda1,
-                lambda2: p.lambda2,
-                feedforward: ff,
-                convergence,
-            },
-        )
-        .ok()
-        .map(Feedback::Robust)
-    };
-    match base {
-        "open-loop" if !ff => Some(Feedback::OpenLoop),
-        "pid" => Pid::new(PidConfig {
+/// The firmware's gains for the laws: the [`Params`] where the user sets them, fixed
+/// choices for the rest (tuned on the stage of [`STAGE_POLE_PER_S`]).
+pub fn tuning(p: &Params) -> Tuning<R> {
+    let pole = c(STAGE_POLE_PER_S);
+    Tuning {
+        pole_per_s: pole,
+        hgo_eps_s: p.hgo_eps_s,
+        lambda1: p.lambda1,
+        lambda2: p.lambda2,
+        fts: FtsGains {
+            lambda1: p.lambda1,
+            lambda2: p.lambda2,
+            alpha1: c(0.8),
+            alpha2: c(0.8),
+            sat_um_per_s: c(1e4),
+        },
+        pid: PidGains {
             kp: p.pid_kp,
             ki: p.pid_ki,
             kd: c(0.0),
             tf_s: c(1e-4),
             kb: c(1.0),
-            feedforward: ff,
-            dt_s,
-        })
-        .ok()
-        .map(Feedback::Pid),
-        "hgo-robust" => robust(Convergence::Exponential),
-        "fts" => robust(Convergence::FiniteTime {
-            alpha1: c(0.8),
-            alpha2: c(0.8),
-            sat_um_per_s: c(1e4),
-        }),
-        "adrc" => Adrc::new(AdrcConfig {
-            // Plain ADRC: the ESO estimates the whole linear part.
+        },
+        // Plain ADRC: the ESO estimates the whole linear part (a1 = a2 = 0).
+        adrc: AdrcGains {
+            b: c(0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S),
             a1: c(0.0),
             a2: c(0.0),
-            b: c(0.16 * STAGE_POLE_PER_S * STAGE_POLE_PER_S),
             eps_s: c(2e-4),
             omega_c: c(2_000.0),
-            feedforward: ff,
-            dt_s,
-        })
-        .ok()
-        .map(Feedback::Adrc),
-        "nmpc" => Nmpc::new(
-            hgo()?,
-            NmpcConfig {
-                decimation: 10,
-                r: c(1e-3),
-                iterations: 2,
-                u_min: c(0.0),
-                u_max: c(150.0),
-                feedforward: ff,
-            },
-        )
-        .ok()
-        .map(Feedback::Nmpc),
-        _ => None,
+        },
+        nmpc: NmpcGains {
+            decimation: 10,
+            r: c(1e-3),
+            iterations: 2,
+            u_min: c(0.0),
+            u_max: c(150.0),
+            hgo_eps_s: p.hgo_eps_s,
+        },
     }
+}
+
+/// The feedback laws of [`LAWS`], by name, with the model and gains of `p`.
+pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
+    let law = *FIRMWARE_LAWS.iter().find(|l| l.name() == name)?;
+    let model = match law.family {
+        Family::Cbw => ObserverModel::Cbw(p.model()?),
+        Family::Gbw => ObserverModel::Gbw(p.gbw_model()?),
+    };
+    let model = Some(model);
+    law.build(model, &tuning(p), c(1.0) / sample_hz).ok()
 }
 
 /// The feedforward compensators, by name, with the default [`Params`] (host tests).
@@ -162,10 +149,10 @@ pub fn ff_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedforward<R>> {
             .ok()
             .map(Feedforward::ImsCbw)
     };
-    match name {
-        "linear" => Some(Feedforward::Linear(p.linear())),
-        "ims-cbw" => ims(ImsLoop::Solved),
-        "ims-cbw-delayed" => ims(ImsLoop::Delayed),
+    match *FIRMWARE_FFS.iter().find(|f| f.name() == name)? {
+        FfKind::Linear => Some(Feedforward::Linear(p.linear())),
+        FfKind::ImsCbw => ims(ImsLoop::Solved),
+        FfKind::ImsCbwDelayed => ims(ImsLoop::Delayed),
         _ => None,
     }
 }

@@ -111,7 +111,7 @@ pub fn select_controllers(names: &[String]) -> Result<Vec<Entry>> {
     names
         .iter()
         .map(|n| {
-            all.iter().find(|e| e.name == n).copied().ok_or_else(|| {
+            crate::sim::controllers::find(n).ok_or_else(|| {
                 let known: Vec<_> = all.iter().map(|e| e.name).collect();
                 anyhow::anyhow!("--controller {n}: unknown (known: {})", known.join(", "))
             })

@@ -12,10 +12,12 @@ pub mod models;
 
 use super::StageInfo;
 use anyhow::Result;
-use models::Family;
 use piezo_core::feedback::Feedback;
 use piezo_core::feedforward::{Feedforward, LinearFf, MultiFeedforward};
 use piezo_core::pipeline::Mode;
+use piezo_core::registry::{self, Family as RegFamily, Law, LawKind};
+use LawKind::*;
+use RegFamily::{Cbw, Gbw};
 
 /// The number type of the simulated firmware (the firmware's own).
 pub type R = f32;
@@ -48,7 +50,7 @@ pub struct Entry {
 pub fn registry() -> Vec<Entry> {
     let mut v = vec![
         Entry {
-            name: "open-loop",
+            name: law(OpenLoop, false, Cbw),
             about: "linear scaling of the reference (calibrated gain and offset), no model, no feedback",
             one_axis: open_loop::<1>,
             two_axis: Some(open_loop::<2>),
@@ -56,79 +58,89 @@ pub fn registry() -> Vec<Entry> {
         // FEEDFORWARD and FEEDBACK: add entries here.
         // FEEDBACK (000 Part III-IV laws, builders in `fb` below):
         Entry {
-            name: "pid",
+            name: law(Pid, false, Cbw),
             about: "PI on the position error, back-calculation anti-windup from the applied voltage, notch on the resonance",
-            one_axis: |s| fb::pid::<1>(s, false),
-            two_axis: Some(|s| fb::pid::<2>(s, false)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Pid, false, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Pid, false, Cbw))),
         },
         Entry {
-            name: "ff+pid",
+            name: law(Pid, true, Cbw),
             about: "linear feedforward + the same PI",
-            one_axis: |s| fb::pid::<1>(s, true),
-            two_axis: Some(|s| fb::pid::<2>(s, true)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Pid, true, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Pid, true, Cbw))),
         },
         Entry {
-            name: "hgo-robust",
+            name: law(HgoRobust, false, Cbw),
             about: "HGO (000 eq. 6) + robust virtual-hysteresis law (000 eq. 7-8), notch",
-            one_axis: |s| fb::robust::<1>(s, false, false),
-            two_axis: Some(|s| fb::robust::<2>(s, false, false)),
+            one_axis: |s| fb::build::<1>(s, Law::new(HgoRobust, false, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(HgoRobust, false, Cbw))),
         },
         Entry {
-            name: "ff+hgo-robust",
+            name: law(HgoRobust, true, Cbw),
             about: "linear feedforward + HGO robust law (feedforward increments replace the law's own)",
-            one_axis: |s| fb::robust::<1>(s, true, false),
-            two_axis: Some(|s| fb::robust::<2>(s, true, false)),
+            one_axis: |s| fb::build::<1>(s, Law::new(HgoRobust, true, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(HgoRobust, true, Cbw))),
         },
         Entry {
-            name: "fts",
+            name: law(Fts, false, Cbw),
             about: "HGO + finite-time virtual-hysteresis law (000 Part IV), CBW prediction model",
-            one_axis: |s| fb::robust::<1>(s, false, true),
-            two_axis: Some(|s| fb::robust::<2>(s, false, true)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Fts, false, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Fts, false, Cbw))),
         },
         Entry {
-            name: "fts-gbw",
+            name: law(Fts, false, Gbw),
             about: "the finite-time law with the GBW (000 eq. 3) as observer and law model",
-            one_axis: |s| fb::robust_with::<1>(s, false, true, Family::Gbw),
-            two_axis: Some(|s| fb::robust_with::<2>(s, false, true, Family::Gbw)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Fts, false, Gbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Fts, false, Gbw))),
         },
         Entry {
-            name: "adrc",
+            name: law(Adrc, false, Cbw),
             about: "extended-state observer + ADRC as 000 eq. 10-11 (Delta holds the whole linear part; measured y in the law)",
-            one_axis: |s| fb::adrc::<1>(s, false, false),
-            two_axis: Some(|s| fb::adrc::<2>(s, false, false)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Adrc, false, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Adrc, false, Cbw))),
         },
         Entry {
-            name: "ff+adrc",
+            name: law(Adrc, true, Cbw),
             about: "linear feedforward + the same ESO/ADRC on what it leaves",
-            one_axis: |s| fb::adrc::<1>(s, true, false),
-            two_axis: Some(|s| fb::adrc::<2>(s, true, false)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Adrc, true, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Adrc, true, Cbw))),
         },
         Entry {
-            name: "adrc-lin",
+            name: law(AdrcLin, false, Cbw),
             about: "ESO/ADRC with the structure's a1, a2 known: the ESO estimates only -b0 h + delta_y",
-            one_axis: |s| fb::adrc::<1>(s, false, true),
-            two_axis: Some(|s| fb::adrc::<2>(s, false, true)),
+            one_axis: |s| fb::build::<1>(s, Law::new(AdrcLin, false, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(AdrcLin, false, Cbw))),
         },
         Entry {
-            name: "nmpc",
+            name: law(Nmpc, false, Cbw),
             about: "HGO + NMPC with a CBW prediction model (000 Part IV), 10 kHz, horizon 8",
-            one_axis: |s| fb::nmpc::<1>(s, false, Family::Cbw),
-            two_axis: Some(|s| fb::nmpc::<2>(s, false, Family::Cbw)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Nmpc, false, Cbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Nmpc, false, Cbw))),
         },
         Entry {
-            name: "nmpc-gbw",
+            name: law(Nmpc, false, Gbw),
             about: "HGO + NMPC with the GBW (000 eq. 3) as prediction model, as 000 Part IV",
-            one_axis: |s| fb::nmpc::<1>(s, false, Family::Gbw),
-            two_axis: Some(|s| fb::nmpc::<2>(s, false, Family::Gbw)),
+            one_axis: |s| fb::build::<1>(s, Law::new(Nmpc, false, Gbw)),
+            two_axis: Some(|s| fb::build::<2>(s, Law::new(Nmpc, false, Gbw))),
         },
     ];
     v.extend(feedforward::entries());
     v
 }
 
-/// Looks a controller up by name.
+/// A law's name in the core's registry ([`piezo_core::registry`]).
+const fn law(kind: LawKind, feedforward: bool, family: RegFamily) -> &'static str {
+    Law::new(kind, feedforward, family).name()
+}
+
+/// Looks a controller up by its registry name, or by a name `piezo sim` used before the
+/// registry (with a note on stderr; accepted for one release).
 pub fn find(name: &str) -> Option<Entry> {
-    registry().into_iter().find(|e| e.name == name)
+    let canonical = registry::canonical(name);
+    if canonical != name {
+        eprintln!("note: controller {name} is now called {canonical} (the old name goes in the next release)");
+    }
+    registry().into_iter().find(|e| e.name == canonical)
 }
 
 /// The linear feedforward of the calibrated stage, per axis.
@@ -155,17 +167,15 @@ pub fn open_loop<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
 /// delay, sensor noise); the constants below were chosen on `sine-10hz` at 30 um amplitude
 /// (see the FEEDBACK report) and are the same for every scenario.
 pub mod fb {
-    use super::models::{prediction, Family};
+    use super::models::prediction;
     use super::{linear_ff, Controller, R};
     use crate::sim::StageInfo;
     use anyhow::{anyhow, Result};
-    use piezo_core::feedback::{
-        Adrc, AdrcConfig, Biquad, Convergence, Feedback, Hgo, Nmpc, NmpcConfig, Pid, PidConfig,
-        Robust, RobustConfig,
-    };
+    use piezo_core::feedback::{Biquad, Feedback, Hgo, ObserverModel};
     use piezo_core::feedforward::MultiFeedforward;
     use piezo_core::hysteresis::ParamError;
     use piezo_core::pipeline::Mode;
+    use piezo_core::registry::{AdrcGains, FtsGains, Law, LawKind, NmpcGains, PidGains, Tuning};
     use std::f64::consts::PI;
 
     /// Allowed RMS of the HGO's `h_hat` from sensor noise (um): with the default 5 nm sensor
@@ -236,143 +246,85 @@ pub mod fb {
         1.0 / s.loop_hz()
     }
 
-    /// The HGO on the `family` prediction model ([`prediction`]) with `eps` from the sensor
-    /// noise ([`Hgo::epsilon_for`]) and the budget of `h_hat` noise (um).
-    pub fn hgo(s: &StageInfo, budget_um: f64, family: Family) -> Result<Hgo<R>> {
-        let m = prediction(s, family)?;
-        let a = pole(s) as R;
-        let eps =
-            Hgo::epsilon_for(m, a, dt(s) as R, noise_um(s) as R, budget_um as R).map_err(perr)?;
-        Hgo::with_eps(m, a, eps, dt(s) as R).map_err(perr)
-    }
-
-    /// PI(D): integral action with crossover 250 Hz on the calibrated gain (the stage is
-    /// quasi-static below its resonance), proportional zero on the lag pole.
-    pub fn pid<const N: usize>(s: &StageInfo, feedforward: bool) -> Result<Controller<N>> {
-        let wc = 2.0 * PI * 250.0;
-        let ki = wc / s.linear.um_per_volt;
-        let law = Pid::new(PidConfig {
-            kp: (ki / pole(s)) as R,
-            ki: ki as R,
-            kd: 0.0,
-            tf_s: 1e-4,
-            kb: 1.0,
-            feedforward,
-            dt_s: dt(s) as R,
-        })
-        .map_err(perr)?;
-        wrap(s, Feedback::Pid(law))
-    }
-
-    /// HGO + robust law (000 eq. 6-8) on CBW; `finite_time`: the finite-time variant
-    /// (000 Part IV).
-    pub fn robust<const N: usize>(
-        s: &StageInfo,
-        feedforward: bool,
-        finite_time: bool,
-    ) -> Result<Controller<N>> {
-        robust_with(s, feedforward, finite_time, Family::Cbw)
-    }
-
-    /// [`robust`] with the prediction model of `family`.
-    pub fn robust_with<const N: usize>(
-        s: &StageInfo,
-        feedforward: bool,
-        finite_time: bool,
-        family: Family,
-    ) -> Result<Controller<N>> {
-        let plain = !feedforward && !finite_time;
+    /// The gains of `law` for the stage `s` as the registry's [`Tuning`]; `model` is the
+    /// law's prediction model (the HGO's `eps` follows from it and the sensor noise).
+    pub fn tuning(s: &StageInfo, law: Law, model: Option<&ObserverModel<R>>) -> Result<Tuning<R>> {
+        let a = pole(s);
+        let plain = law.kind == LawKind::HgoRobust && !law.feedforward;
         let (l1_hz, budget) = if plain {
             (PLAIN_LAMBDA1_HZ, PLAIN_H_NOISE_BUDGET_UM)
         } else {
             (LAMBDA1_HZ, H_NOISE_BUDGET_UM)
         };
         let (l1, l2) = (2.0 * PI * l1_hz, 2.0 * PI * LAMBDA2_HZ);
-        let (lambda1, lambda2, convergence) = if finite_time {
-            // k sig(e)^0.8: the same rate as the exponential law at ~0.03 um error.
-            (
-                0.3 * l1,
-                l2,
-                Convergence::FiniteTime {
-                    alpha1: 0.8,
-                    alpha2: 0.8,
-                    sat_um_per_s: 1e5,
-                },
-            )
-        } else {
-            (l1, l2, Convergence::Exponential)
+        let hgo_eps_s = match model {
+            Some(m) => Hgo::epsilon_for(*m, a as R, dt(s) as R, noise_um(s) as R, budget as R)
+                .map_err(perr)?,
+            None => 0.0,
         };
-        let law = Robust::new(
-            hgo(s, budget, family)?,
-            RobustConfig {
-                lambda1: lambda1 as R,
-                lambda2: lambda2 as R,
-                feedforward,
-                convergence,
-            },
-        )
-        .map_err(perr)?;
-        wrap(s, Feedback::Robust(law))
-    }
-
-    /// ESO + ADRC (000 eq. 10-11) with the input gain `b = b0 d_p` of the structure's
-    /// second-order model. `known_structure: false` is the seed's ESO, whose extended state
-    /// `Delta` holds the whole `-a1 y' - a2 y - b0 h + delta_y`; `true` gives the ESO the
-    /// structure's `a1, a2`, so that it estimates only `-b0 h + delta_y` (without feedforward
-    /// that tracks 5x better at 10 Hz, see the README).
-    pub fn adrc<const N: usize>(
-        s: &StageInfo,
-        feedforward: bool,
-        known_structure: bool,
-    ) -> Result<Controller<N>> {
+        // PI(D): integral action with crossover 250 Hz on the calibrated gain (the stage is
+        // quasi-static below its resonance), proportional zero on the lag pole.
+        let ki = 2.0 * PI * 250.0 / s.linear.um_per_volt;
+        // ESO + ADRC (000 eq. 10-11) with the input gain `b = b0 d_p` of the structure's
+        // second-order model; `adrc-lin` also gets its `a1, a2`, so that the ESO estimates
+        // only `-b0 h + delta_y` (without feedforward that tracks 5x better at 10 Hz).
         let r = &s.scenario.stage.resonance;
         let (w2, a1) = if r.enabled {
             let w = 2.0 * PI * r.freq_hz;
             (w * w, 2.0 * r.zeta * w)
         } else {
-            (pole(s).powi(2), 2.0 * pole(s))
+            (a * a, 2.0 * a)
         };
-        let (a1, a2) = if known_structure {
-            (a1, w2)
-        } else {
-            (0.0, 0.0)
-        };
-        let law = Adrc::new(AdrcConfig {
-            b: (s.linear.um_per_volt * w2) as R,
-            a1: a1 as R,
-            a2: a2 as R,
-            eps_s: 2e-5,
-            omega_c: (2.0 * PI * 600.0) as R,
-            feedforward,
-            dt_s: dt(s) as R,
-        })
-        .map_err(perr)?;
-        wrap(s, Feedback::Adrc(law))
-    }
-
-    /// HGO + NMPC at a tenth of the loop rate, horizon 8 moves (0.8 ms at 100 kHz).
-    pub fn nmpc<const N: usize>(
-        s: &StageInfo,
-        feedforward: bool,
-        family: Family,
-    ) -> Result<Controller<N>> {
         let (lo, hi) = s.volts_range();
-        let m = prediction(s, family)?;
-        // The prediction holds each move for 10 samples: a slower observer (eps 100 us) keeps
-        // its noise out of the plan.
-        let hgo = Hgo::with_eps(m, pole(s) as R, 1e-4, dt(s) as R).map_err(perr)?;
-        let law = Nmpc::new(
-            hgo,
-            NmpcConfig {
+        Ok(Tuning {
+            pole_per_s: a as R,
+            hgo_eps_s,
+            lambda1: l1 as R,
+            lambda2: l2 as R,
+            // k sig(e)^0.8: the same rate as the exponential law at ~0.03 um error.
+            fts: FtsGains {
+                lambda1: (0.3 * l1) as R,
+                lambda2: l2 as R,
+                alpha1: 0.8,
+                alpha2: 0.8,
+                sat_um_per_s: 1e5,
+            },
+            pid: PidGains {
+                kp: (ki / a) as R,
+                ki: ki as R,
+                kd: 0.0,
+                tf_s: 1e-4,
+                kb: 1.0,
+            },
+            adrc: AdrcGains {
+                b: (s.linear.um_per_volt * w2) as R,
+                a1: a1 as R,
+                a2: w2 as R,
+                eps_s: 2e-5,
+                omega_c: (2.0 * PI * 600.0) as R,
+            },
+            // NMPC at a tenth of the loop rate, horizon 8 moves (0.8 ms at 100 kHz); the
+            // prediction holds each move for 10 samples: a slower observer (eps 100 us)
+            // keeps its noise out of the plan.
+            nmpc: NmpcGains {
                 decimation: 10,
                 r: 1.0,
                 iterations: 2,
                 u_min: lo as R,
                 u_max: hi as R,
-                feedforward,
+                hgo_eps_s: 1e-4,
             },
-        )
-        .map_err(perr)?;
-        wrap(s, Feedback::Nmpc(law))
+        })
+    }
+
+    /// The registry's `law` for the stage `s`: its prediction model where it has an
+    /// observer, [`tuning`], the notch on the resonance, the linear feedforward.
+    pub fn build<const N: usize>(s: &StageInfo, law: Law) -> Result<Controller<N>> {
+        let model = match law.kind {
+            LawKind::HgoRobust | LawKind::Fts | LawKind::Nmpc => Some(prediction(s, law.family)?),
+            _ => None,
+        };
+        let t = tuning(s, law, model.as_ref())?;
+        wrap(s, law.build(model, &t, dt(s) as R).map_err(perr)?)
     }
 }

@@ -3,7 +3,7 @@
 //! (or 20 % off them), pipeline in `Mode::Feedforward`, no feedback.
 //!
 //! Only the IMS entries share the stage's model structure (hysteresis family, static
-//! quadratic, creep, coupling); `ff-mbw` runs the MBW identified from the stage's
+//! quadratic, creep, coupling); `mbw` runs the MBW identified from the stage's
 //! open-loop record; the others are built by mapping the stage's parameters into their own
 //! model (documented per builder), i.e. they run with a structure mismatch.
 
@@ -16,6 +16,7 @@ use piezo_core::feedback::Feedback;
 use piezo_core::feedforward::*;
 use piezo_core::hysteresis::*;
 use piezo_core::pipeline::Mode;
+use piezo_core::registry::FfKind;
 
 /// Scale of the compensator's model parameters against the stage's.
 const NOMINAL: f64 = 1.0;
@@ -28,9 +29,9 @@ fn e(err: ParamError) -> anyhow::Error {
 /// The feedforward entries.
 pub fn entries() -> Vec<Entry> {
     macro_rules! entry {
-        ($name:expr, $about:expr, $f:ident) => {
+        ($kind:ident, $about:expr, $f:ident) => {
             Entry {
-                name: $name,
+                name: FfKind::$kind.name(),
                 about: $about,
                 one_axis: $f::<1>,
                 two_axis: Some($f::<2>),
@@ -38,16 +39,16 @@ pub fn entries() -> Vec<Entry> {
         };
     }
     vec![
-        entry!("ff-ims", "IMS u=(y+h(u))/d, algebraic loop solved; stage model + quadratic + creep + decoupler", ims_solved),
-        entry!("ff-ims-delayed", "IMS with the one-sample-delayed h (004 §4.4); same model", ims_delayed),
-        entry!("ff-ims-off20", "ff-ims with every hysteresis/creep/coupling parameter +20 % (d from calibration)", ims_off20),
-        entry!("ff-ims-bare", "IMS on the hysteresis model only (no quadratic, creep, decoupler)", ims_bare),
-        entry!("ff-mbw", "002 feedforward without inversion (eq. 8-12, k_p = 1), MBW identified by piezo fit from the open-loop record", mbw_no_inverse),
-        entry!("ff-wpmbw", "004 direct WPMBW inverse + inverse resonance + prefilter; MBW mapped from the CBW loop", wpmbw),
-        entry!("ff-pi", "exact PI inverse; PI fitted to the stage's major loop (Masing)", pi_inverse),
-        entry!("ff-ppi", "PPI inverse by bounded solve; same fit, c1 = 0", ppi),
-        entry!("ff-dpi", "exact DPI inverse; same fit, one dead zone at 0", dpi),
-        entry!("ff-multi-ims", "multivariable IMS U = D^-1(y+h) (003 eq. 16) with D, A, B, Gamma = C*diag(.)", multi_ims),
+        entry!(ImsCbw, "IMS u=(y+h(u))/d, algebraic loop solved; stage model + quadratic + creep + decoupler", ims_solved),
+        entry!(ImsCbwDelayed, "IMS with the one-sample-delayed h (004 §4.4); same model", ims_delayed),
+        entry!(ImsCbwOff20, "ims-cbw with every hysteresis/creep/coupling parameter +20 % (d from calibration)", ims_off20),
+        entry!(ImsCbwBare, "IMS on the hysteresis model only (no quadratic, creep, decoupler)", ims_bare),
+        entry!(Mbw, "002 feedforward without inversion (eq. 8-12, k_p = 1), MBW identified by piezo fit from the open-loop record", mbw_no_inverse),
+        entry!(Wpmbw, "004 direct WPMBW inverse + inverse resonance + prefilter; MBW mapped from the CBW loop", wpmbw),
+        entry!(PiInverse, "exact PI inverse; PI fitted to the stage's major loop (Masing)", pi_inverse),
+        entry!(PpiInverse, "PPI inverse by bounded solve; same fit, c1 = 0", ppi),
+        entry!(DpiInverse, "exact DPI inverse; same fit, one dead zone at 0", dpi),
+        entry!(MultiIms, "multivariable IMS U = D^-1(y+h) (003 eq. 16) with D, A, B, Gamma = C*diag(.)", multi_ims),
     ]
 }
 

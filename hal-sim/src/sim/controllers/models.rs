@@ -21,12 +21,8 @@ use std::sync::Mutex;
 
 use super::R;
 
-/// Hysteresis family of a law's prediction model.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Family {
-    Cbw,
-    Gbw,
-}
+/// Hysteresis family of a law's prediction model (the registry's).
+pub use piezo_core::registry::Family;
 
 fn perr(p: ParamError) -> anyhow::Error {
     anyhow!("{p}")
