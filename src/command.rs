@@ -48,26 +48,26 @@
 //! Parameters (the firmware's `help` lists them; one table in the firmware,
 //! [`crate::firmware::SETTINGS`], which `tests/settings_table.rs` checks this one against):
 //!
-//! | name | unit | sets | access |
-//! |---|---|---|---|
-//! | `u_min` | V | lowest output voltage | limit |
-//! | `u_max` | V | highest output voltage (at most 150) | limit |
-//! | `slew` | V/s | output slew-rate limit | limit |
-//! | `um_per_code` | um | position per ADC code | read-only |
-//! | `volts_per_code` | V | output voltage per DAC code | read-only |
-//! | `sample_hz` | Hz | control rate | read-only |
-//! | `cbw_d` | um/V | CBW piezo gain d (000 eq. 1) | model |
-//! | `cbw_alpha` | um/V | CBW alpha (000 eq. 2) | model |
-//! | `cbw_beta` | 1/V | CBW beta | model |
-//! | `cbw_gamma` | 1/V | CBW gamma | model |
-//! | `gbw_b` | 1/V | GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3) | model |
-//! | `um_per_volt` | um/V | open-loop scaling | model |
-//! | `offset_um` | um | open-loop offset | model |
-//! | `hgo_eps` | s | HGO epsilon (000 eq. 6) | model |
-//! | `lambda1` | 1/s | robust law gain (000 eq. 7) | model |
-//! | `lambda2` | 1/s | robust law gain (000 eq. 7) | model |
-//! | `pid_kp` | V/um | PID proportional gain | model |
-//! | `pid_ki` | V/(um s) | PID integral gain | model |
+//! | name | unit | sets | access | default | range (`set`) |
+//! |---|---|---|---|---|---|
+//! | `u_min` | V | lowest output voltage | limit | 0 | 0 .. 150 |
+//! | `u_max` | V | highest output voltage (at most 150) | limit | 150 | 0 .. 150 |
+//! | `slew` | V/s | output slew-rate limit | limit | 20000 | 0.001 .. 1000000000 |
+//! | `um_per_code` | um | position per ADC code | read-only | board | - |
+//! | `volts_per_code` | V | output voltage per DAC code | read-only | board | - |
+//! | `sample_hz` | Hz | control rate | read-only | board | - |
+//! | `cbw_d` | um/V | CBW piezo gain d (000 eq. 1) | model | 0.16 | 0.000001 .. 1000 |
+//! | `cbw_alpha` | um/V | CBW alpha (000 eq. 2) | model | 0.07 | -1000 .. 1000 |
+//! | `cbw_beta` | 1/V | CBW beta | model | 0.02 | -1000 .. 1000 |
+//! | `cbw_gamma` | 1/V | CBW gamma | model | 0.01 | -1000 .. 1000 |
+//! | `gbw_b` | 1/V | GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3) | model | 0 | -1000 .. 1000 |
+//! | `um_per_volt` | um/V | open-loop scaling | model | 0.16 | -1000 .. 1000 |
+//! | `offset_um` | um | open-loop offset | model | 0 | -10000 .. 10000 |
+//! | `hgo_eps` | s | HGO epsilon (000 eq. 6) | model | 0.0002 | 0.0000001 .. 1 |
+//! | `lambda1` | 1/s | robust law gain (000 eq. 7) | model | 2000 | 0 .. 10000000 |
+//! | `lambda2` | 1/s | robust law gain (000 eq. 7) | model | 2000 | 0 .. 10000000 |
+//! | `pid_kp` | V/um | PID proportional gain | model | 0.5 | 0 .. 10000 |
+//! | `pid_ki` | V/(um s) | PID integral gain | model | 2000 | 0 .. 100000000 |
 //!
 //! The CBW (n = 1) is the one `piezo fit --model cbw` identifies; `gbw_b` tilts its loop
 //! (`set gbw_b` refuses `|B| >= cbw_beta + cbw_gamma`). A model or gain `set` is

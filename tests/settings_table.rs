@@ -18,7 +18,7 @@ fn the_protocol_doc_help_and_get_follow_the_settings_table() {
                 .map(|c| c.trim().trim_matches('`').to_string())
                 .collect()
         })
-        .filter(|r: &Vec<String>| r.len() == 5 && SETTINGS.iter().any(|s| s.name == r[0]))
+        .filter(|r: &Vec<String>| r.len() == 7 && SETTINGS.iter().any(|s| s.name == r[0]))
         .collect();
     let access = |a: Access| match a {
         Access::Limit => "limit",
@@ -28,15 +28,33 @@ fn the_protocol_doc_help_and_get_follow_the_settings_table() {
     let want: Vec<Vec<String>> = SETTINGS
         .iter()
         .map(|s| {
-            vec![s.name, s.unit, s.about, access(s.access), ""]
-                .into_iter()
-                .map(String::from)
-                .collect()
+            let (default, range) = match s.access {
+                Access::ReadOnly => ("board".to_string(), "-".to_string()),
+                _ => (format!("{}", s.default), format!("{} .. {}", s.min, s.max)),
+            };
+            vec![
+                s.name.into(),
+                s.unit.into(),
+                s.about.into(),
+                access(s.access).into(),
+                default,
+                range,
+                String::new(),
+            ]
+        })
+        .collect();
+    let table: String = want
+        .iter()
+        .map(|r| {
+            format!(
+                "//! | `{}` | {} | {} | {} | {} | {} |\n",
+                r[0], r[1], r[2], r[3], r[4], r[5]
+            )
         })
         .collect();
     assert_eq!(
         rows, want,
-        "src/command.rs's parameter table differs from SETTINGS"
+        "src/command.rs's parameter table differs from SETTINGS; it should read:\n{table}"
     );
     let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
     let help = ask(&mut ctl, "help");
@@ -51,6 +69,20 @@ fn the_protocol_doc_help_and_get_follow_the_settings_table() {
     for s in SETTINGS {
         let r = ask(&mut ctl, &format!("get {}", s.name));
         assert!(r.starts_with(&format!("ok {} ", s.name)), "{r}");
+        if s.access != Access::ReadOnly {
+            // Beyond the table's range: refused before anything else looks at it.
+            let beyond = if s.max > 0.0 {
+                s.max * 2.0
+            } else {
+                s.max + 1.0
+            };
+            assert_eq!(
+                ask(&mut ctl, &format!("set {} {beyond}", s.name)),
+                "err 8 value out of range",
+                "{}",
+                s.name
+            );
+        }
         if s.access == Access::ReadOnly {
             assert_eq!(
                 ask(&mut ctl, &format!("set {} 1", s.name)),

@@ -664,7 +664,7 @@ fn param(listing: &str, name: &str) -> f64 {
 #[test]
 fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
     let addr = spawn_firmware();
-    let before = run(&addr, Action::Params).unwrap();
+    let before = run(&addr, params()).unwrap();
     assert_eq!(param(&before, "cbw_d"), 0.16, "{before}");
     assert_eq!(param(&before, "u_max"), 150.0);
     assert_eq!(param(&before, "pid_ki"), 2000.0);
@@ -694,7 +694,7 @@ fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
     let out = run(&addr, Action::LoadFit { fit: good.clone() }).unwrap();
     assert!(out.contains("ok cbw 0.21 0.06 0.005 0.002"), "{out}");
     assert!(out.contains("offset -0.5 um is not sent"), "{out}");
-    let after = run(&addr, Action::Params).unwrap();
+    let after = run(&addr, params()).unwrap();
     for (k, v) in [
         ("cbw_d", 0.21),
         ("cbw_alpha", 0.06),
@@ -729,7 +729,7 @@ fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
     assert!(msg.contains(&refused.display().to_string()), "{msg}");
     assert!(msg.contains("refused the CBW model of parts[0]"), "{msg}");
     assert!(msg.contains("error 8"), "{msg}");
-    let still = run(&addr, Action::Params).unwrap();
+    let still = run(&addr, params()).unwrap();
     assert!((param(&still, "cbw_d") - 0.21).abs() < 1e-6, "{still}");
 
     // Reports without a CBW fit or with a key missing: named, nothing sent.
@@ -757,4 +757,70 @@ fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
         msg.contains("cannot read") && msg.contains("fit-missing.json"),
         "{msg}"
     );
+}
+
+fn set(addr: &str, name: &str, v: f32) {
+    let mut c = connect(&conn(addr)).unwrap();
+    c.send(&piezo_core::command::Command::Set(name, v)).unwrap();
+}
+
+fn params() -> Action {
+    Action::Params {
+        save: None,
+        restore: None,
+    }
+}
+
+#[test]
+fn params_save_and_restore_round_trip_and_a_bad_file_sends_nothing() {
+    let addr = spawn_firmware();
+    let file = tmp("params-saved.csv");
+    let listing = run(
+        &addr,
+        Action::Params {
+            save: Some(file.clone()),
+            restore: None,
+        },
+    )
+    .unwrap();
+    assert!(listing.contains("saved 15 settings"), "{listing}");
+    let saved = std::fs::read_to_string(&file).unwrap();
+    assert!(saved.contains("\nlambda1,2000,1/s\n"), "{saved}");
+
+    // Change some, then restore the file: every value is back.
+    for (k, v) in [("lambda1", 1500.0), ("pid_kp", 0.25), ("u_max", 120.0)] {
+        set(&addr, k, v);
+    }
+    let changed = run(&addr, params()).unwrap();
+    assert_eq!(param(&changed, "lambda1"), 1500.0);
+    let restored = run(
+        &addr,
+        Action::Params {
+            save: None,
+            restore: Some(file.clone()),
+        },
+    )
+    .unwrap();
+    assert!(restored.contains("restored 15 settings"), "{restored}");
+    for (k, v) in [("lambda1", 2000.0), ("pid_kp", 0.5), ("u_max", 150.0)] {
+        assert_eq!(param(&restored, k), v, "{k}: {restored}");
+    }
+
+    // A file with one bad line (a gain in the wrong unit) sends nothing.
+    set(&addr, "lambda1", 1500.0);
+    let bad = tmp("params-bad.csv");
+    std::fs::write(&bad, saved.replace("pid_kp,0.5,V/um", "pid_kp,500,V/mm")).unwrap();
+    let msg = format!(
+        "{:#}",
+        run(
+            &addr,
+            Action::Params {
+                save: None,
+                restore: Some(bad),
+            },
+        )
+        .unwrap_err()
+    );
+    assert!(msg.contains("pid_kp in V/mm"), "{msg}");
+    assert_eq!(param(&run(&addr, params()).unwrap(), "lambda1"), 1500.0);
 }

@@ -2,6 +2,7 @@
 //! the stage that follow from them.
 
 use super::params::Params;
+use super::settings::default_of;
 use super::target::{c, AXES, FIXED, R, SAFE_VOLTS};
 use crate::drivers::{Ad4000Config, Ad5791Config};
 use crate::pipeline::{AxisConfig, Config, DacScale, OutputLimits, Sensor};
@@ -89,7 +90,7 @@ impl Converters for SpiPair {
 }
 
 /// The converters over the stage: the sensor of `C`, DAC over 0..150 V (amplifier gain
-/// 45 V/V at 3.3 V on-chip), slew limit 20 V/ms, safe state 0 V. Every axis alike.
+/// 45 V/V at 3.3 V on-chip), limits from the settings table (0..150 V, 20 V/ms), safe state 0 V. Every axis alike.
 pub fn converter_config<C: Converters>(sample_hz: R) -> Config<R, AXES> {
     Config {
         sample_hz,
@@ -97,9 +98,9 @@ pub fn converter_config<C: Converters>(sample_hz: R) -> Config<R, AXES> {
             sensor: C::sensor(),
             open_loop: Params::default().linear(),
             limits: OutputLimits {
-                volts_min: c(0.0),
-                volts_max: c(150.0),
-                slew_volts_per_s: c(20_000.0),
+                volts_min: c(default_of("u_min")),
+                volts_max: c(default_of("u_max")),
+                slew_volts_per_s: c(default_of("slew")),
             },
             dac: DacScale {
                 volts_per_code: c(150.0 / C::DAC_MAX as f64),

@@ -581,6 +581,7 @@ pub fn push_real<const N: usize>(out: &mut command::Reply<N>, v: R) {
     out.push_f32(v.to_f64() as f32);
 }
 
+use super::settings::{setting, Access};
 pub use super::settings::{PARAMS, READ_ONLY};
 
 pub(super) fn get_param<C: Converters>(lp: &Loop<C>, name: &str) -> Result<R, Error> {
@@ -606,6 +607,11 @@ fn set_param<C: Converters>(lp: &mut Loop<C>, name: &str, v: R) -> Result<(), Er
         (l.volts_min, l.volts_max)
     };
     let check = |ok: bool| if ok { Ok(()) } else { Err(Error::OutOfRange) };
+    if let Some(s) = setting(name) {
+        if s.access != Access::ReadOnly {
+            check(s.accepts(v.to_f64()))?;
+        }
+    }
     match name {
         "u_min" => {
             check(v >= c(0.0) && v < hi)?;

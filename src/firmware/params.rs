@@ -1,6 +1,7 @@
 //! What `set` changes besides the limits: the hysteresis model, the open-loop scaling and
 //! the gains the laws and compensators are built from.
 
+use super::settings::SETTINGS;
 use super::target::{c, R};
 use crate::feedforward::LinearFf;
 use crate::hysteresis::{Cbw, Gbw};
@@ -33,21 +34,29 @@ pub struct Params {
 }
 
 impl Default for Params {
+    /// The defaults of the settings table ([`super::SETTINGS`]).
     fn default() -> Self {
-        Self {
-            cbw_d: c(0.16),
-            cbw_alpha: c(0.07),
-            cbw_beta: c(0.02),
-            cbw_gamma: c(0.01),
-            gbw_b: c(0.0),
-            um_per_volt: c(0.16),
-            offset_um: c(0.0),
-            hgo_eps_s: c(2e-4),
-            lambda1: c(2_000.0),
-            lambda2: c(2_000.0),
-            pid_kp: c(0.5),
-            pid_ki: c(2_000.0),
+        let zero = c(0.0);
+        let mut p = Self {
+            cbw_d: zero,
+            cbw_alpha: zero,
+            cbw_beta: zero,
+            cbw_gamma: zero,
+            gbw_b: zero,
+            um_per_volt: zero,
+            offset_um: zero,
+            hgo_eps_s: zero,
+            lambda1: zero,
+            lambda2: zero,
+            pid_kp: zero,
+            pid_ki: zero,
+        };
+        for s in SETTINGS.iter() {
+            if let Some(f) = s.field {
+                *f(&mut p) = c(s.default);
+            }
         }
+        p
     }
 }
 
@@ -80,22 +89,9 @@ impl Params {
         }
     }
 
-    /// The slot of a settable parameter, by its `get`/`set` name.
+    /// The slot of a model setting, by its `get`/`set` name ([`super::SETTINGS`]).
     pub(super) fn slot(&mut self, name: &str) -> Option<&mut R> {
-        Some(match name {
-            "cbw_d" => &mut self.cbw_d,
-            "cbw_alpha" => &mut self.cbw_alpha,
-            "cbw_beta" => &mut self.cbw_beta,
-            "cbw_gamma" => &mut self.cbw_gamma,
-            "gbw_b" => &mut self.gbw_b,
-            "um_per_volt" => &mut self.um_per_volt,
-            "offset_um" => &mut self.offset_um,
-            "hgo_eps" => &mut self.hgo_eps_s,
-            "lambda1" => &mut self.lambda1,
-            "lambda2" => &mut self.lambda2,
-            "pid_kp" => &mut self.pid_kp,
-            "pid_ki" => &mut self.pid_ki,
-            _ => return None,
-        })
+        let f = SETTINGS.iter().find(|s| s.name == name)?.field?;
+        Some(f(self))
     }
 }

@@ -5,6 +5,11 @@
 //! output limits, the converter scalings and [`super::Params`] (defaults there); `set`
 //! checks a value through the core's constructors.
 
+use super::params::Params;
+#[cfg(test)]
+use super::target::c;
+use super::target::R;
+
 /// Who changes a setting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Access {
@@ -17,80 +22,182 @@ pub enum Access {
     Model,
 }
 
-/// One setting.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// One setting: its name, unit and meaning, who changes it, its built-in value and the
+/// range `set` accepts (a value outside it is `err 8` before any other check), and, for a
+/// model setting, where it lives in [`Params`].
+#[derive(Debug, Clone, Copy)]
 pub struct Setting {
     pub name: &'static str,
     pub unit: &'static str,
     pub about: &'static str,
     pub access: Access,
+    /// Built-in value (read-only settings: NaN, the board's converters decide).
+    pub default: f64,
+    /// Accepted range, inclusive; the laws' constructors and the other limits check more.
+    pub min: f64,
+    pub max: f64,
+    /// The model setting's slot in [`Params`].
+    pub field: Option<fn(&mut Params) -> &mut R>,
 }
 
-const fn s(name: &'static str, unit: &'static str, about: &'static str, access: Access) -> Setting {
+impl Setting {
+    /// Whether `v` is finite and inside the setting's range.
+    pub fn accepts(&self, v: f64) -> bool {
+        v.is_finite() && v >= self.min && v <= self.max
+    }
+}
+
+const fn limit(
+    name: &'static str,
+    unit: &'static str,
+    about: &'static str,
+    default: f64,
+    min: f64,
+    max: f64,
+) -> Setting {
     Setting {
         name,
         unit,
         about,
-        access,
+        access: Access::Limit,
+        default,
+        min,
+        max,
+        field: None,
     }
 }
 
-/// Every setting, in the order `help` lists them.
+const fn board(name: &'static str, unit: &'static str, about: &'static str) -> Setting {
+    Setting {
+        name,
+        unit,
+        about,
+        access: Access::ReadOnly,
+        default: f64::NAN,
+        min: f64::NAN,
+        max: f64::NAN,
+        field: None,
+    }
+}
+
+const fn model(
+    name: &'static str,
+    unit: &'static str,
+    about: &'static str,
+    [default, min, max]: [f64; 3],
+    field: fn(&mut Params) -> &mut R,
+) -> Setting {
+    Setting {
+        name,
+        unit,
+        about,
+        access: Access::Model,
+        default,
+        min,
+        max,
+        field: Some(field),
+    }
+}
+
+/// Every setting, in the order `help` lists them. Defaults: the QEMU board's simulated
+/// stage (CBW set 1 of the 000 backup slide) and gains tuned on it; ranges: what a piezo
+/// stage behind a 150 V amplifier can use, wide enough for any fitted model.
 pub const SETTINGS: [Setting; 18] = [
-    s("u_min", "V", "lowest output voltage", Access::Limit),
-    s(
+    limit("u_min", "V", "lowest output voltage", 0.0, 0.0, 150.0),
+    limit(
         "u_max",
         "V",
         "highest output voltage (at most 150)",
-        Access::Limit,
+        150.0,
+        0.0,
+        150.0,
     ),
-    s("slew", "V/s", "output slew-rate limit", Access::Limit),
-    s(
-        "um_per_code",
-        "um",
-        "position per ADC code",
-        Access::ReadOnly,
-    ),
-    s(
-        "volts_per_code",
-        "V",
-        "output voltage per DAC code",
-        Access::ReadOnly,
-    ),
-    s("sample_hz", "Hz", "control rate", Access::ReadOnly),
-    s(
+    limit("slew", "V/s", "output slew-rate limit", 20_000.0, 1e-3, 1e9),
+    board("um_per_code", "um", "position per ADC code"),
+    board("volts_per_code", "V", "output voltage per DAC code"),
+    board("sample_hz", "Hz", "control rate"),
+    model(
         "cbw_d",
         "um/V",
         "CBW piezo gain d (000 eq. 1)",
-        Access::Model,
+        [0.16, 1e-6, 1e3],
+        |p| &mut p.cbw_d,
     ),
-    s("cbw_alpha", "um/V", "CBW alpha (000 eq. 2)", Access::Model),
-    s("cbw_beta", "1/V", "CBW beta", Access::Model),
-    s("cbw_gamma", "1/V", "CBW gamma", Access::Model),
-    s(
+    model(
+        "cbw_alpha",
+        "um/V",
+        "CBW alpha (000 eq. 2)",
+        [0.07, -1e3, 1e3],
+        |p| &mut p.cbw_alpha,
+    ),
+    model("cbw_beta", "1/V", "CBW beta", [0.02, -1e3, 1e3], |p| {
+        &mut p.cbw_beta
+    }),
+    model("cbw_gamma", "1/V", "CBW gamma", [0.01, -1e3, 1e3], |p| {
+        &mut p.cbw_gamma
+    }),
+    model(
         "gbw_b",
         "1/V",
         "GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3)",
-        Access::Model,
+        [0.0, -1e3, 1e3],
+        |p| &mut p.gbw_b,
     ),
-    s("um_per_volt", "um/V", "open-loop scaling", Access::Model),
-    s("offset_um", "um", "open-loop offset", Access::Model),
-    s("hgo_eps", "s", "HGO epsilon (000 eq. 6)", Access::Model),
-    s(
+    model(
+        "um_per_volt",
+        "um/V",
+        "open-loop scaling",
+        [0.16, -1e3, 1e3],
+        |p| &mut p.um_per_volt,
+    ),
+    model(
+        "offset_um",
+        "um",
+        "open-loop offset",
+        [0.0, -1e4, 1e4],
+        |p| &mut p.offset_um,
+    ),
+    model(
+        "hgo_eps",
+        "s",
+        "HGO epsilon (000 eq. 6)",
+        [2e-4, 1e-7, 1.0],
+        |p| &mut p.hgo_eps_s,
+    ),
+    model(
         "lambda1",
         "1/s",
         "robust law gain (000 eq. 7)",
-        Access::Model,
+        [2_000.0, 0.0, 1e7],
+        |p| &mut p.lambda1,
     ),
-    s(
+    model(
         "lambda2",
         "1/s",
         "robust law gain (000 eq. 7)",
-        Access::Model,
+        [2_000.0, 0.0, 1e7],
+        |p| &mut p.lambda2,
     ),
-    s("pid_kp", "V/um", "PID proportional gain", Access::Model),
-    s("pid_ki", "V/(um s)", "PID integral gain", Access::Model),
+    model(
+        "pid_kp",
+        "V/um",
+        "PID proportional gain",
+        [0.5, 0.0, 1e4],
+        |p| &mut p.pid_kp,
+    ),
+    model(
+        "pid_ki",
+        "V/(um s)",
+        "PID integral gain",
+        [2_000.0, 0.0, 1e8],
+        |p| &mut p.pid_ki,
+    ),
 ];
+
+/// The built-in value of the setting `name` (NaN for an unknown or read-only one).
+pub fn default_of(name: &str) -> f64 {
+    setting(name).map_or(f64::NAN, |s| s.default)
+}
 
 /// The setting of `name`.
 pub fn setting(name: &str) -> Option<&'static Setting> {
@@ -136,10 +243,32 @@ mod tests {
             .count();
         assert_eq!(ro, READ_ONLY.len());
         assert!(READ_ONLY.iter().all(|p| !p.is_empty()));
-        // Every model setting is a slot of Params.
-        let mut p = super::super::Params::default();
-        for s in SETTINGS.iter().filter(|s| s.access == Access::Model) {
-            assert!(p.slot(s.name).is_some(), "{}", s.name);
+        // Every model setting is a slot of Params, its default is the built-in value and
+        // inside its range, and the slots are distinct.
+        let mut p = Params::default();
+        for (i, s) in SETTINGS.iter().enumerate() {
+            let Some(f) = s.field else {
+                assert!(s.access != Access::Model, "{}", s.name);
+                continue;
+            };
+            assert!(s.accepts(s.default), "{} default outside its range", s.name);
+            assert_eq!(*p.slot(s.name).unwrap(), c(s.default), "{}", s.name);
+            *f(&mut p) = c(1e-3 * i as f64 + 0.5);
+        }
+        for (i, s) in SETTINGS
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.field.is_some())
+        {
+            assert_eq!(
+                *p.slot(s.name).unwrap(),
+                c(1e-3 * i as f64 + 0.5),
+                "{}",
+                s.name
+            );
+        }
+        for s in SETTINGS.iter().filter(|s| s.access == Access::Limit) {
+            assert!(s.accepts(s.default), "{}", s.name);
         }
     }
 }

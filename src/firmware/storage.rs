@@ -15,6 +15,7 @@ use super::converters::Converters;
 use super::execute::{get_param, PARAMS, READ_ONLY};
 use super::nor::Blocking;
 use super::params::Params;
+use super::settings::setting;
 use super::target::{c, R};
 use crate::command::Error;
 use crate::pipeline::{Mode, Wave};
@@ -258,6 +259,9 @@ impl<C: Converters> Loop<C> {
         let mut p = self.params;
         for name in stored() {
             let v = rec.value(name).ok_or(Error::BadSettings)?;
+            if !setting(name).is_some_and(|s| s.accepts(f64::from(v))) {
+                return Err(Error::BadSettings);
+            }
             if let Some(slot) = p.slot(name) {
                 *slot = c(f64::from(v));
             }

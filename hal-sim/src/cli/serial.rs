@@ -114,8 +114,17 @@ pub enum Action {
     /// Select the axis the 1-axis waves (sine, triangle, square, steps, table, hold) go to
     /// (`axis 1`: y of an XY build); with no number, print it.
     Axis { axis: Option<usize> },
-    /// Every parameter of the firmware (names from its `help`) with its value.
-    Params,
+    /// Every parameter of the firmware (names from its `help`) with its value; `--save`
+    /// also writes the settable ones to a file, `--restore` sets them from one.
+    Params {
+        /// Write `name,value,unit` of every settable parameter to FILE (CSV).
+        #[arg(long, value_name = "FILE", conflicts_with = "restore")]
+        save: Option<PathBuf>,
+        /// Set every parameter of FILE (as `--save` writes it): the whole file is checked
+        /// against the settings table (known name, unit, range) before anything is sent.
+        #[arg(long, value_name = "FILE")]
+        restore: Option<PathBuf>,
+    },
     /// Send the CBW model of a `piezo fit --model cbw` report to the firmware as one
     /// `cbw <d> <alpha> <beta> <gamma>` line (checked and installed as a whole).
     LoadFit {
@@ -236,7 +245,15 @@ pub fn execute(
             let r = c.send(&Command::Axis(axis))?;
             writeln!(out, "{}", r.reply_line())?;
         }
-        Action::Params => params::print_params(c, out)?,
+        Action::Params { save, restore } => {
+            if let Some(f) = restore {
+                params::restore(c, &f, out)?;
+            }
+            params::print_params(c, out)?;
+            if let Some(f) = save {
+                params::save(c, &f, out)?;
+            }
+        }
         Action::LoadFit { fit } => load_fit::run(c, &fit, out)?,
         Action::Status => status::status(c, out)?,
         Action::Stats { reset, clock } => status::stats(c, reset, clock, out)?,
