@@ -33,7 +33,6 @@ pub use pid::{Pid, PidConfig};
 pub use robust::{Convergence, Robust, RobustConfig};
 
 use crate::real::Real;
-use crate::registry::{Family, Law, LawKind};
 use crate::signals::LoopSignals;
 
 /// The selectable feedback law. Its output is the voltage command (V) before the
@@ -95,49 +94,5 @@ impl<T: Real> Feedback<T> {
         };
         g.notch = notch;
         g.restart();
-    }
-
-    /// The law in the controller registry ([`crate::registry`]).
-    pub fn law(&self) -> Law {
-        let gbw = |m: &ObserverModel<T>| match m {
-            ObserverModel::Gbw(_) => Family::Gbw,
-            _ => Family::Cbw,
-        };
-        let (kind, feedforward, family) = match self {
-            Feedback::OpenLoop => (LawKind::OpenLoop, false, Family::Cbw),
-            Feedback::Pid(l) => (LawKind::Pid, l.config().feedforward, Family::Cbw),
-            Feedback::Robust(l) => {
-                let kind = match l.config().convergence {
-                    Convergence::Exponential => LawKind::HgoRobust,
-                    Convergence::FiniteTime { .. } => LawKind::Fts,
-                };
-                (kind, l.config().feedforward, gbw(l.observer().model()))
-            }
-            Feedback::Adrc(l) => {
-                let c = l.config();
-                let known = c.a1 != T::ZERO || c.a2 != T::ZERO;
-                let kind = if known {
-                    LawKind::AdrcLin
-                } else {
-                    LawKind::Adrc
-                };
-                (kind, c.feedforward, Family::Cbw)
-            }
-            Feedback::Nmpc(l) => (
-                LawKind::Nmpc,
-                l.config().feedforward,
-                gbw(l.observer().model()),
-            ),
-        };
-        Law {
-            kind,
-            feedforward,
-            family,
-        }
-    }
-
-    /// Short name for tables and logs: the registry's ([`Law::name`]).
-    pub fn name(&self) -> &'static str {
-        self.law().name()
     }
 }

@@ -299,6 +299,54 @@ impl Law {
     }
 }
 
+/// Each built law knows its registry entry (kept here, not in `feedback`, so that the
+/// registry depends on the laws and not the other way round).
+impl<T: Real> Feedback<T> {
+    /// The law in the controller registry ([`crate::registry`]).
+    pub fn law(&self) -> Law {
+        let gbw = |m: &ObserverModel<T>| match m {
+            ObserverModel::Gbw(_) => Family::Gbw,
+            _ => Family::Cbw,
+        };
+        let (kind, feedforward, family) = match self {
+            Feedback::OpenLoop => (LawKind::OpenLoop, false, Family::Cbw),
+            Feedback::Pid(l) => (LawKind::Pid, l.config().feedforward, Family::Cbw),
+            Feedback::Robust(l) => {
+                let kind = match l.config().convergence {
+                    Convergence::Exponential => LawKind::HgoRobust,
+                    Convergence::FiniteTime { .. } => LawKind::Fts,
+                };
+                (kind, l.config().feedforward, gbw(l.observer().model()))
+            }
+            Feedback::Adrc(l) => {
+                let c = l.config();
+                let known = c.a1 != T::ZERO || c.a2 != T::ZERO;
+                let kind = if known {
+                    LawKind::AdrcLin
+                } else {
+                    LawKind::Adrc
+                };
+                (kind, c.feedforward, Family::Cbw)
+            }
+            Feedback::Nmpc(l) => (
+                LawKind::Nmpc,
+                l.config().feedforward,
+                gbw(l.observer().model()),
+            ),
+        };
+        Law {
+            kind,
+            feedforward,
+            family,
+        }
+    }
+
+    /// Short name for tables and logs: the registry's ([`Law::name`]).
+    pub fn name(&self) -> &'static str {
+        self.law().name()
+    }
+}
+
 impl FfKind {
     /// The kind's one name ([`FF_NAMES`]).
     pub const fn name(self) -> &'static str {

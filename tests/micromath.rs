@@ -5,7 +5,7 @@
 //! the QEMU board's (`bench: math` lines of `30-qemu.sh`). Run with `--nocapture` for the
 //! table the README quotes.
 use micromath::F32Ext;
-use piezo_core::pipeline::reference::sin_cos_turns;
+use piezo_core::pipeline::excitation::sin_cos_turns;
 use piezo_core::real::Real;
 
 /// Worst absolute and relative error of `f` against `exact` over `n` points of `[lo, hi]`.

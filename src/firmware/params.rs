@@ -1,7 +1,6 @@
 //! What `set` changes besides the limits: the hysteresis model, the open-loop scaling and
 //! the gains the laws and compensators are built from.
 
-use super::settings::SETTINGS;
 use super::target::{c, R};
 use crate::feedforward::LinearFf;
 use crate::hysteresis::{Cbw, Gbw};
@@ -9,7 +8,8 @@ use crate::hysteresis::{Cbw, Gbw};
 /// What `set` changes besides the limits: the hysteresis model (the one `piezo fit
 /// --model cbw` identifies), the open-loop scaling and the gains (config, apart from the
 /// laws' state). [`Params::default`] is the simulated stage: CBW set 1 of the 000 backup
-/// slide, first-order linear part with pole [`super::STAGE_POLE_PER_S`].
+/// slide, first-order linear part with pole [`super::STAGE_POLE_PER_S`]; `Default` and the
+/// slots by name are the settings table's (`settings.rs`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params {
     /// CBW (n = 1) of the IMS feedforward and the HGO's observer model: `d`, `alpha` (um/V),
@@ -31,33 +31,6 @@ pub struct Params {
     /// PID gains: V/um and V/(um s).
     pub pid_kp: R,
     pub pid_ki: R,
-}
-
-impl Default for Params {
-    /// The defaults of the settings table ([`super::SETTINGS`]).
-    fn default() -> Self {
-        let zero = c(0.0);
-        let mut p = Self {
-            cbw_d: zero,
-            cbw_alpha: zero,
-            cbw_beta: zero,
-            cbw_gamma: zero,
-            gbw_b: zero,
-            um_per_volt: zero,
-            offset_um: zero,
-            hgo_eps_s: zero,
-            lambda1: zero,
-            lambda2: zero,
-            pid_kp: zero,
-            pid_ki: zero,
-        };
-        for s in SETTINGS.iter() {
-            if let Some(f) = s.field {
-                *f(&mut p) = c(s.default);
-            }
-        }
-        p
-    }
 }
 
 impl Params {
@@ -87,11 +60,5 @@ impl Params {
             um_per_volt: self.um_per_volt,
             offset_um: self.offset_um,
         }
-    }
-
-    /// The slot of a model setting, by its `get`/`set` name ([`super::SETTINGS`]).
-    pub(super) fn slot(&mut self, name: &str) -> Option<&mut R> {
-        let f = SETTINGS.iter().find(|s| s.name == name)?.field?;
-        Some(f(self))
     }
 }

@@ -6,9 +6,7 @@
 //! checks a value through the core's constructors.
 
 use super::params::Params;
-#[cfg(test)]
-use super::target::c;
-use super::target::R;
+use super::target::{c, R};
 
 /// Who changes a setting.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -225,6 +223,43 @@ const fn names<const N: usize>(only: Option<Access>) -> [&'static str; N] {
 pub const PARAMS: [&str; 18] = names(None);
 /// The settings only `get` reads.
 pub const READ_ONLY: [&str; 3] = names(Some(Access::ReadOnly));
+
+/// The parameters' built-in values and their slots by name come from [`SETTINGS`] (kept
+/// here so that the table depends on [`Params`], not the other way round).
+impl Default for Params {
+    /// The defaults of the settings table ([`super::SETTINGS`]).
+    fn default() -> Self {
+        let zero = c(0.0);
+        let mut p = Self {
+            cbw_d: zero,
+            cbw_alpha: zero,
+            cbw_beta: zero,
+            cbw_gamma: zero,
+            gbw_b: zero,
+            um_per_volt: zero,
+            offset_um: zero,
+            hgo_eps_s: zero,
+            lambda1: zero,
+            lambda2: zero,
+            pid_kp: zero,
+            pid_ki: zero,
+        };
+        for s in SETTINGS.iter() {
+            if let Some(f) = s.field {
+                *f(&mut p) = c(s.default);
+            }
+        }
+        p
+    }
+}
+
+impl Params {
+    /// The slot of a model setting, by its `get`/`set` name ([`super::SETTINGS`]).
+    pub(super) fn slot(&mut self, name: &str) -> Option<&mut R> {
+        let f = SETTINGS.iter().find(|s| s.name == name)?.field?;
+        Some(f(self))
+    }
+}
 
 #[cfg(test)]
 mod tests {

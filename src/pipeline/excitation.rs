@@ -115,7 +115,7 @@ pub fn chirp_at<T: Real>(
     a_fx: i64,
     b_fx: i64,
 ) -> Setpoint<T> {
-    let (s, c) = super::reference::sin_cos_turns(T::from_turns(chirp_phase(x, a_fx, b_fx)));
+    let (s, c) = sin_cos_turns(T::from_turns(chirp_phase(x, a_fx, b_fx)));
     let tau = T::from_turns(x);
     let w = T::TWO * T::PI * (f0_hz + (f1_hz - f0_hz) * tau);
     let dw = if duration_s > T::ZERO {
@@ -150,7 +150,7 @@ pub fn multisine_phases<T: Real>(
             r as f64 / 4_294_967_296.0
         };
         let t = turns - libm::floor(turns);
-        let (sv, cv) = super::reference::sin_cos_turns(T::from_f64(t));
+        let (sv, cv) = sin_cos_turns(T::from_f64(t));
         *c = cv;
         *s = sv;
     }
@@ -172,7 +172,7 @@ pub fn multisine_at<T: Real>(
     cos_phi: &[T; MULTISINE_MAX],
     sin_phi: &[T; MULTISINE_MAX],
 ) -> Setpoint<T> {
-    let (s1, c1) = super::reference::sin_cos_turns(x);
+    let (s1, c1) = sin_cos_turns(x);
     let (mut s, mut c) = (s1, c1);
     let (mut y, mut dy, mut ddy) = (T::ZERO, T::ZERO, T::ZERO);
     let mut k = T::ZERO;
@@ -216,9 +216,62 @@ pub fn multisine_scale<T: Real>(
     }
 }
 
+/// `(sin, cos)` of `2 pi x` for `x` in `[0, 1)` turns, without libm: octant reduction and
+/// Taylor polynomials to degree 12 on `|phi| <= pi/4` (truncation below 1e-11, so `f64`
+/// keeps 11 digits and `f32` is exact to rounding). libm's `sinf`/`cosf` compute in `f64`,
+/// which a single-precision FPU emulates in software.
+#[inline]
+pub fn sin_cos_turns<T: Real>(x: T) -> (T, T) {
+    let four = T::from_f64(4.0);
+    let q = (x * four + T::HALF).floor();
+    let phi = (x - q * T::from_f64(0.25)) * (T::TWO * T::PI);
+    let p2 = phi * phi;
+    // sin: phi (1 - p2/6 (1 - p2/20 (1 - p2/42 (1 - p2/72 (1 - p2/110)))))
+    let c = |k: f64| T::from_f64(1.0 / k);
+    let s = phi
+        * (T::ONE
+            - p2 * c(6.0)
+                * (T::ONE
+                    - p2 * c(20.0)
+                        * (T::ONE
+                            - p2 * c(42.0) * (T::ONE - p2 * c(72.0) * (T::ONE - p2 * c(110.0))))));
+    let co = T::ONE
+        - p2 * c(2.0)
+            * (T::ONE
+                - p2 * c(12.0)
+                    * (T::ONE
+                        - p2 * c(30.0)
+                            * (T::ONE
+                                - p2 * c(56.0)
+                                    * (T::ONE - p2 * c(90.0) * (T::ONE - p2 * c(132.0))))));
+    // Quadrant: sin(phi + n pi/2).
+    let n = q.to_i32().rem_euclid(4);
+    match n {
+        0 => (s, co),
+        1 => (co, -s),
+        2 => (-s, -co),
+        _ => (-co, s),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sin_cos_turns_matches_libm() {
+        for k in 0..10_000 {
+            let x = k as f64 / 10_000.0;
+            let (s, c) = sin_cos_turns(x);
+            let a = 2.0 * std::f64::consts::PI * x;
+            assert!(
+                (s - a.sin()).abs() < 1e-10 && (c - a.cos()).abs() < 1e-10,
+                "{x}"
+            );
+            let (s, c) = sin_cos_turns(x as f32);
+            assert!((s as f64 - a.sin()).abs() < 5e-7 && (c as f64 - a.cos()).abs() < 5e-7);
+        }
+    }
 
     #[test]
     fn prbs_has_maximal_period() {

@@ -3,7 +3,7 @@
 //! The phase is a 32-bit accumulator (as in a DDS): it wraps exactly once per period and
 //! never loses precision, so an `f32` generator runs for days without drifting.
 
-use super::excitation;
+use super::excitation::{self, sin_cos_turns};
 use super::ConfigError;
 use crate::real::Real;
 use crate::signals::Setpoint;
@@ -399,44 +399,6 @@ impl<T: Real> Wave<T> {
     }
 }
 
-/// `(sin, cos)` of `2 pi x` for `x` in `[0, 1)` turns, without libm: octant reduction and
-/// Taylor polynomials to degree 12 on `|phi| <= pi/4` (truncation below 1e-11, so `f64`
-/// keeps 11 digits and `f32` is exact to rounding). libm's `sinf`/`cosf` compute in `f64`,
-/// which a single-precision FPU emulates in software.
-#[inline]
-pub fn sin_cos_turns<T: Real>(x: T) -> (T, T) {
-    let four = T::from_f64(4.0);
-    let q = (x * four + T::HALF).floor();
-    let phi = (x - q * T::from_f64(0.25)) * (T::TWO * T::PI);
-    let p2 = phi * phi;
-    // sin: phi (1 - p2/6 (1 - p2/20 (1 - p2/42 (1 - p2/72 (1 - p2/110)))))
-    let c = |k: f64| T::from_f64(1.0 / k);
-    let s = phi
-        * (T::ONE
-            - p2 * c(6.0)
-                * (T::ONE
-                    - p2 * c(20.0)
-                        * (T::ONE
-                            - p2 * c(42.0) * (T::ONE - p2 * c(72.0) * (T::ONE - p2 * c(110.0))))));
-    let co = T::ONE
-        - p2 * c(2.0)
-            * (T::ONE
-                - p2 * c(12.0)
-                    * (T::ONE
-                        - p2 * c(30.0)
-                            * (T::ONE
-                                - p2 * c(56.0)
-                                    * (T::ONE - p2 * c(90.0) * (T::ONE - p2 * c(132.0))))));
-    // Quadrant: sin(phi + n pi/2).
-    let n = q.to_i32().rem_euclid(4);
-    match n {
-        0 => (s, co),
-        1 => (co, -s),
-        2 => (-s, -co),
-        _ => (-co, s),
-    }
-}
-
 /// Periodic Catmull-Rom spline at phase `x` and its time derivatives.
 #[inline]
 fn catmull_rom<T: Real>(points: &[T; TABLE_LEN], len: usize, x: T, freq_hz: T) -> Setpoint<T> {
@@ -773,21 +735,6 @@ mod tests {
         assert!(Wave::multisine(0.0, 1.0, 200.0, 32, 0)
             .and_then(|w| w.validate(10_000.0))
             .is_err());
-    }
-
-    #[test]
-    fn sin_cos_turns_matches_libm() {
-        for k in 0..10_000 {
-            let x = k as f64 / 10_000.0;
-            let (s, c) = sin_cos_turns(x);
-            let a = 2.0 * std::f64::consts::PI * x;
-            assert!(
-                (s - a.sin()).abs() < 1e-10 && (c - a.cos()).abs() < 1e-10,
-                "{x}"
-            );
-            let (s, c) = sin_cos_turns(x as f32);
-            assert!((s as f64 - a.sin()).abs() < 5e-7 && (c as f64 - a.cos()).abs() < 5e-7);
-        }
     }
 
     #[test]
