@@ -1,19 +1,15 @@
 //! `piezo fit --model ss | hammerstein-ss | scheduled-ss`: one multivariable state-space
 //! model (with a hysteresis per actuator, or scheduled by the input level) for several
 //! training records.
-use super::fit::Args;
-use super::predict::{score_last_period, Loaded};
+use super::fit_args::Args;
 use crate::ident::fit::models;
+pub use crate::ident::saved::handles;
+use crate::ident::saved::{score_last_period, Loaded};
 use crate::ident::ss::frf::{self, PeriodicSpectra};
 use crate::ident::ss::saved::SsJson;
 use crate::ident::ss::{identify, SsOptions};
 use crate::record::Record;
 use anyhow::{Context, Result};
-
-/// True for the model names this module fits.
-pub fn handles(model: &str) -> bool {
-    matches!(model, "ss" | "hammerstein-ss" | "scheduled-ss")
-}
 
 fn read_all(args: &Args) -> Result<Vec<Record>> {
     anyhow::ensure!(

@@ -3,6 +3,7 @@ pub mod demo;
 pub mod diagnose;
 pub mod faults;
 pub mod fit;
+pub mod fit_args;
 pub mod fit_ss;
 pub mod predict;
 pub mod serial;

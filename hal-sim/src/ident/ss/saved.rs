@@ -59,7 +59,7 @@ impl SsJson {
         report: serde_json::Value,
     ) -> Self {
         Self {
-            format: crate::cli::fit::FORMAT.into(),
+            format: crate::ident::FORMAT.into(),
             model: if model.fronts.is_empty() {
                 "ss"
             } else {
