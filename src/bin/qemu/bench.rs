@@ -212,7 +212,7 @@ pub fn run(syst: &mut SYST) -> Table {
 #[cfg(target_abi = "eabihf")]
 pub fn math(syst: &mut SYST, instr_per_tick_x1000: u32) {
     use micromath::F32Ext;
-    use piezo_core::pipeline::reference::sin_cos_turns;
+    use piezo_core::pipeline::excitation::sin_cos_turns;
     use piezo_core::real::Real;
     syst.disable_interrupt();
     syst.set_reload(0x00FF_FFFF);
