@@ -124,8 +124,7 @@ impl<T: Real, const N: usize, const K: usize> MultiIms<T, N, K> {
         volts_max: T,
         dt_s: T,
     ) -> Result<Self, FfError> {
-        super::check_range(volts_min, volts_max)?;
-        super::check_dt(dt_s)?;
+        super::check_range_dt(volts_min, volts_max, dt_s)?;
         let d_pinv = pseudo_inverse(model.d())?;
         let u0 = T::ZERO.clamp_to(volts_min, volts_max);
         Ok(Self {
