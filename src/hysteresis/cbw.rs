@@ -118,7 +118,7 @@ super::piezo_form!(Cbw<T>, |m, h, u0, du, _dt| m.advance_h(h, u0, du));
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hysteresis::along_sine;
+    use crate::hysteresis::{along_sine, assert_refused};
 
     /// Backup slide of 000, parameter set 1.
     fn set1() -> Cbw<f64> {
@@ -127,13 +127,13 @@ mod tests {
 
     #[test]
     fn rejects_parameters_that_break_004_eq3() {
-        assert_eq!(
-            Cbw::with_n1(0.16, 0.07, 0.01, 0.02).unwrap_err().0,
-            "CBW: beta - gamma >= 0 (004 eq. 3)"
+        assert_refused(
+            Cbw::with_n1(0.16, 0.07, 0.01, 0.02),
+            "CBW: beta - gamma >= 0 (004 eq. 3)",
         );
-        assert_eq!(
-            Cbw::with_n1(0.16, -0.07, 0.02, 0.01).unwrap_err().0,
-            "CBW: alpha > 0 (004 eq. 3)"
+        assert_refused(
+            Cbw::with_n1(0.16, -0.07, 0.02, 0.01),
+            "CBW: alpha > 0 (004 eq. 3)",
         );
         assert!(Cbw::new(0.16, 0.07, 0.02, 0.01, 0.5).is_err());
         assert!(Cbw::with_n1(f64::NAN, 0.07, 0.02, 0.01).is_err());

@@ -76,18 +76,12 @@ super::piezo_form!(Dahl<T>, |m, h, _, du, _dt| m.advance_h(h, du));
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hysteresis::{along_sine, rk4_input};
+    use crate::hysteresis::{along_sine, assert_refused, rk4_input};
 
     #[test]
     fn rejects_bad_parameters() {
-        assert_eq!(
-            Dahl::new(0.16, 0.07, 0.0, 1.0).unwrap_err().0,
-            "Dahl: hc > 0"
-        );
-        assert_eq!(
-            Dahl::new(0.16, 0.07, 2.0, -1.0).unwrap_err().0,
-            "Dahl: i > 0"
-        );
+        assert_refused(Dahl::new(0.16, 0.07, 0.0, 1.0), "Dahl: hc > 0");
+        assert_refused(Dahl::new(0.16, 0.07, 2.0, -1.0), "Dahl: i > 0");
         assert!(Dahl::new(0.16, f64::NAN, 2.0, 1.0).is_err());
     }
 

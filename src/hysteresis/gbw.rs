@@ -179,7 +179,7 @@ super::piezo_form!(Gbw<T>, |m, h, u0, du, _dt| m.advance_h(h, u0, du));
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hysteresis::along_sine;
+    use crate::hysteresis::{along_sine, assert_refused};
 
     fn model() -> Gbw<f64> {
         Gbw::new(0.16, 1.2, 0.07, 0.005, 0.02, 1.0).unwrap()
@@ -187,14 +187,11 @@ mod tests {
 
     #[test]
     fn rejects_unbounded_parameters() {
-        assert_eq!(
-            Gbw::new(0.16, 1.0, 0.07, 0.03, 0.02, 1.0).unwrap_err().0,
-            "GBW: B_h + G > |B| (bounded up and down equilibria)"
+        assert_refused(
+            Gbw::new(0.16, 1.0, 0.07, 0.03, 0.02, 1.0),
+            "GBW: B_h + G > |B| (bounded up and down equilibria)",
         );
-        assert_eq!(
-            Gbw::new(0.16, 0.0, 0.07, 0.0, 0.02, 1.0).unwrap_err().0,
-            "GBW: alpha > 0"
-        );
+        assert_refused(Gbw::new(0.16, 0.0, 0.07, 0.0, 0.02, 1.0), "GBW: alpha > 0");
         assert!(Gbw::new(0.16, 1.0, 0.07, 0.0, 0.02, 0.5).is_err());
         assert!(Gbw::new(0.16, 1.0, f64::INFINITY, 0.0, 0.02, 1.0).is_err());
     }

@@ -314,6 +314,12 @@ pub(crate) fn along_sine(
     (h, h_ref)
 }
 
+/// Test check: `r` is refused with the text `why`.
+#[cfg(test)]
+pub(crate) fn assert_refused<M: core::fmt::Debug>(r: Result<M, ParamError>, why: &str) {
+    assert_eq!(r.unwrap_err().0, why);
+}
+
 /// Test reference: `h' = f(h, t)` integrated over `dt` by `n` classical RK4 steps.
 #[cfg(test)]
 pub(crate) fn rk4_time(mut h: f64, dt: f64, n: usize, f: impl Fn(f64, f64) -> f64) -> f64 {

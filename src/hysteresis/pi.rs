@@ -267,16 +267,17 @@ impl<T: Real, const N: usize, const M: usize> Hysteresis<T> for Dpi<T, N, M> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hysteresis::assert_refused;
 
     #[test]
     fn rejects_bad_thresholds() {
-        assert_eq!(
-            Pi::new(1.0, [0.2, 0.3], [0.0, 1.0]).unwrap_err().0,
-            "PI: thresholds r_i > 0"
+        assert_refused(
+            Pi::new(1.0, [0.2, 0.3], [0.0, 1.0]),
+            "PI: thresholds r_i > 0",
         );
-        assert_eq!(
-            Pi::new(1.0, [0.2, 0.3], [2.0, 1.0]).unwrap_err().0,
-            "PI: thresholds r_i strictly increasing"
+        assert_refused(
+            Pi::new(1.0, [0.2, 0.3], [2.0, 1.0]),
+            "PI: thresholds r_i strictly increasing",
         );
         assert!(Pi::new(f64::NAN, [0.2], [1.0]).is_err());
         assert_eq!(
