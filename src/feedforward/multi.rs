@@ -17,13 +17,8 @@ pub fn invert<T: Real, const M: usize>(a: &[[T; M]; M], tol: T) -> Option<[[T; M
         row[i] = T::ONE;
     }
     for col in 0..M {
-        let mut piv = col;
-        for r in col + 1..M {
-            if a[r][col].abs() > a[piv][col].abs() {
-                piv = r;
-            }
-        }
-        if !(a[piv][col].abs() > tol) {
+        let (piv, magnitude) = crate::manipulation::linalg::pivot(&a, col);
+        if !(magnitude > tol) {
             return None;
         }
         a.swap(col, piv);
