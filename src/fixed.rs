@@ -169,30 +169,25 @@ impl Neg for Q16 {
         Self(self.0.saturating_neg())
     }
 }
-impl AddAssign for Q16 {
-    #[inline(always)]
-    fn add_assign(&mut self, o: Self) {
-        *self = *self + o;
-    }
+/// `a op= b` as `a = a op b` for each compound assignment.
+macro_rules! op_assign {
+    ($($trait:ident $method:ident $op:tt),*) => {
+        $(
+            impl $trait for Q16 {
+                #[inline(always)]
+                fn $method(&mut self, o: Self) {
+                    *self = *self $op o;
+                }
+            }
+        )*
+    };
 }
-impl SubAssign for Q16 {
-    #[inline(always)]
-    fn sub_assign(&mut self, o: Self) {
-        *self = *self - o;
-    }
-}
-impl MulAssign for Q16 {
-    #[inline(always)]
-    fn mul_assign(&mut self, o: Self) {
-        *self = *self * o;
-    }
-}
-impl DivAssign for Q16 {
-    #[inline(always)]
-    fn div_assign(&mut self, o: Self) {
-        *self = *self / o;
-    }
-}
+op_assign!(
+    AddAssign add_assign +,
+    SubAssign sub_assign -,
+    MulAssign mul_assign *,
+    DivAssign div_assign /
+);
 
 /// `e^r` for `abs(r) <= 0.35` in Q2.30 (Taylor degree 7, remainder < 2e-9).
 fn exp_small_q30(r: i32) -> i32 {
