@@ -11,6 +11,11 @@ mod control {
     pub const DAC_FULL: i32 = OnChip::DAC_FULL;
 }
 
+/// The executor at the board's sample rate, as it powers up.
+fn board() -> control::Ctl {
+    control::Ctl::new(control::c(control::SAMPLE_HZ as f64))
+}
+
 fn ask(ctl: &mut control::Ctl, line: &str) -> String {
     ctl.answer(line).as_str().to_string()
 }
@@ -24,7 +29,7 @@ fn exchange(ctl: &mut control::Ctl, table: &[(&str, &str)]) {
 
 #[test]
 fn a_sensor_fault_latches_until_cleared() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     assert_eq!(
         ask(&mut ctl, "fault"),
         "ok fault none sensor 0 nonfinite 0 dac 0"
@@ -62,7 +67,7 @@ fn reference(ctl: &mut control::Ctl, n: usize) -> Vec<f64> {
 
 #[test]
 fn a_table_wave_moves_the_reference_through_the_points() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     exchange(
         &mut ctl,
         &[
@@ -135,7 +140,7 @@ fn a_table_wave_moves_the_reference_through_the_points() {
 
 #[test]
 fn a_steps_wave_visits_every_level() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     exchange(
         &mut ctl,
         &[
@@ -175,7 +180,7 @@ fn span(v: impl Iterator<Item = f64>) -> (f64, f64) {
 #[cfg(not(feature = "xy"))]
 #[test]
 fn one_axis_build_refuses_scans_and_axis_1() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     let unsupported = "err 13 not supported on this board";
     assert_eq!(ask(&mut ctl, "wave raster 10 10 8 50"), unsupported);
     assert_eq!(ask(&mut ctl, "wave lissajous 5 5 40 30"), unsupported);
@@ -196,7 +201,7 @@ fn one_axis_build_refuses_scans_and_axis_1() {
 #[cfg(feature = "xy")]
 #[test]
 fn xy_build_scans_both_axes() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     // 4 lines at 1 kHz: x period 100 samples, y triangle at 125 Hz (800 samples), centred
     // on half the spans by default: x 0..10, y 0..6 um.
     assert_eq!(
@@ -299,7 +304,7 @@ fn xy_build_scans_both_axes() {
 
 #[test]
 fn narrowing_and_widening_the_range_restores_the_safe_voltage() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     let safe = |ctl: &control::Ctl| ctl.lp.p.config().axes[0].safe_volts as f64;
     assert_eq!(safe(&ctl), control::SAFE_VOLTS);
     assert_eq!(ask(&mut ctl, "set u_min 10"), "ok u_min 10");
@@ -353,7 +358,7 @@ fn robust_gains(ctl: &control::Ctl) -> Vec<(f32, f32, f32)> {
 
 #[test]
 fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     let help = ask(&mut ctl, "help");
     for p in control::PARAMS {
         assert!(help.contains(&format!(" {p}")), "help lacks {p}: {help}");
@@ -517,7 +522,7 @@ fn the_gbw_laws_predict_with_the_gbw() {
             _ => panic!("{}: GBW expected", f.name()),
         }
     }
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     exchange(
         &mut ctl,
         &[
