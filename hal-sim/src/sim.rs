@@ -652,13 +652,15 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
         s.run.duration_s = 2.0;
         s.run.settle_s = Some(0.0);
     });
-    add("force-step", &|s| {
+    // Holding a position against a force from `at_s` on, scored after 50 ms.
+    let force = |s: &mut Scenario, duration_s: f64, at_s: f64| {
         s.reference.wave = WaveKind::Hold;
-        s.run.duration_s = 0.2;
+        s.run.duration_s = duration_s;
         s.run.settle_s = Some(0.05);
         s.stage.force.enabled = true;
-        s.stage.force.at_s = 0.1;
-    });
+        s.stage.force.at_s = at_s;
+    };
+    add("force-step", &|s| force(s, 0.2, 0.1));
     // FEEDBACK's robustness set (000 Part III-IV claims): 1 and 50 Hz, a force disturbance
     // of 37 % of the 100 um range (a 5 Hz sine: a 37 um step rings the 1.5 kHz structure to
     // ~74 um and out of the sensor range whatever the controller), +-20 % model parameter
@@ -683,11 +685,7 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
         s.run.settle_s = Some(0.04);
     });
     add("force-37pct", &|s| {
-        s.reference.wave = WaveKind::Hold;
-        s.run.duration_s = 0.3;
-        s.run.settle_s = Some(0.05);
-        s.stage.force.enabled = true;
-        s.stage.force.at_s = 0.05;
+        force(s, 0.3, 0.05);
         s.stage.force.freq_hz = 5.0;
         s.stage.force.newtons = 37.0 * s.stage.force.stiffness_n_per_um;
     });
