@@ -587,12 +587,7 @@ mod tests {
     }
 
     fn sine() -> Wave<f64> {
-        Wave::Sine {
-            offset_um: 50.0,
-            amplitude_um: 40.0,
-            freq_hz: 100.0,
-            phase_turns: 0.0,
-        }
+        Wave::sine(50.0, 40.0, 100.0)
     }
 
     #[test]

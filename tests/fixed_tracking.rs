@@ -223,12 +223,7 @@ fn track_pipeline<T: Real>(law_name: &str, ims: bool) -> f64 {
         "ff+hgo-robust" => robust(5e-4, 1_000.0, dt).unwrap(),
         _ => Feedback::OpenLoop,
     };
-    let wave = Wave::Sine {
-        offset_um: f(10.0),
-        amplitude_um: f(5.0),
-        freq_hz: f(50.0),
-        phase_turns: f(0.0),
-    };
+    let wave = Wave::sine(f(10.0), f(5.0), f(50.0));
     let mut p = Pipeline::new(config, [wave], MultiFeedforward::PerAxis([ff]), [fb]).unwrap();
     p.set_mode(if law_name == "open-loop" {
         Mode::Feedforward
