@@ -32,14 +32,7 @@ use crate::signals::Setpoint;
 /// A compensator parameter broke a condition; the text names it.
 pub type FfError = ParamError;
 
-#[inline]
-pub(crate) fn ensure(cond: bool, msg: &'static str) -> Result<(), FfError> {
-    if cond {
-        Ok(())
-    } else {
-        Err(ParamError(msg))
-    }
-}
+pub(crate) use crate::hysteresis::ensure;
 
 pub(crate) fn check_range<T: Real>(lo: T, hi: T) -> Result<(), FfError> {
     ensure(
@@ -53,6 +46,18 @@ pub(crate) fn check_dt<T: Real>(dt_s: T) -> Result<(), FfError> {
         dt_s.is_finite() && dt_s > T::ZERO,
         "feedforward: sample period dt_s must be finite and > 0",
     )
+}
+
+/// The voltage a compensator restarts at: `u0` (0 V when not finite) clamped to the range.
+#[inline]
+pub(crate) fn rest_volts<T: Real>(u0: T, lo: T, hi: T) -> T {
+    crate::hysteresis::sane_input(u0, T::ZERO).clamp_to(lo, hi)
+}
+
+/// A compensator's voltage range and sample period ([`check_range`], then [`check_dt`]).
+pub(crate) fn check_range_dt<T: Real>(lo: T, hi: T, dt_s: T) -> Result<(), FfError> {
+    check_range(lo, hi)?;
+    check_dt(dt_s)
 }
 
 /// Linear scaling only: `u = (y_ref - offset) / d`, no hysteresis model.

@@ -26,6 +26,7 @@
 #![allow(clippy::needless_range_loop)]
 
 mod matrix;
+pub(crate) use matrix::gauss;
 pub mod poly;
 
 use crate::hysteresis::{ensure, ParamError};

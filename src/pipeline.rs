@@ -536,6 +536,15 @@ mod tests {
     use crate::feedforward::Feedforward;
     use proptest::prelude::*;
 
+    /// Range `volts_min..volts_max`, slew limit `slew` (V/s).
+    fn limits(volts_min: f64, volts_max: f64, slew: f64) -> OutputLimits<f64> {
+        OutputLimits {
+            volts_min,
+            volts_max,
+            slew_volts_per_s: slew,
+        }
+    }
+
     const FULL: i32 = (1 << 20) - 1;
 
     pub(crate) fn axis() -> AxisConfig<f64> {
@@ -550,11 +559,7 @@ mod tests {
                 um_per_volt: 100.0 / 150.0,
                 offset_um: 0.0,
             },
-            limits: OutputLimits {
-                volts_min: 0.0,
-                volts_max: 150.0,
-                slew_volts_per_s: 20_000.0,
-            },
+            limits: limits(0.0, 150.0, 20_000.0),
             dac: DacScale {
                 volts_per_code: 150.0 / FULL as f64,
                 volts_at_zero: 0.0,
@@ -582,12 +587,7 @@ mod tests {
     }
 
     fn sine() -> Wave<f64> {
-        Wave::Sine {
-            offset_um: 50.0,
-            amplitude_um: 40.0,
-            freq_hz: 100.0,
-            phase_turns: 0.0,
-        }
+        Wave::sine(50.0, 40.0, 100.0)
     }
 
     #[test]
@@ -657,19 +657,11 @@ mod tests {
         for _ in 0..1000 {
             p.step([600_000]);
         }
-        let bad = OutputLimits {
-            volts_min: 10.0,
-            volts_max: 5.0,
-            slew_volts_per_s: 1e4,
-        };
+        let bad = limits(10.0, 5.0, 1e4);
         let e = p.set_limits(0, bad, 7.0).unwrap_err();
         assert!(e.what.contains("volts_min"), "{e}");
         assert!(p.set_limits(1, axis().limits, 0.0).is_err());
-        let new = OutputLimits {
-            volts_min: 20.0,
-            volts_max: 60.0,
-            slew_volts_per_s: 5_000.0,
-        };
+        let new = limits(20.0, 60.0, 5_000.0);
         let e = p.set_limits(0, new, 0.0).unwrap_err();
         assert!(e.what.contains("safe_volts"), "{e}");
         assert_eq!(

@@ -35,3 +35,15 @@ pub struct LoopSignals<T> {
     /// Integral laws and observers use this, so saturation never winds them up.
     pub u_applied: T,
 }
+
+impl<T: crate::Real> LoopSignals<T> {
+    /// The signals at a constant setpoint `r_um` ([`Setpoint::hold`]).
+    pub fn hold(r_um: T, y_um: T, u_ff: T, u_applied: T) -> Self {
+        Self {
+            setpoint: Setpoint::hold(r_um),
+            y_um,
+            u_ff,
+            u_applied,
+        }
+    }
+}

@@ -19,13 +19,24 @@ fn direct(ctl: &mut Ctl<OnChip>, line: &str) -> String {
     ctl.answer(line).as_str().to_string()
 }
 
+/// Types `line` and its newline into the command line, `ctl` the live loop behind it.
+fn type_line(cli: &mut CommandLine<OnChip>, ctl: &mut Ctl<OnChip>, port: &mut Lines, line: &str) {
+    for byte in line.bytes().chain(Some(b'\n')) {
+        cli.byte(byte, &mut Exclusive(&mut *ctl), port);
+    }
+}
+
+/// The live loop and its twin at the board's rate, and a command line on the live one.
+fn live_and_twin() -> (Ctl<OnChip>, Ctl<OnChip>, CommandLine<OnChip>, Lines) {
+    let hz = c(SAMPLE_HZ as f64);
+    let (a, b) = (Ctl::<OnChip>::new(hz), Ctl::<OnChip>::new(hz));
+    let cli = CommandLine::new(&b.lp);
+    (a, b, cli, Lines::default())
+}
+
 #[test]
 fn the_replica_path_answers_and_steps_as_the_direct_executor() {
-    let hz = c(SAMPLE_HZ as f64);
-    let mut a = Ctl::<OnChip>::new(hz);
-    let mut b = Ctl::<OnChip>::new(hz);
-    let mut cli = CommandLine::new(&b.lp);
-    let mut port = Lines::default();
+    let (mut a, mut b, mut cli, mut port) = live_and_twin();
     let script = [
         "ping",
         "get u_max",
@@ -60,9 +71,7 @@ fn the_replica_path_answers_and_steps_as_the_direct_executor() {
     for line in script {
         let want = direct(&mut a, line);
         port.0.clear();
-        for byte in line.bytes().chain(Some(b'\n')) {
-            cli.byte(byte, &mut Exclusive(&mut b), &mut port);
-        }
+        type_line(&mut cli, &mut b, &mut port, line);
         assert_eq!(port.0, [want], "reply to `{line}`");
         for _ in 0..50 {
             k += 1;
@@ -80,18 +89,9 @@ fn the_replica_path_answers_and_steps_as_the_direct_executor() {
 #[test]
 fn a_mode_over_budget_is_refused_and_changes_nothing() {
     use piezo_core::firmware::Budget;
-    let hz = c(SAMPLE_HZ as f64);
-    let mut live = Ctl::<OnChip>::new(hz);
-    let mut twin = Ctl::<OnChip>::new(hz);
+    let (mut twin, mut live, mut cli, mut port) = live_and_twin();
     // The QEMU M4F's period (10 000 instructions at 100 kHz), the SPI path's overhead.
-    let mut cli = CommandLine::new(&live.lp);
     cli.set_budget(Budget::m4f(10_000, 1_200));
-    let mut port = Lines::default();
-    let mut send = |ctl: &mut Ctl<OnChip>, line: &str| {
-        for b in line.bytes().chain([b'\n']) {
-            cli.byte(b, &mut Exclusive(ctl), &mut port);
-        }
-    };
     for line in [
         "mode ff+hgo-robust",
         "ff ims-cbw",
@@ -99,7 +99,7 @@ fn a_mode_over_budget_is_refused_and_changes_nothing() {
         "mode nmpc-gbw",
         "mode fts",
     ] {
-        send(&mut live, line);
+        type_line(&mut cli, &mut live, &mut port, line);
     }
     for line in ["mode ff+hgo-robust", "ff ims-cbw", "mode fts"] {
         direct(&mut twin, line);
@@ -127,11 +127,7 @@ fn a_mode_over_budget_is_refused_and_changes_nothing() {
 /// the restart, as the direct executor did: the same codes and state.
 #[test]
 fn a_limit_change_after_a_mode_change_keeps_its_restart() {
-    let hz = c(SAMPLE_HZ as f64);
-    let mut a = Ctl::<OnChip>::new(hz);
-    let mut b = Ctl::<OnChip>::new(hz);
-    let mut cli = CommandLine::new(&b.lp);
-    let mut port = Lines::default();
+    let (mut a, mut b, mut cli, mut port) = live_and_twin();
     let mid = 1i32 << (OnChip::ADC_BITS - 1);
     let mut k = 0i32;
     let mut steps = |a: &mut Ctl<OnChip>, b: &mut Ctl<OnChip>, n: usize| {
@@ -152,9 +148,7 @@ fn a_limit_change_after_a_mode_change_keeps_its_restart() {
     ] {
         for line in burst {
             direct(&mut a, line);
-            for byte in line.bytes().chain(Some(b'\n')) {
-                cli.byte(byte, &mut Exclusive(&mut b), &mut port);
-            }
+            type_line(&mut cli, &mut b, &mut port, line);
         }
         steps(&mut a, &mut b, 300);
         assert_eq!(a.lp.p.state(), b.lp.p.state(), "after {burst:?}");

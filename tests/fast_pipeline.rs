@@ -59,15 +59,7 @@ fn main_mode() -> Ctl {
     ctl.lp.set_law("ff+hgo-robust").unwrap();
     ctl.lp
         .p
-        .set_wave(
-            0,
-            Wave::Sine {
-                offset_um: c(10.0),
-                amplitude_um: c(5.0),
-                freq_hz: c(100.0),
-                phase_turns: c(0.0),
-            },
-        )
+        .set_wave(0, Wave::sine(c(10.0), c(5.0), c(100.0)))
         .unwrap();
     ctl
 }
@@ -193,12 +185,7 @@ fn apply(
             reference.lp.p.dac_write_failed(0, code);
         }
         Op::Sine { amp_um, freq_hz } => {
-            let w = Wave::Sine {
-                offset_um: c(10.0),
-                amplitude_um: amp_um,
-                freq_hz,
-                phase_turns: c(0.0),
-            };
+            let w = Wave::sine(c(10.0), amp_um, freq_hz);
             let a = fast.lp.p.set_wave(0, w);
             let b = reference.lp.p.set_wave(0, w);
             assert_eq!(a, b);

@@ -256,12 +256,7 @@ proptest! {
 #[test]
 fn every_law_is_bumpless_after_reset() {
     for mut law in all_laws() {
-        let io = LoopSignals {
-            setpoint: Setpoint::hold(12.0),
-            y_um: 10.0,
-            u_ff: 70.0,
-            u_applied: 77.0,
-        };
+        let io = LoopSignals::hold(12.0, 10.0, 70.0, 77.0);
         law.update(&io);
         law.reset(&io);
         let u = law.update(&io);

@@ -54,7 +54,7 @@ fn ims_solved_vs_delayed_at_1_10_50_hz() {
     println!("| f (Hz) | IMS solved RMSE (um) | IMS delayed RMSE (um) |");
     println!("|---|---|---|");
     for &f in &[1.0, 10.0, 50.0] {
-        let mut solved = Feedforward::ImsCbw(Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap());
+        let mut solved = Feedforward::ImsCbw(ims_solved(m));
         let mut delayed = Feedforward::ImsCbw(Ims::new(m, ImsLoop::Delayed, V.0, V.1, DT).unwrap());
         let (a, b) = (
             rmse(&m, &mut solved, f, 0.0),
@@ -86,38 +86,55 @@ fn check<M: Hysteresis<f32>>(
     );
 }
 
+/// [`check`] of the compensator `ff` builds on `model(1.0)` (exact) and on `model(off)`;
+/// returns the exact model.
+fn check_family<M: Hysteresis<f32>>(
+    name: &str,
+    model: impl Fn(f32) -> M,
+    off: f32,
+    ff: impl Fn(&M) -> Feedforward<f32>,
+    tight: f64,
+    f_hz: f64,
+) -> M {
+    let m = model(1.0);
+    check(name, &m, ff(&m), ff(&model(off)), tight, f_hz);
+    m
+}
+
+/// The solved-loop IMS on `m` over the test's voltage range.
+fn ims_solved<M: ImsModel<f32>>(m: M) -> Ims<f32, M> {
+    Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap()
+}
+
 #[test]
 fn every_compensator_on_its_exact_model_and_20_percent_off() {
     println!("| compensator | RMSE exact model (um) | RMSE params 20 % off (um) |");
     println!("|---|---|---|");
-    let m = cbw(1.0);
-    check(
+    check_family(
         "ims-cbw",
-        &m,
-        Feedforward::ImsCbw(Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
-        Feedforward::ImsCbw(Ims::new(cbw(1.2), ImsLoop::Solved, V.0, V.1, DT).unwrap()),
+        cbw,
+        1.2,
+        |m| Feedforward::ImsCbw(ims_solved(*m)),
         2e-4,
         1.0,
     );
 
     let gbw = |k: f32| Gbw::new(0.16 * k, 1.0, 0.07 * k, 0.005 * k, 0.02 * k, 1.0).unwrap();
-    let m = gbw(1.0);
-    check(
+    check_family(
         "ims-gbw",
-        &m,
-        Feedforward::ImsGbw(Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
-        Feedforward::ImsGbw(Ims::new(gbw(0.8), ImsLoop::Solved, V.0, V.1, DT).unwrap()),
+        gbw,
+        0.8,
+        |m| Feedforward::ImsGbw(ims_solved(*m)),
         2e-4,
         1.0,
     );
 
     let dahl = |k: f32| Dahl::new(0.16 * k, 0.05 * k, 2.0 * k, 1.0).unwrap();
-    let m = dahl(1.0);
-    check(
+    check_family(
         "ims-dahl",
-        &m,
-        Feedforward::ImsDahl(Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
-        Feedforward::ImsDahl(Ims::new(dahl(1.2), ImsLoop::Solved, V.0, V.1, DT).unwrap()),
+        dahl,
+        1.2,
+        |m| Feedforward::ImsDahl(ims_solved(*m)),
         2e-4,
         1.0,
     );
@@ -136,25 +153,18 @@ fn every_compensator_on_its_exact_model_and_20_percent_off() {
         )
         .unwrap()
     };
-    let m = mbw(1.0);
-    check(
+    // f32 resolution: dy/du of the rate terms is ~2e3 um/V at 10 kHz, one ulp of u ~5e-7 V.
+    let m = check_family(
         "ims-mbw",
-        &m,
-        Feedforward::ImsMbw(Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
-        Feedforward::ImsMbw(Ims::new(mbw(1.2), ImsLoop::Solved, V.0, V.1, DT).unwrap()),
-        // f32 resolution: dy/du of the rate terms is ~2e3 um/V at 10 kHz, one ulp of u ~5e-7 V.
+        mbw,
+        1.2,
+        |m| Feedforward::ImsMbw(ims_solved(*m)),
         2e-3,
         1.0,
     );
     // Without inversion the error is the method's own, not rounding.
-    check(
-        "mbw-no-inverse",
-        &m,
-        Feedforward::Mbw(MbwFf::new(m, 1.0, V.0, V.1, DT).unwrap()),
-        Feedforward::Mbw(MbwFf::new(mbw(1.2), 1.0, V.0, V.1, DT).unwrap()),
-        0.05,
-        0.1,
-    );
+    let mbw_ff = |m: &Mbw002<f32>| Feedforward::Mbw(MbwFf::new(*m, 1.0, V.0, V.1, DT).unwrap());
+    check_family("mbw-no-inverse", mbw, 1.2, mbw_ff, 0.05, 0.1);
     let mut lin = Feedforward::Linear(LinearFf {
         um_per_volt: m.abw().d(),
         offset_um: 0.0,
@@ -169,15 +179,10 @@ fn every_compensator_on_its_exact_model_and_20_percent_off() {
         )
         .unwrap()
     };
-    let m = wp(1.0);
-    check(
-        "wpmbw-inverse",
-        &m,
-        Feedforward::Wpmbw(WpmbwInverse::new(&m, None, None, V.0, V.1, DT).unwrap()),
-        Feedforward::Wpmbw(WpmbwInverse::new(&wp(1.2), None, None, V.0, V.1, DT).unwrap()),
-        2e-4,
-        1.0,
-    );
+    let wp_ff = |m: &Wpmbw<f32, 2>| {
+        Feedforward::Wpmbw(WpmbwInverse::new(m, None, None, V.0, V.1, DT).unwrap())
+    };
+    check_family("wpmbw-inverse", wp, 1.2, wp_ff, 2e-4, 1.0);
 
     let pi = |k: f32| {
         Pi::new(
@@ -187,15 +192,8 @@ fn every_compensator_on_its_exact_model_and_20_percent_off() {
         )
         .unwrap()
     };
-    let m = pi(1.0);
-    check(
-        "pi-inverse",
-        &m,
-        Feedforward::PiInverse(PiInverse::new(&m, V.0, V.1).unwrap()),
-        Feedforward::PiInverse(PiInverse::new(&pi(1.2), V.0, V.1).unwrap()),
-        2e-4,
-        1.0,
-    );
+    let pi_ff = |m: &Pi<f32, 3>| Feedforward::PiInverse(PiInverse::new(m, V.0, V.1).unwrap());
+    check_family("pi-inverse", pi, 1.2, pi_ff, 2e-4, 1.0);
 
     let ppi = |k: f32| {
         Ppi::new(
@@ -206,15 +204,8 @@ fn every_compensator_on_its_exact_model_and_20_percent_off() {
         )
         .unwrap()
     };
-    let m = ppi(1.0);
-    check(
-        "ppi-inverse",
-        &m,
-        Feedforward::PpiInverse(ppi_inverse(&m, V.0, V.1, DT).unwrap()),
-        Feedforward::PpiInverse(ppi_inverse(&ppi(1.2), V.0, V.1, DT).unwrap()),
-        2e-4,
-        1.0,
-    );
+    let ppi_ff = |m: &Ppi<f32, 3>| Feedforward::PpiInverse(ppi_inverse(m, V.0, V.1, DT).unwrap());
+    check_family("ppi-inverse", ppi, 1.2, ppi_ff, 2e-4, 1.0);
 
     let dpi = |k: f32| {
         Dpi::new(
@@ -225,15 +216,9 @@ fn every_compensator_on_its_exact_model_and_20_percent_off() {
         )
         .unwrap()
     };
-    let m = dpi(1.0);
-    check(
-        "dpi-inverse",
-        &m,
-        Feedforward::DpiInverse(DpiInverse::new(&m, V.0, V.1).unwrap()),
-        Feedforward::DpiInverse(DpiInverse::new(&dpi(1.2), V.0, V.1).unwrap()),
-        2e-4,
-        1.0,
-    );
+    let dpi_ff =
+        |m: &Dpi<f32, 3, 2>| Feedforward::DpiInverse(DpiInverse::new(m, V.0, V.1).unwrap());
+    check_family("dpi-inverse", dpi, 1.2, dpi_ff, 2e-4, 1.0);
 }
 
 #[test]
@@ -277,8 +262,8 @@ fn decoupler_makes_per_axis_ims_exact_on_a_coupled_stage() {
     let c = [[1.0f32, 0.04], [0.03, 1.0]];
     let axes = || {
         [
-            Feedforward::ImsCbw(Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
-            Feedforward::ImsCbw(Ims::new(m, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
+            Feedforward::ImsCbw(ims_solved(m)),
+            Feedforward::ImsCbw(ims_solved(m)),
         ]
     };
     let mut dec = MultiFeedforward::decoupled(c, axes()).unwrap();
@@ -326,7 +311,7 @@ fn reset_at_applied_voltage_is_consistent_with_the_model_at_rest_there() {
             dpi.step(&mut dpi.init(u0), u0, DT),
         ),
         (
-            Feedforward::ImsCbw(Ims::new(cbw, ImsLoop::Solved, V.0, V.1, DT).unwrap()),
+            Feedforward::ImsCbw(ims_solved(cbw)),
             cbw.step(&mut cbw.init(u0), u0, DT),
         ),
     ];

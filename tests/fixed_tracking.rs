@@ -33,40 +33,64 @@ fn cbw<T: Real>() -> Cbw<T> {
     .unwrap()
 }
 
+/// The PID of both tests at sample period `dt_s`.
+fn pid<T: Real>(dt_s: f64) -> Result<Pid<T>, piezo_core::hysteresis::ParamError> {
+    let f = T::from_f64;
+    Pid::new(PidConfig {
+        kp: f(0.5),
+        ki: f(2_000.0),
+        kd: f(0.0),
+        tf_s: f(1e-4),
+        kb: f(1.0),
+        feedforward: true,
+        dt_s: f(dt_s),
+    })
+}
+
+/// The HGO-based robust law on the plant's CBW: observer `eps_s`, gains `lambda`.
+fn robust<T: Real>(
+    eps_s: f64,
+    lambda: f64,
+    dt_s: f64,
+) -> Result<Feedback<T>, piezo_core::hysteresis::ParamError> {
+    let f = T::from_f64;
+    let hgo = Hgo::new(
+        ObserverModel::Cbw(cbw()),
+        f(POLE_PER_S),
+        f(eps_s),
+        f(hgo::K1),
+        f(hgo::K2),
+        f(dt_s),
+    )?;
+    let cfg = RobustConfig {
+        lambda1: f(lambda),
+        lambda2: f(lambda),
+        feedforward: true,
+        convergence: Convergence::Exponential,
+    };
+    Ok(Feedback::Robust(Robust::new(hgo, cfg)?))
+}
+
+/// IMS on the plant's CBW over 0..150 V, or the linear scaling.
+fn feedforward<T: Real>(ims: bool, dt_s: f64) -> Feedforward<T> {
+    let f = T::from_f64;
+    if ims {
+        Feedforward::ImsCbw(Ims::new(cbw(), ImsLoop::Solved, f(0.0), f(150.0), f(dt_s)).unwrap())
+    } else {
+        Feedforward::Linear(LinearFf {
+            um_per_volt: f(0.16),
+            offset_um: f(0.0),
+        })
+    }
+}
+
 fn law<T: Real>(name: &str) -> Result<Feedback<T>, piezo_core::hysteresis::ParamError> {
     let f = T::from_f64;
     let dt = f(1.0 / FS_HZ);
-    let hgo = || {
-        Hgo::new(
-            ObserverModel::Cbw(cbw()),
-            f(POLE_PER_S),
-            f(2e-4),
-            f(hgo::K1),
-            f(hgo::K2),
-            dt,
-        )
-        .unwrap()
-    };
     Ok(match name {
         "open-loop" => Feedback::OpenLoop,
-        "ff+pid" => Feedback::Pid(Pid::new(PidConfig {
-            kp: f(0.5),
-            ki: f(2_000.0),
-            kd: f(0.0),
-            tf_s: f(1e-4),
-            kb: f(1.0),
-            feedforward: true,
-            dt_s: dt,
-        })?),
-        "ff+hgo-robust" => Feedback::Robust(Robust::new(
-            hgo(),
-            RobustConfig {
-                lambda1: f(2_000.0),
-                lambda2: f(2_000.0),
-                feedforward: true,
-                convergence: Convergence::Exponential,
-            },
-        )?),
+        "ff+pid" => Feedback::Pid(pid(1.0 / FS_HZ)?),
+        "ff+hgo-robust" => robust(2e-4, 2_000.0, 1.0 / FS_HZ)?,
         "ff+adrc" => Feedback::Adrc(Adrc::new(AdrcConfig {
             b: f(0.16 * POLE_PER_S * POLE_PER_S),
             a1: f(0.0),
@@ -85,14 +109,7 @@ fn law<T: Real>(name: &str) -> Result<Feedback<T>, piezo_core::hysteresis::Param
 fn track<T: Real>(law_name: &str, ims: bool) -> (f64, f64, bool) {
     let f = T::from_f64;
     let dt = 1.0 / FS_HZ;
-    let mut ff = if ims {
-        Feedforward::ImsCbw(Ims::new(cbw(), ImsLoop::Solved, f(0.0), f(150.0), f(dt)).unwrap())
-    } else {
-        Feedforward::Linear(LinearFf {
-            um_per_volt: f(0.16),
-            offset_um: f(0.0),
-        })
-    };
+    let mut ff = feedforward::<T>(ims, dt);
     let mut fb = law::<T>(law_name).unwrap();
     let plant = cbw::<f64>();
     let mut ps = plant.init(0.0);
@@ -199,56 +216,14 @@ fn track_pipeline<T: Real>(law_name: &str, ims: bool) -> f64 {
             safe_volts: f(0.0),
         }],
     };
-    let ff = if ims {
-        Feedforward::ImsCbw(Ims::new(cbw(), ImsLoop::Solved, f(0.0), f(150.0), f(dt)).unwrap())
-    } else {
-        Feedforward::Linear(LinearFf {
-            um_per_volt: f(0.16),
-            offset_um: f(0.0),
-        })
-    };
+    let ff = feedforward::<T>(ims, dt);
     // The laws above are tuned at 65 536 Hz; only their sample period changes here.
     let fb = match law_name {
-        "ff+pid" => Feedback::Pid(
-            Pid::new(PidConfig {
-                kp: f(0.5),
-                ki: f(2_000.0),
-                kd: f(0.0),
-                tf_s: f(1e-4),
-                kb: f(1.0),
-                feedforward: true,
-                dt_s: f(dt),
-            })
-            .unwrap(),
-        ),
-        "ff+hgo-robust" => Feedback::Robust(
-            Robust::new(
-                Hgo::new(
-                    ObserverModel::Cbw(cbw()),
-                    f(POLE_PER_S),
-                    f(5e-4),
-                    f(hgo::K1),
-                    f(hgo::K2),
-                    f(dt),
-                )
-                .unwrap(),
-                RobustConfig {
-                    lambda1: f(1_000.0),
-                    lambda2: f(1_000.0),
-                    feedforward: true,
-                    convergence: Convergence::Exponential,
-                },
-            )
-            .unwrap(),
-        ),
+        "ff+pid" => Feedback::Pid(pid(dt).unwrap()),
+        "ff+hgo-robust" => robust(5e-4, 1_000.0, dt).unwrap(),
         _ => Feedback::OpenLoop,
     };
-    let wave = Wave::Sine {
-        offset_um: f(10.0),
-        amplitude_um: f(5.0),
-        freq_hz: f(50.0),
-        phase_turns: f(0.0),
-    };
+    let wave = Wave::sine(f(10.0), f(5.0), f(50.0));
     let mut p = Pipeline::new(config, [wave], MultiFeedforward::PerAxis([ff]), [fb]).unwrap();
     p.set_mode(if law_name == "open-loop" {
         Mode::Feedforward

@@ -11,13 +11,25 @@ mod control {
     pub const DAC_FULL: i32 = OnChip::DAC_FULL;
 }
 
+/// The executor at the board's sample rate, as it powers up.
+fn board() -> control::Ctl {
+    control::Ctl::new(control::c(control::SAMPLE_HZ as f64))
+}
+
 fn ask(ctl: &mut control::Ctl, line: &str) -> String {
     ctl.answer(line).as_str().to_string()
 }
 
+/// Sends each command in turn and checks its reply.
+fn exchange(ctl: &mut control::Ctl, table: &[(&str, &str)]) {
+    for (line, reply) in table {
+        assert_eq!(ask(ctl, line), *reply, "reply to `{line}`");
+    }
+}
+
 #[test]
 fn a_sensor_fault_latches_until_cleared() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     assert_eq!(
         ask(&mut ctl, "fault"),
         "ok fault none sensor 0 nonfinite 0 dac 0"
@@ -55,24 +67,28 @@ fn reference(ctl: &mut control::Ctl, n: usize) -> Vec<f64> {
 
 #[test]
 fn a_table_wave_moves_the_reference_through_the_points() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
-    assert_eq!(ask(&mut ctl, "table len"), "ok table 0");
-    assert_eq!(
-        ask(&mut ctl, "wave table 10"),
-        "err 12 not possible in the current state"
+    let mut ctl = board();
+    exchange(
+        &mut ctl,
+        &[
+            ("table len", "ok table 0"),
+            ("wave table 10", "err 12 not possible in the current state"),
+            ("table add 5", "ok table 1"),
+            ("wave table 10", "err 12 not possible in the current state"),
+            ("table clear", "ok table 0"),
+        ],
     );
-    assert_eq!(ask(&mut ctl, "table add 5"), "ok table 1");
-    assert_eq!(
-        ask(&mut ctl, "wave table 10"),
-        "err 12 not possible in the current state"
-    );
-    assert_eq!(ask(&mut ctl, "table clear"), "ok table 0");
     // 5 points in two lines; 1 kHz: 100 samples per period, 20 per point.
     let pts = [10.0, 40.0, 25.0, 60.0, 5.0];
-    assert_eq!(ask(&mut ctl, "table add 10 40 25"), "ok table 3");
-    assert_eq!(ask(&mut ctl, "table add 60 5"), "ok table 5");
-    assert_eq!(ask(&mut ctl, "table len"), "ok table 5");
-    assert_eq!(ask(&mut ctl, "wave table 1000"), "ok wave table 1000 5");
+    exchange(
+        &mut ctl,
+        &[
+            ("table add 10 40 25", "ok table 3"),
+            ("table add 60 5", "ok table 5"),
+            ("table len", "ok table 5"),
+            ("wave table 1000", "ok wave table 1000 5"),
+        ],
+    );
     let period = control::SAMPLE_HZ as usize / 1000;
     let r = reference(&mut ctl, 3 * period);
     // Each point is passed within one sample's travel (the phase accumulator is not an
@@ -113,20 +129,24 @@ fn a_table_wave_moves_the_reference_through_the_points() {
             format!("ok table {}", 8 * n)
         );
     }
-    assert_eq!(ask(&mut ctl, "table add 1"), "err 8 value out of range");
-    assert_eq!(ask(&mut ctl, "table len"), "ok table 64");
+    exchange(
+        &mut ctl,
+        &[
+            ("table add 1", "err 8 value out of range"),
+            ("table len", "ok table 64"),
+        ],
+    );
 }
 
 #[test]
 fn a_steps_wave_visits_every_level() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
-    assert_eq!(
-        ask(&mut ctl, "wave steps 10 40 4 1000"),
-        "ok wave steps 10 40 4 1000"
-    );
-    assert_eq!(
-        ask(&mut ctl, "wave steps 10 40 65 1000"),
-        "err 8 value out of range"
+    let mut ctl = board();
+    exchange(
+        &mut ctl,
+        &[
+            ("wave steps 10 40 4 1000", "ok wave steps 10 40 4 1000"),
+            ("wave steps 10 40 65 1000", "err 8 value out of range"),
+        ],
     );
     let r = reference(&mut ctl, control::SAMPLE_HZ as usize / 1000);
     let mut levels: Vec<i64> = r.iter().map(|y| (y * 1000.0).round() as i64).collect();
@@ -160,14 +180,19 @@ fn span(v: impl Iterator<Item = f64>) -> (f64, f64) {
 #[cfg(not(feature = "xy"))]
 #[test]
 fn one_axis_build_refuses_scans_and_axis_1() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     let unsupported = "err 13 not supported on this board";
     assert_eq!(ask(&mut ctl, "wave raster 10 10 8 50"), unsupported);
     assert_eq!(ask(&mut ctl, "wave lissajous 5 5 40 30"), unsupported);
     assert_eq!(ask(&mut ctl, "rec sel ref_um y1_um"), unsupported);
-    assert_eq!(ask(&mut ctl, "axis"), "ok axis 0 of 1");
-    assert_eq!(ask(&mut ctl, "axis 1"), "err 8 value out of range");
-    assert_eq!(ask(&mut ctl, "axis 0"), "ok axis 0 of 1");
+    exchange(
+        &mut ctl,
+        &[
+            ("axis", "ok axis 0 of 1"),
+            ("axis 1", "err 8 value out of range"),
+            ("axis 0", "ok axis 0 of 1"),
+        ],
+    );
 }
 
 /// The xy build (`cargo test -p piezo-core --features xy --test same_pipeline_executor`):
@@ -176,7 +201,7 @@ fn one_axis_build_refuses_scans_and_axis_1() {
 #[cfg(feature = "xy")]
 #[test]
 fn xy_build_scans_both_axes() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     // 4 lines at 1 kHz: x period 100 samples, y triangle at 125 Hz (800 samples), centred
     // on half the spans by default: x 0..10, y 0..6 um.
     assert_eq!(
@@ -241,10 +266,15 @@ fn xy_build_scans_both_axes() {
     );
 
     // `axis 1`: the 1-axis waves go to y; `wave off` holds both.
-    assert_eq!(ask(&mut ctl, "axis 2"), "err 8 value out of range");
-    assert_eq!(ask(&mut ctl, "axis 1"), "ok axis 1 of 2");
-    assert_eq!(ask(&mut ctl, "wave off"), "ok wave off");
-    assert_eq!(ask(&mut ctl, "wave hold 12"), "ok wave hold 12");
+    exchange(
+        &mut ctl,
+        &[
+            ("axis 2", "err 8 value out of range"),
+            ("axis 1", "ok axis 1 of 2"),
+            ("wave off", "ok wave off"),
+            ("wave hold 12", "ok wave hold 12"),
+        ],
+    );
     let r = references(&mut ctl, 10);
     assert_eq!(r[9][1], 12.0);
     assert!((r[9][0] - r[0][0]).abs() < 1e-9, "x must hold");
@@ -255,8 +285,13 @@ fn xy_build_scans_both_axes() {
     for fb in ctl.lp.p.feedback() {
         assert_eq!(fb.name(), "ff+pid");
     }
-    assert_eq!(ask(&mut ctl, "set u_max 120"), "ok u_max 120");
-    assert_eq!(ask(&mut ctl, "set slew 1"), "err 8 value out of range");
+    exchange(
+        &mut ctl,
+        &[
+            ("set u_max 120", "ok u_max 120"),
+            ("set slew 1", "err 8 value out of range"),
+        ],
+    );
     for a in &ctl.lp.p.config().axes {
         assert_eq!(a.limits.volts_max, 120.0);
         assert_eq!(a.limits.slew_volts_per_s, 20_000.0);
@@ -269,7 +304,7 @@ fn xy_build_scans_both_axes() {
 
 #[test]
 fn narrowing_and_widening_the_range_restores_the_safe_voltage() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     let safe = |ctl: &control::Ctl| ctl.lp.p.config().axes[0].safe_volts as f64;
     assert_eq!(safe(&ctl), control::SAFE_VOLTS);
     assert_eq!(ask(&mut ctl, "set u_min 10"), "ok u_min 10");
@@ -300,6 +335,13 @@ fn ims_models(ctl: &control::Ctl) -> Vec<piezo_core::hysteresis::Cbw<f32>> {
         .collect()
 }
 
+/// Every axis's IMS compensator holds the CBW `(d, alpha, beta, gamma)`.
+fn assert_cbw(ctl: &control::Ctl, want: (f32, f32, f32, f32)) {
+    for m in ims_models(ctl) {
+        assert_eq!((m.d(), m.alpha(), m.beta(), m.gamma()), want);
+    }
+}
+
 /// The observer's `eps_s` and the robust gains on every axis.
 fn robust_gains(ctl: &control::Ctl) -> Vec<(f32, f32, f32)> {
     use piezo_core::feedback::Feedback;
@@ -316,16 +358,21 @@ fn robust_gains(ctl: &control::Ctl) -> Vec<(f32, f32, f32)> {
 
 #[test]
 fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+    let mut ctl = board();
     let help = ask(&mut ctl, "help");
     for p in control::PARAMS {
         assert!(help.contains(&format!(" {p}")), "help lacks {p}: {help}");
         assert!(ask(&mut ctl, &format!("get {p}")).starts_with(&format!("ok {p} ")));
     }
-    assert_eq!(ask(&mut ctl, "get cbw_d"), "ok cbw_d 0.16");
-    assert_eq!(ask(&mut ctl, "get hgo_eps"), "ok hgo_eps 0.0002");
-    assert_eq!(ask(&mut ctl, "ff ims-cbw"), "ok ff ims-cbw");
-    assert_eq!(ask(&mut ctl, "mode ff+hgo-robust"), "ok mode ff+hgo-robust");
+    exchange(
+        &mut ctl,
+        &[
+            ("get cbw_d", "ok cbw_d 0.16"),
+            ("get hgo_eps", "ok hgo_eps 0.0002"),
+            ("ff ims-cbw", "ok ff ims-cbw"),
+            ("mode ff+hgo-robust", "ok mode ff+hgo-robust"),
+        ],
+    );
     let mid = 1 << (control::ADC_BITS - 1);
     assert_eq!(ask(&mut ctl, "wave sine 5 100 20"), "ok wave sine 5 100 20");
     for _ in 0..200 {
@@ -339,22 +386,27 @@ fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
     );
 
     // A new model: the compensator and the observer take it, on every axis.
-    assert_eq!(ask(&mut ctl, "set cbw_alpha 0.05"), "ok cbw_alpha 0.05");
-    assert_eq!(ask(&mut ctl, "set cbw_d 0.2"), "ok cbw_d 0.2");
-    for m in ims_models(&ctl) {
-        assert_eq!(
-            (m.d(), m.alpha(), m.beta(), m.gamma()),
-            (0.2, 0.05, 0.02, 0.01)
-        );
-    }
+    exchange(
+        &mut ctl,
+        &[
+            ("set cbw_alpha 0.05", "ok cbw_alpha 0.05"),
+            ("set cbw_d 0.2", "ok cbw_d 0.2"),
+        ],
+    );
+    assert_cbw(&ctl, (0.2, 0.05, 0.02, 0.01));
     for f in ctl.lp.p.feedback() {
         let piezo_core::feedback::Feedback::Robust(r) = f else {
             panic!("robust law expected");
         };
         assert_eq!(r.observer().d_p(), 0.2);
     }
-    assert_eq!(ask(&mut ctl, "set hgo_eps 1e-4"), "ok hgo_eps 0.0001");
-    assert_eq!(ask(&mut ctl, "set lambda2 3000"), "ok lambda2 3000");
+    exchange(
+        &mut ctl,
+        &[
+            ("set hgo_eps 1e-4", "ok hgo_eps 0.0001"),
+            ("set lambda2 3000", "ok lambda2 3000"),
+        ],
+    );
     for g in robust_gains(&ctl) {
         assert_eq!(g, (1e-4, 2_000.0, 3_000.0));
     }
@@ -397,20 +449,14 @@ fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
 
     // The whole model at once: valid as a whole, though not through single `set`s from
     // the present one (beta 0.005 below the present gamma 0.01 breaks 004 eq. 3).
-    assert_eq!(
-        ask(&mut ctl, "set cbw_beta 0.005"),
-        "err 8 value out of range"
+    exchange(
+        &mut ctl,
+        &[
+            ("set cbw_beta 0.005", "err 8 value out of range"),
+            ("cbw 0.21 0.06 0.005 0.002", "ok cbw 0.21 0.06 0.005 0.002"),
+        ],
     );
-    assert_eq!(
-        ask(&mut ctl, "cbw 0.21 0.06 0.005 0.002"),
-        "ok cbw 0.21 0.06 0.005 0.002"
-    );
-    for m in ims_models(&ctl) {
-        assert_eq!(
-            (m.d(), m.alpha(), m.beta(), m.gamma()),
-            (0.21, 0.06, 0.005, 0.002)
-        );
-    }
+    assert_cbw(&ctl, (0.21, 0.06, 0.005, 0.002));
     assert_eq!(ctl.lp.p.is_fused(), fused);
     // beta < gamma (004 eq. 3); and d = 0.05 below the largest slope dh/du (0.093 um/V),
     // which IMS refuses.
@@ -430,16 +476,26 @@ fn model_and_gains_are_set_at_run_time_and_bad_values_change_nothing() {
     );
 
     // PID gains and the open-loop scaling.
-    assert_eq!(ask(&mut ctl, "set pid_kp 0.25"), "ok pid_kp 0.25");
-    assert_eq!(ask(&mut ctl, "mode pid"), "ok mode pid");
+    exchange(
+        &mut ctl,
+        &[
+            ("set pid_kp 0.25", "ok pid_kp 0.25"),
+            ("mode pid", "ok mode pid"),
+        ],
+    );
     for f in ctl.lp.p.feedback() {
         let piezo_core::feedback::Feedback::Pid(p) = f else {
             panic!("PID expected");
         };
         assert_eq!((p.config().kp, p.config().ki), (0.25, 2_000.0));
     }
-    assert_eq!(ask(&mut ctl, "set um_per_volt 0.5"), "ok um_per_volt 0.5");
-    assert_eq!(ask(&mut ctl, "set offset_um -1"), "ok offset_um -1");
+    exchange(
+        &mut ctl,
+        &[
+            ("set um_per_volt 0.5", "ok um_per_volt 0.5"),
+            ("set offset_um -1", "ok offset_um -1"),
+        ],
+    );
     for a in &ctl.lp.p.config().axes {
         assert_eq!(
             (a.open_loop.um_per_volt, a.open_loop.offset_um),
@@ -466,9 +522,14 @@ fn the_gbw_laws_predict_with_the_gbw() {
             _ => panic!("{}: GBW expected", f.name()),
         }
     }
-    let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
-    assert_eq!(ask(&mut ctl, "get gbw_b"), "ok gbw_b 0");
-    assert_eq!(ask(&mut ctl, "set gbw_b 0.006"), "ok gbw_b 0.006");
+    let mut ctl = board();
+    exchange(
+        &mut ctl,
+        &[
+            ("get gbw_b", "ok gbw_b 0"),
+            ("set gbw_b 0.006", "ok gbw_b 0.006"),
+        ],
+    );
     let mid = 1 << (control::ADC_BITS - 1);
     assert_eq!(ask(&mut ctl, "wave sine 5 100 20"), "ok wave sine 5 100 20");
     for law in ["fts-gbw", "nmpc-gbw"] {
@@ -492,15 +553,14 @@ fn the_gbw_laws_predict_with_the_gbw() {
         let Feedback::Nmpc(n) = f else { panic!() };
         assert!(matches!(n.observer().model(), ObserverModel::Cbw(_)));
     }
-    assert_eq!(ask(&mut ctl, "mode ff+nmpc-gbw"), "err 9 unknown mode name");
-    assert_eq!(ask(&mut ctl, "set gbw_b 0.03"), "err 8 value out of range");
-    assert_eq!(
-        ask(&mut ctl, "set gbw_b -0.031"),
-        "err 8 value out of range"
-    );
-    assert_eq!(ask(&mut ctl, "get gbw_b"), "ok gbw_b 0.006");
-    assert_eq!(
-        ask(&mut ctl, "fault"),
-        "ok fault none sensor 0 nonfinite 0 dac 0"
+    exchange(
+        &mut ctl,
+        &[
+            ("mode ff+nmpc-gbw", "err 9 unknown mode name"),
+            ("set gbw_b 0.03", "err 8 value out of range"),
+            ("set gbw_b -0.031", "err 8 value out of range"),
+            ("get gbw_b", "ok gbw_b 0.006"),
+            ("fault", "ok fault none sensor 0 nonfinite 0 dac 0"),
+        ],
     );
 }

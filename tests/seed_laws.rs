@@ -85,12 +85,7 @@ fn finite_time_error_reaches_its_band_in_the_computed_time() {
             p.step((k as f64 * 0.01).min(60.0));
         }
         let y0 = p.x;
-        let io = |y_d: f64, p: &Plant| LoopSignals {
-            setpoint: Setpoint::hold(y_d),
-            y_um: p.x,
-            u_ff: 0.0,
-            u_applied: p.u,
-        };
+        let io = |y_d: f64, p: &Plant| LoopSignals::hold(y_d, p.x, 0.0, p.u);
         law.update(&io(y0, &p)); // primes the observer at rest
         let y_d = y0 + step_um;
         // The outer error settles in T1; the inner one starts at most at the saturated

@@ -109,6 +109,32 @@ pub fn adc_config(sc: &Scenario) -> Ad4000Config {
     }
 }
 
+/// The mock ADC of a scenario's converters (its errors and noise; timing and seed at
+/// their defaults).
+pub fn adc_spec(sc: &Scenario) -> AdcSpec {
+    let cv = &sc.converters;
+    AdcSpec {
+        config: adc_config(sc),
+        vref: cv.adc_vref,
+        offset_lsb: cv.adc_offset_lsb,
+        gain_error: cv.adc_gain_error,
+        noise_lsb: cv.adc_noise_lsb,
+        ..AdcSpec::default()
+    }
+}
+
+/// The mock DAC of a scenario's converters (range and errors).
+pub fn dac_spec(sc: &Scenario) -> DacSpec {
+    let cv = &sc.converters;
+    DacSpec {
+        vrefp: cv.dac_vrefp,
+        vrefn: cv.dac_vrefn,
+        offset_lsb: cv.dac_offset_lsb,
+        gain_error: cv.dac_gain_error,
+        ..DacSpec::default()
+    }
+}
+
 /// The firmware pipeline configuration for the scenario's stage and converters (nominal
 /// values: the converters' offset and gain errors stay uncalibrated).
 pub fn pipeline_config<const N: usize>(sc: &Scenario, linear: &LinearFf<f64>) -> Config<R, N> {
@@ -214,21 +240,15 @@ pub fn converters(
     clock: &MockClock,
     initial_codes: &[i32],
 ) -> Result<(Vec<AdcChannel>, Vec<DacChannel>)> {
-    let cv = &sc.converters;
     let acfg = adc_config(sc);
     let mut adcs = Vec::new();
     let mut dacs = Vec::new();
     for i in 0..axes {
         let chip = MockAdc::new(
             AdcSpec {
-                config: acfg,
-                vref: cv.adc_vref,
-                offset_lsb: cv.adc_offset_lsb,
-                gain_error: cv.adc_gain_error,
-                noise_lsb: cv.adc_noise_lsb,
                 t_conv_ns: 290,
                 seed: sc.run.seed.wrapping_add(100 + i as u64),
-                ..AdcSpec::default()
+                ..adc_spec(sc)
             },
             clock.clone(),
         );
@@ -237,16 +257,7 @@ pub fn converters(
             .map_err(|e| anyhow!("ADC {i}: {e}"))?;
         driver.init().map_err(|e| anyhow!("ADC {i} init: {e}"))?;
         adcs.push(AdcChannel { chip, driver });
-        let chip = MockDac::new(
-            DacSpec {
-                vrefp: cv.dac_vrefp,
-                vrefn: cv.dac_vrefn,
-                offset_lsb: cv.dac_offset_lsb,
-                gain_error: cv.dac_gain_error,
-                ..DacSpec::default()
-            },
-            clock.clone(),
-        );
+        let chip = MockDac::new(dac_spec(sc), clock.clone());
         let delay = MockDelay(clock.clone());
         let mut driver = SimDac::new(chip.spi(), chip.ldac(), delay, Ad5791Config::DEFAULT)
             .map_err(|e| anyhow!("DAC {i}: {e}"))?;
@@ -641,13 +652,15 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
         s.run.duration_s = 2.0;
         s.run.settle_s = Some(0.0);
     });
-    add("force-step", &|s| {
+    // Holding a position against a force from `at_s` on, scored after 50 ms.
+    let force = |s: &mut Scenario, duration_s: f64, at_s: f64| {
         s.reference.wave = WaveKind::Hold;
-        s.run.duration_s = 0.2;
+        s.run.duration_s = duration_s;
         s.run.settle_s = Some(0.05);
         s.stage.force.enabled = true;
-        s.stage.force.at_s = 0.1;
-    });
+        s.stage.force.at_s = at_s;
+    };
+    add("force-step", &|s| force(s, 0.2, 0.1));
     // FEEDBACK's robustness set (000 Part III-IV claims): 1 and 50 Hz, a force disturbance
     // of 37 % of the 100 um range (a 5 Hz sine: a 37 um step rings the 1.5 kHz structure to
     // ~74 um and out of the sensor range whatever the controller), +-20 % model parameter
@@ -672,11 +685,7 @@ pub fn default_scenarios(freq_hz: Option<f64>, amplitude_um: Option<f64>) -> Vec
         s.run.settle_s = Some(0.04);
     });
     add("force-37pct", &|s| {
-        s.reference.wave = WaveKind::Hold;
-        s.run.duration_s = 0.3;
-        s.run.settle_s = Some(0.05);
-        s.stage.force.enabled = true;
-        s.stage.force.at_s = 0.05;
+        force(s, 0.3, 0.05);
         s.stage.force.freq_hz = 5.0;
         s.stage.force.newtons = 37.0 * s.stage.force.stiffness_n_per_um;
     });

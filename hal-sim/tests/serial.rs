@@ -146,6 +146,12 @@ fn run(addr: &str, action: Action) -> anyhow::Result<String> {
     Ok(String::from_utf8(out).unwrap())
 }
 
+/// Runs `action`, which must fail with an error that mentions `why`.
+fn refused(addr: &str, action: Action, why: &str) {
+    let e = run(addr, action).unwrap_err();
+    assert!(e.to_string().contains(why), "{e}");
+}
+
 fn tmp(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("serial-{name}"))
 }
@@ -218,7 +224,7 @@ fn typed_commands_drive_the_firmware_executor() {
 
     // A 2-axis scan on this 1-axis firmware: refused with err 13, the command named as
     // sent (the default centre made explicit).
-    let e = run(
+    refused(
         &addr,
         Action::Wave(WaveCmd::Raster {
             x_span: 10.0,
@@ -227,14 +233,9 @@ fn typed_commands_drive_the_firmware_executor() {
             line_freq: 20.0,
             center: None,
         }),
-    )
-    .unwrap_err();
-    assert!(
-        e.to_string()
-            .contains("`wave raster 10 6 4 20 5 3`: firmware error 13"),
-        "{e}"
+        "`wave raster 10 6 4 20 5 3`: firmware error 13",
     );
-    let e = run(
+    refused(
         &addr,
         Action::Wave(WaveCmd::Lissajous {
             x_amp: 6.0,
@@ -244,11 +245,7 @@ fn typed_commands_drive_the_firmware_executor() {
             phase: 45.0,
             center: Some(vec![10.0]),
         }),
-    )
-    .unwrap_err();
-    assert!(
-        e.to_string().contains("--center takes two positions x,y"),
-        "{e}"
+        "--center takes two positions x,y",
     );
     let out = run(&addr, Action::Axis { axis: None }).unwrap();
     assert_eq!(out, "ok axis 0 of 1\n");
@@ -273,18 +270,14 @@ fn typed_commands_drive_the_firmware_executor() {
             .contains("`mode warp-drive`: firmware error 9: unknown mode name (UnknownMode)"),
         "{e}"
     );
-    let e = run(
+    refused(
         &addr,
         Action::Limits {
             u_min: None,
             u_max: Some(200.0),
             slew: None,
         },
-    )
-    .unwrap_err();
-    assert!(
-        e.to_string().contains("`set u_max 200`: firmware error 8"),
-        "{e}"
+        "`set u_max 200`: firmware error 8",
     );
 
     let out = run(&addr, Action::Status).unwrap();
@@ -486,11 +479,10 @@ fn a_trigger_that_never_fires_times_out_and_does_not_block_the_next_capture() {
         wait_s,
         ..ref_capture("never.csv", 1)
     };
-    let e = run(&addr, Action::Record(args("rise:ref_um:1000", 0.3))).unwrap_err();
-    assert!(
-        e.to_string()
-            .contains("still armed after 0.3 s (trigger `rise:ref_um:1000` never fired?)"),
-        "{e}"
+    refused(
+        &addr,
+        Action::Record(args("rise:ref_um:1000", 0.3)),
+        "still armed after 0.3 s (trigger `rise:ref_um:1000` never fired?)",
     );
     let out = run(&addr, Action::Record(args("now", 10.0))).unwrap();
     assert!(out.contains("recorded 1024 frames"), "{out}");
@@ -580,8 +572,7 @@ fn a_table_from_a_file_is_loaded_in_lines_and_the_reference_follows_it() {
     }
 
     // Too many points: refused before anything is sent (the table keeps its 20).
-    let e = run(&addr, table(None, vec![1.0; 65])).unwrap_err();
-    assert!(e.to_string().contains("65 points"), "{e}");
+    refused(&addr, table(None, vec![1.0; 65]), "65 points");
     let out = run(
         &addr,
         Action::Send {

@@ -5,12 +5,13 @@
 //! compile-time check: this file does not build if they differ).
 
 use hal_sim::mock::{
-    AdcSpec, DacSpec, MockAdc, MockAdcSpi, MockClock, MockCnv, MockDac, MockDacSpi, MockDelay,
-    MockLdac,
+    MockAdc, MockAdcSpi, MockClock, MockCnv, MockDac, MockDacSpi, MockDelay, MockLdac,
 };
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::controllers::open_loop;
-use hal_sim::sim::{adc_config, calibrate, pipeline_config, waves, Bench, StageInfo};
+use hal_sim::sim::{
+    adc_config, adc_spec, calibrate, dac_spec, pipeline_config, waves, Bench, StageInfo,
+};
 use hal_sim::stage::Stage;
 use piezo_core::drivers::{Ad5791Config, FirmwareAdc, FirmwareDac};
 use piezo_core::feedback::{Feedback, Pid, PidConfig};
@@ -49,17 +50,7 @@ fn run(mode: Mode) -> (f64, u32) {
     let lin = calibrate(&sc).unwrap();
     let clock = MockClock::default();
     let cv = &sc.converters;
-    let adc_chip = MockAdc::new(
-        AdcSpec {
-            config: adc_config(&sc),
-            vref: cv.adc_vref,
-            offset_lsb: cv.adc_offset_lsb,
-            gain_error: cv.adc_gain_error,
-            noise_lsb: cv.adc_noise_lsb,
-            ..AdcSpec::default()
-        },
-        clock.clone(),
-    );
+    let adc_chip = MockAdc::new(adc_spec(&sc), clock.clone());
     let delay = MockDelay(clock.clone());
     let mut adc: Adc = FirmwareAdc::new(
         adc_chip.spi(),
@@ -69,16 +60,7 @@ fn run(mode: Mode) -> (f64, u32) {
     )
     .unwrap();
     adc.init().unwrap();
-    let dac_chip = MockDac::new(
-        DacSpec {
-            vrefp: cv.dac_vrefp,
-            vrefn: cv.dac_vrefn,
-            offset_lsb: cv.dac_offset_lsb,
-            gain_error: cv.dac_gain_error,
-            ..DacSpec::default()
-        },
-        clock.clone(),
-    );
+    let dac_chip = MockDac::new(dac_spec(&sc), clock.clone());
     let mut dac: Dac = FirmwareDac::new(
         dac_chip.spi(),
         dac_chip.ldac(),

@@ -140,7 +140,6 @@ impl<T: Real> Pid<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::signals::Setpoint;
 
     fn pid(feedforward: bool) -> Pid<f64> {
         Pid::new(PidConfig {
@@ -173,24 +172,14 @@ mod tests {
         let mut u_applied = 0.0;
         let mut max_i: f64 = 0.0;
         for _ in 0..100_000 {
-            let io = LoopSignals {
-                setpoint: Setpoint::hold(50.0),
-                y_um: 0.0,
-                u_ff: 0.0,
-                u_applied,
-            };
+            let io = LoopSignals::hold(50.0, 0.0, 0.0, u_applied);
             let u = p.update(&io);
             u_applied = u.clamp(0.0, 10.0);
             max_i = max_i.max(p.state().integral.abs());
         }
         assert!(max_i < 30.0, "integrator wound up to {max_i}");
         // ...and it recovers at once when the error changes sign.
-        let io = LoopSignals {
-            setpoint: Setpoint::hold(0.0),
-            y_um: 5.0,
-            u_ff: 0.0,
-            u_applied,
-        };
+        let io = LoopSignals::hold(0.0, 5.0, 0.0, u_applied);
         assert!(p.update(&io) < 10.0);
     }
 
@@ -202,12 +191,7 @@ mod tests {
         let mut p = Pid::new(c).unwrap();
         let mut u_applied = 0.0;
         for _ in 0..100_000 {
-            let io = LoopSignals {
-                setpoint: Setpoint::hold(50.0),
-                y_um: 0.0,
-                u_ff: 0.0,
-                u_applied,
-            };
+            let io = LoopSignals::hold(50.0, 0.0, 0.0, u_applied);
             u_applied = p.update(&io).clamp(0.0, 10.0);
         }
         assert!(p.state().integral > 1e4);
@@ -216,12 +200,7 @@ mod tests {
     #[test]
     fn reset_is_bumpless() {
         let mut p = pid(true);
-        let io = LoopSignals {
-            setpoint: Setpoint::hold(3.0),
-            y_um: 1.0,
-            u_ff: 20.0,
-            u_applied: 42.0,
-        };
+        let io = LoopSignals::hold(3.0, 1.0, 20.0, 42.0);
         p.reset(&io);
         assert!((p.update(&io) - 42.0).abs() < 1e-9);
     }
@@ -229,12 +208,7 @@ mod tests {
     #[test]
     fn feedforward_passes_through_at_zero_error() {
         let mut p = pid(true);
-        let mut io = LoopSignals {
-            setpoint: Setpoint::hold(1.0),
-            y_um: 1.0,
-            u_ff: 7.0,
-            u_applied: 7.0,
-        };
+        let mut io = LoopSignals::hold(1.0, 1.0, 7.0, 7.0);
         p.reset(&io);
         for _ in 0..10 {
             let u = p.update(&io);

@@ -319,8 +319,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         volts_max: T,
         dt_s: T,
     ) -> Result<Self, FfError> {
-        super::check_range(volts_min, volts_max)?;
-        super::check_dt(dt_s)?;
+        super::check_range_dt(volts_min, volts_max, dt_s)?;
         let min_slope = model.d() - model.max_h_slope_within(volts_max - volts_min);
         super::ensure(
             min_slope.is_finite() && min_slope > T::ZERO,
@@ -543,8 +542,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
 
     /// Restart relaxed at voltage `u0` (e.g. 0 V at power-up).
     pub fn reset_volts(&mut self, u0: T) {
-        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
-        let u0 = u0.clamp_to(self.volts_min, self.volts_max);
+        let u0 = super::rest_volts(u0, self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
         self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.u = u0;

@@ -39,8 +39,7 @@ impl<T: Real> MbwFf<T> {
         volts_max: T,
         dt_s: T,
     ) -> Result<Self, FfError> {
-        super::check_range(volts_min, volts_max)?;
-        super::check_dt(dt_s)?;
+        super::check_range_dt(volts_min, volts_max, dt_s)?;
         super::ensure(
             k_p.is_finite() && k_p > T::ZERO,
             "MBW feedforward: k_p finite and > 0 (002 eq. 12)",
@@ -100,8 +99,7 @@ impl<T: Real> MbwFf<T> {
 
     /// Restart at rest at voltage `u0`.
     pub fn reset_volts(&mut self, u0: T) {
-        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
-        self.u = u0.clamp_to(self.volts_min, self.volts_max);
+        self.u = super::rest_volts(u0, self.volts_min, self.volts_max);
         self.v_r = self.u / self.k_p;
         self.h = T::ZERO;
     }

@@ -17,13 +17,8 @@ pub fn invert<T: Real, const M: usize>(a: &[[T; M]; M], tol: T) -> Option<[[T; M
         row[i] = T::ONE;
     }
     for col in 0..M {
-        let mut piv = col;
-        for r in col + 1..M {
-            if a[r][col].abs() > a[piv][col].abs() {
-                piv = r;
-            }
-        }
-        if !(a[piv][col].abs() > tol) {
+        let (piv, magnitude) = crate::manipulation::linalg::pivot(&a, col);
+        if !(magnitude > tol) {
             return None;
         }
         a.swap(col, piv);
@@ -124,8 +119,7 @@ impl<T: Real, const N: usize, const K: usize> MultiIms<T, N, K> {
         volts_max: T,
         dt_s: T,
     ) -> Result<Self, FfError> {
-        super::check_range(volts_min, volts_max)?;
-        super::check_dt(dt_s)?;
+        super::check_range_dt(volts_min, volts_max, dt_s)?;
         let d_pinv = pseudo_inverse(model.d())?;
         let u0 = T::ZERO.clamp_to(volts_min, volts_max);
         Ok(Self {

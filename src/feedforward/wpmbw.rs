@@ -117,8 +117,7 @@ impl<T: Real> WpmbwInverse<T> {
         volts_max: T,
         dt_s: T,
     ) -> Result<Self, FfError> {
-        super::check_range(volts_min, volts_max)?;
-        super::check_dt(dt_s)?;
+        super::check_range_dt(volts_min, volts_max, dt_s)?;
         ensure(
             (1..=MAX_POLY).contains(&L),
             "WPMBW inverse: polynomial order L = 1 ..= MAX_POLY",
@@ -291,8 +290,7 @@ impl<T: Real> WpmbwInverse<T> {
     /// Restart at rest at voltage `u0` (operator state zero); the prefilter starts from
     /// the output there.
     pub fn reset_volts(&mut self, u0: T) {
-        let u0 = if u0.is_finite() { u0 } else { T::ZERO };
-        self.u = u0.clamp_to(self.volts_min, self.volts_max);
+        self.u = super::rest_volts(u0, self.volts_min, self.volts_max);
         self.w = T::ZERO;
         if let InverseDynamics::Zpetc(z) = &mut self.dynamics {
             z.reset(T::ZERO);

@@ -173,29 +173,10 @@ fn dot(a: &[f64; MAX_ORDER], b: &[f64; MAX_ORDER], n: usize) -> f64 {
     (0..n).map(|i| a[i] * b[i]).sum()
 }
 
-/// Solves `m x = v` (`n x n`, Gauss with partial pivoting).
-fn gauss(mut m: M, mut v: [f64; MAX_ORDER], n: usize) -> Option<[f64; MAX_ORDER]> {
-    for k in 0..n {
-        let p = (k..n).max_by(|&i, &j| libm::fabs(m[i][k]).total_cmp(&libm::fabs(m[j][k])))?;
-        if !(libm::fabs(m[p][k]) > 0.0) {
-            return None;
-        }
-        m.swap(k, p);
-        v.swap(k, p);
-        for i in k + 1..n {
-            let f = m[i][k] / m[k][k];
-            for j in k..n {
-                m[i][j] -= f * m[k][j];
-            }
-            v[i] -= f * v[k];
-        }
-    }
-    let mut x = [0.0; MAX_ORDER];
-    for k in (0..n).rev() {
-        let s: f64 = (k + 1..n).map(|j| m[k][j] * x[j]).sum();
-        x[k] = (v[k] - s) / m[k][k];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+/// Solves `m x = v` (`n x n`, Gauss with partial pivoting); `None` when singular or the
+/// solution is not finite.
+fn gauss(m: M, v: [f64; MAX_ORDER], n: usize) -> Option<[f64; MAX_ORDER]> {
+    crate::linear::gauss(m, v, n, 0.0).filter(|x| x.iter().all(|v| v.is_finite()))
 }
 
 /// `x` converted to `T`, refused when `T` cannot hold it to 1e-3 of `scale` (a fixed-point

@@ -31,17 +31,90 @@ fn cbw_slope<T: Real>(alpha: T, beta: T, gamma: T, n: T, h: T, s: T, sigma: T) -
     alpha - (beta * s * sigma + gamma) * mag
 }
 
-fn check_cbw_part<T: Real>(
+/// Which `delta` term an [`Abw`] carries: `delta*u*sgn(u')` ([`AbwU`]) or
+/// `delta*|u'|` ([`AbwAbs`]).
+pub trait AbwForm: Copy + core::fmt::Debug + PartialEq {
+    /// The error texts: non-finite parameter, the four conditions of 004 eq. (3) and the
+    /// sub-step bound out of range.
+    const MSGS: [&'static str; 6];
+}
+
+/// The `delta*u*sgn(u')` form of 001 eq. (3).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DeltaU;
+
+/// The `delta*|u'|` form of 002 eq. (3).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DeltaAbs;
+
+impl AbwForm for DeltaU {
+    const MSGS: [&'static str; 6] = [
+        "ABW-u: all parameters must be finite",
+        "ABW-u: alpha > 0 (004 eq. 3)",
+        "ABW-u: beta + gamma > 0 (004 eq. 3)",
+        "ABW-u: beta - gamma >= 0 (004 eq. 3)",
+        "ABW-u: n >= 1",
+        "ABW-u: parameters out of range",
+    ];
+}
+
+impl AbwForm for DeltaAbs {
+    const MSGS: [&'static str; 6] = [
+        "ABW-abs: all parameters must be finite",
+        "ABW-abs: alpha > 0 (004 eq. 3)",
+        "ABW-abs: beta + gamma > 0 (004 eq. 3)",
+        "ABW-abs: beta - gamma >= 0 (004 eq. 3)",
+        "ABW-abs: n >= 1",
+        "ABW-abs: parameters out of range",
+    ];
+}
+
+/// An asymmetric Bouc-Wen model in piezo form, `F` its `delta` term.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Abw<T, F> {
+    d: T,
     alpha: T,
     beta: T,
     gamma: T,
     n: T,
-    msgs: [&'static str; 4],
-) -> Result<(), ParamError> {
-    ensure(alpha > T::ZERO, msgs[0])?;
-    ensure(beta + gamma > T::ZERO, msgs[1])?;
-    ensure(beta - gamma >= T::ZERO, msgs[2])?;
-    ensure(n >= T::ONE, msgs[3])
+    delta: T,
+    /// RK4 sub-step bound (V).
+    max_du: T,
+    form: F,
+}
+
+impl<T: Real, F: AbwForm + Default> Abw<T, F> {
+    /// Checks the parameters (finite, the CBW part against 004 eq. 3, then `extra`) and
+    /// sets the RK4 sub-step bound `0.1/L` for `|h| <= (alpha_h/(beta + gamma))^(1/n)`.
+    fn checked(
+        [d, alpha, beta, gamma, n, delta]: [T; 6],
+        extra: Result<(), ParamError>,
+        alpha_h: T,
+    ) -> Result<Self, ParamError> {
+        let msgs = F::MSGS;
+        ensure_finite(&[d, alpha, beta, gamma, n, delta], msgs[0])?;
+        ensure(alpha > T::ZERO, msgs[1])?;
+        ensure(beta + gamma > T::ZERO, msgs[2])?;
+        ensure(beta - gamma >= T::ZERO, msgs[3])?;
+        ensure(n >= T::ONE, msgs[4])?;
+        extra?;
+        let h_max = (alpha_h / (beta + gamma)).powf(T::ONE / n);
+        let lipschitz = n * (beta + gamma.abs()) * h_max.abs_pow(n - T::ONE);
+        let max_du = T::from_f64(0.1) / lipschitz;
+        ensure(max_du.is_finite() && max_du > T::ZERO, msgs[5])?;
+        Ok(Self {
+            d,
+            alpha,
+            beta,
+            gamma,
+            n,
+            delta,
+            max_du,
+            form: F::default(),
+        })
+    }
+
+    super::getters!(d, alpha, beta, gamma, n, delta);
 }
 
 /// Asymmetric Bouc-Wen with the term `delta*u*sgn(du/dt)` (001 eq. 3; piezo form as in
@@ -57,53 +130,12 @@ fn check_cbw_part<T: Real>(
 /// For a fixed input rate the loop is bounded (the CBW part pulls `h` back with rate
 /// `(beta+gamma)*|u'|`, the drift is `delta*|u|`); as `u' -> 0` at a non-zero `u` the drift
 /// wins, as in the seed's equation. The CBW part is checked against 004 eq. (3).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AbwU<T> {
-    d: T,
-    alpha: T,
-    beta: T,
-    gamma: T,
-    n: T,
-    delta: T,
-    /// RK4 sub-step bound (V).
-    max_du: T,
-}
+pub type AbwU<T> = Abw<T, DeltaU>;
 
 impl<T: Real> AbwU<T> {
     /// `d` (um/V), CBW part `alpha, beta, gamma, n`, asymmetry `delta` (um/(V s)).
     pub fn new(d: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
-        ensure_finite(
-            &[d, alpha, beta, gamma, n, delta],
-            "ABW-u: all parameters must be finite",
-        )?;
-        check_cbw_part(
-            alpha,
-            beta,
-            gamma,
-            n,
-            [
-                "ABW-u: alpha > 0 (004 eq. 3)",
-                "ABW-u: beta + gamma > 0 (004 eq. 3)",
-                "ABW-u: beta - gamma >= 0 (004 eq. 3)",
-                "ABW-u: n >= 1",
-            ],
-        )?;
-        let h_max = (alpha / (beta + gamma)).powf(T::ONE / n);
-        let lipschitz = n * (beta + gamma.abs()) * h_max.abs_pow(n - T::ONE);
-        let max_du = T::from_f64(0.1) / lipschitz;
-        ensure(
-            max_du.is_finite() && max_du > T::ZERO,
-            "ABW-u: parameters out of range",
-        )?;
-        Ok(Self {
-            d,
-            alpha,
-            beta,
-            gamma,
-            n,
-            delta,
-            max_du,
-        })
+        Self::checked([d, alpha, beta, gamma, n, delta], Ok(()), alpha)
     }
 
     /// 001's `y = k*v + h` parameters (eq. 3 order) mapped to the piezo form: `alpha` and
@@ -111,8 +143,6 @@ impl<T: Real> AbwU<T> {
     pub fn from_001(k: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
         Self::new(k, -alpha, beta, -gamma, n, delta)
     }
-
-    super::getters!(d, alpha, beta, gamma, n, delta);
 
     /// `dh/du` at state `h`, input `u` and input rate `du_dt` (V/s): the CBW part minus
     /// `delta*u/|u'|`. Zero rate gives the CBW part only (the term then has no meaning).
@@ -149,27 +179,16 @@ impl<T: Real> AbwU<T> {
     }
 }
 
-impl<T: Real> Hysteresis<T> for AbwU<T> {
-    type State = BwState<T>;
-
-    fn init(&self, u0: T) -> BwState<T> {
-        BwState::rest(u0)
+super::piezo_form!(AbwU<T>, |m, h, u0, du, dt| {
+    let next = m.advance_h(h, u0, du, dt);
+    // Only a non-finite result (impossible for validated parameters and finite dt) is
+    // refused.
+    if next.is_finite() {
+        next
+    } else {
+        h
     }
-
-    #[inline]
-    fn step(&self, s: &mut BwState<T>, u: T, dt: T) -> T {
-        s.step_piezo(self.d, u, |h, u0, du| {
-            let next = self.advance_h(h, u0, du, dt);
-            // Only a non-finite result (impossible for validated parameters and finite dt)
-            // is refused.
-            if next.is_finite() {
-                next
-            } else {
-                h
-            }
-        })
-    }
-}
+});
 
 /// Asymmetric Bouc-Wen with the term `delta*|du/dt|` (002 eq. 3), piezo form
 /// `y = d*u - h`, `dh/dt = alpha*u' - beta*|u'|*|h|^(n-1)*h - gamma*u'*|h|^n + delta*|u'|`.
@@ -179,61 +198,23 @@ impl<T: Real> Hysteresis<T> for AbwU<T> {
 ///
 /// Accepted when the CBW part meets 004 eq. (3) and `alpha > |delta|` (`h` moves with the
 /// input in both directions); then `|h| <= ((alpha + |delta|)/(beta + gamma))^(1/n)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AbwAbs<T> {
-    d: T,
-    alpha: T,
-    beta: T,
-    gamma: T,
-    n: T,
-    delta: T,
-    max_du: T,
-}
+pub type AbwAbs<T> = Abw<T, DeltaAbs>;
 
 impl<T: Real> AbwAbs<T> {
     /// `d` (um/V), CBW part `alpha, beta, gamma, n`, asymmetry `delta` (um/V).
     pub fn new(d: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
-        ensure_finite(
-            &[d, alpha, beta, gamma, n, delta],
-            "ABW-abs: all parameters must be finite",
-        )?;
-        check_cbw_part(
-            alpha,
-            beta,
-            gamma,
-            n,
-            [
-                "ABW-abs: alpha > 0 (004 eq. 3)",
-                "ABW-abs: beta + gamma > 0 (004 eq. 3)",
-                "ABW-abs: beta - gamma >= 0 (004 eq. 3)",
-                "ABW-abs: n >= 1",
-            ],
-        )?;
-        ensure(alpha > delta.abs(), "ABW-abs: alpha > |delta|")?;
-        let h_max = ((alpha + delta.abs()) / (beta + gamma)).powf(T::ONE / n);
-        let lipschitz = n * (beta + gamma.abs()) * h_max.abs_pow(n - T::ONE);
-        let max_du = T::from_f64(0.1) / lipschitz;
-        ensure(
-            max_du.is_finite() && max_du > T::ZERO,
-            "ABW-abs: parameters out of range",
-        )?;
-        Ok(Self {
-            d,
-            alpha,
-            beta,
-            gamma,
-            n,
-            delta,
-            max_du,
-        })
+        let extra = ensure(alpha > delta.abs(), "ABW-abs: alpha > |delta|");
+        Self::checked(
+            [d, alpha, beta, gamma, n, delta],
+            extra,
+            alpha + delta.abs(),
+        )
     }
 
     /// 002's `y = k*v + h` parameters (table 1 order) mapped to the piezo form.
     pub fn from_002(k: T, alpha: T, beta: T, gamma: T, n: T, delta: T) -> Result<Self, ParamError> {
         Self::new(k, -alpha, beta, -gamma, n, -delta)
     }
-
-    super::getters!(d, alpha, beta, gamma, n, delta);
 
     /// Bound of `|h|`: `((alpha + |delta|)/(beta + gamma))^(1/n)`.
     pub fn h_bound(&self) -> T {
@@ -269,18 +250,7 @@ impl<T: Real> AbwAbs<T> {
     }
 }
 
-impl<T: Real> Hysteresis<T> for AbwAbs<T> {
-    type State = BwState<T>;
-
-    fn init(&self, u0: T) -> BwState<T> {
-        BwState::rest(u0)
-    }
-
-    #[inline]
-    fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        s.step_piezo(self.d, u, |h, _, du| self.advance_h(h, du))
-    }
-}
+super::piezo_form!(AbwAbs<T>, |m, h, _, du, _dt| m.advance_h(h, du));
 
 /// State of [`Mbw002`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -366,17 +336,17 @@ impl<T: Real> Hysteresis<T> for Mbw002<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hysteresis::{rk4_input, Cbw};
+    use crate::hysteresis::{along_sine, assert_refused, rk4_input, rk4_time, Cbw};
 
     #[test]
     fn rejects_bad_parameters() {
-        assert_eq!(
-            AbwAbs::new(1.0, 0.05, 0.4, 0.15, 1.0, 0.06).unwrap_err().0,
-            "ABW-abs: alpha > |delta|"
+        assert_refused(
+            AbwAbs::new(1.0, 0.05, 0.4, 0.15, 1.0, 0.06),
+            "ABW-abs: alpha > |delta|",
         );
-        assert_eq!(
-            AbwU::new(1.0, 0.05, 0.1, 0.15, 1.0, 0.0).unwrap_err().0,
-            "ABW-u: beta - gamma >= 0 (004 eq. 3)"
+        assert_refused(
+            AbwU::new(1.0, 0.05, 0.1, 0.15, 1.0, 0.0),
+            "ABW-u: beta - gamma >= 0 (004 eq. 3)",
         );
         assert!(Mbw002::new(
             AbwAbs::new(1.0, 0.1, 0.4, 0.1, 1.0, 0.0).unwrap(),
@@ -405,15 +375,17 @@ mod tests {
     #[test]
     fn abs_closed_form_equals_fine_rk4_and_is_bounded() {
         let m = AbwAbs::from_002(1.0998, -0.0656, 0.3922, -0.15, 1.0, -0.011).unwrap();
-        let (mut h, mut h_ref, mut u) = (0.0, 0.0, 0.0);
-        for k in 1..3000 {
-            let un = 10.0 * (k as f64 * 0.01).sin();
-            let du = un - u;
-            h = m.advance_h(h, du);
-            h_ref = rk4_input(h_ref, u, du, 1e-4, |h, _| m.slope(h, du.signum()));
-            u = un;
-            assert!(h.abs() <= m.h_bound() * (1.0 + 1e-12));
-        }
+        let (h, h_ref) = along_sine(
+            10.0,
+            0.01,
+            3000,
+            |h, _, du| {
+                let h = m.advance_h(h, du);
+                assert!(h.abs() <= m.h_bound() * (1.0 + 1e-12));
+                h
+            },
+            |h, u, du| rk4_input(h, u, du, 1e-4, |h, _| m.slope(h, du.signum())),
+        );
         assert!((h - h_ref).abs() < 1e-7, "{h} vs {h_ref}");
     }
 
@@ -434,16 +406,7 @@ mod tests {
                     - 0.16 * rate * h.abs()
                     - 0.04 * uu * rate.signum()
             };
-            let n = 2000;
-            let d = dt / n as f64;
-            for j in 0..n {
-                let t = j as f64 * d;
-                let k1 = f(h_ref, t);
-                let k2 = f(h_ref + 0.5 * d * k1, t + 0.5 * d);
-                let k3 = f(h_ref + 0.5 * d * k2, t + 0.5 * d);
-                let k4 = f(h_ref + d * k3, t + d);
-                h_ref += d / 6.0 * (k1 + 2.0 * (k2 + k3) + k4);
-            }
+            h_ref = rk4_time(h_ref, dt, 2000, f);
             u = un;
         }
         assert!((s.h - h_ref).abs() < 1e-6, "{} vs {h_ref}", s.h);
@@ -468,16 +431,7 @@ mod tests {
                 al * rate - be * rate.abs() * h - ga * rate * h.abs()
                     + de * (u + rate * t) * rate.signum()
             };
-            let n = 400;
-            let d = dt / n as f64;
-            for i in 0..n {
-                let t = i as f64 * d;
-                let k1 = f(h, t);
-                let k2 = f(h + 0.5 * d * k1, t + 0.5 * d);
-                let k3 = f(h + 0.5 * d * k2, t + 0.5 * d);
-                let k4 = f(h + d * k3, t + d);
-                h += d / 6.0 * (k1 + 2.0 * (k2 + k3) + k4);
-            }
+            h = rk4_time(h, dt, 400, f);
             u = un;
             worst = worst.max((y - (k * un + h)).abs());
         }

@@ -113,22 +113,12 @@ impl<T: Real> Cbw<T> {
     }
 }
 
-impl<T: Real> Hysteresis<T> for Cbw<T> {
-    type State = BwState<T>;
-
-    fn init(&self, u0: T) -> BwState<T> {
-        BwState::rest(u0)
-    }
-
-    #[inline]
-    fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        s.step_piezo(self.d, u, |h, u0, du| self.advance_h(h, u0, du))
-    }
-}
+super::piezo_form!(Cbw<T>, |m, h, u0, du, _dt| m.advance_h(h, u0, du));
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hysteresis::{along_sine, assert_refused};
 
     /// Backup slide of 000, parameter set 1.
     fn set1() -> Cbw<f64> {
@@ -137,13 +127,13 @@ mod tests {
 
     #[test]
     fn rejects_parameters_that_break_004_eq3() {
-        assert_eq!(
-            Cbw::with_n1(0.16, 0.07, 0.01, 0.02).unwrap_err().0,
-            "CBW: beta - gamma >= 0 (004 eq. 3)"
+        assert_refused(
+            Cbw::with_n1(0.16, 0.07, 0.01, 0.02),
+            "CBW: beta - gamma >= 0 (004 eq. 3)",
         );
-        assert_eq!(
-            Cbw::with_n1(0.16, -0.07, 0.02, 0.01).unwrap_err().0,
-            "CBW: alpha > 0 (004 eq. 3)"
+        assert_refused(
+            Cbw::with_n1(0.16, -0.07, 0.02, 0.01),
+            "CBW: alpha > 0 (004 eq. 3)",
         );
         assert!(Cbw::new(0.16, 0.07, 0.02, 0.01, 0.5).is_err());
         assert!(Cbw::with_n1(f64::NAN, 0.07, 0.02, 0.01).is_err());
@@ -152,16 +142,13 @@ mod tests {
     #[test]
     fn closed_form_equals_fine_rk4() {
         let m = set1();
-        let mut h_exact = 0.0;
-        let mut h_rk4 = 0.0;
-        let mut u = 0.0;
-        for k in 1..2000 {
-            let un = 100.0 * (k as f64 * 0.01).sin();
-            let du = un - u;
-            h_exact = m.advance_h(h_exact, u, du);
-            h_rk4 = rk4_input(h_rk4, u, du, 1e-3, |h, _| m.slope(h, du.signum()));
-            u = un;
-        }
+        let (h_exact, h_rk4) = along_sine(
+            100.0,
+            0.01,
+            2000,
+            |h, u, du| m.advance_h(h, u, du),
+            |h, u, du| rk4_input(h, u, du, 1e-3, |h, _| m.slope(h, du.signum())),
+        );
         assert!((h_exact - h_rk4).abs() < 1e-8, "{h_exact} vs {h_rk4}");
     }
 

@@ -71,34 +71,17 @@ impl<T: Real> Dahl<T> {
     }
 }
 
-impl<T: Real> Hysteresis<T> for Dahl<T> {
-    type State = BwState<T>;
-
-    fn init(&self, u0: T) -> BwState<T> {
-        BwState::rest(u0)
-    }
-
-    #[inline]
-    fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        s.step_piezo(self.d, u, |h, _, du| self.advance_h(h, du))
-    }
-}
+super::piezo_form!(Dahl<T>, |m, h, _, du, _dt| m.advance_h(h, du));
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hysteresis::rk4_input;
+    use crate::hysteresis::{along_sine, assert_refused, rk4_input};
 
     #[test]
     fn rejects_bad_parameters() {
-        assert_eq!(
-            Dahl::new(0.16, 0.07, 0.0, 1.0).unwrap_err().0,
-            "Dahl: hc > 0"
-        );
-        assert_eq!(
-            Dahl::new(0.16, 0.07, 2.0, -1.0).unwrap_err().0,
-            "Dahl: i > 0"
-        );
+        assert_refused(Dahl::new(0.16, 0.07, 0.0, 1.0), "Dahl: hc > 0");
+        assert_refused(Dahl::new(0.16, 0.07, 2.0, -1.0), "Dahl: i > 0");
         assert!(Dahl::new(0.16, f64::NAN, 2.0, 1.0).is_err());
     }
 
@@ -106,16 +89,13 @@ mod tests {
     fn exact_update_equals_fine_rk4_for_several_exponents() {
         for &i in &[0.5, 1.0, 1.7, 3.0] {
             let m = Dahl::new(0.16, 0.3, 2.0, i).unwrap();
-            let mut h = 0.0;
-            let mut h_ref = 0.0;
-            let mut u = 0.0;
-            for k in 1..1500 {
-                let un = 30.0 * (k as f64 * 0.01).sin();
-                let du = un - u;
-                h = m.advance_h(h, du);
-                h_ref = rk4_input(h_ref, u, du, 1e-3, |h, _| m.slope(h, du.signum()));
-                u = un;
-            }
+            let (h, h_ref) = along_sine(
+                30.0,
+                0.01,
+                1500,
+                |h, _, du| m.advance_h(h, du),
+                |h, u, du| rk4_input(h, u, du, 1e-3, |h, _| m.slope(h, du.signum())),
+            );
             assert!((h - h_ref).abs() < 1e-6, "i = {i}: {h} vs {h_ref}");
         }
     }

@@ -174,22 +174,12 @@ impl<T: Real> Gbw<T> {
     }
 }
 
-impl<T: Real> Hysteresis<T> for Gbw<T> {
-    type State = BwState<T>;
-
-    fn init(&self, u0: T) -> BwState<T> {
-        BwState::rest(u0)
-    }
-
-    #[inline]
-    fn step(&self, s: &mut BwState<T>, u: T, _dt: T) -> T {
-        s.step_piezo(self.d, u, |h, u0, du| self.advance_h(h, u0, du))
-    }
-}
+super::piezo_form!(Gbw<T>, |m, h, u0, du, _dt| m.advance_h(h, u0, du));
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hysteresis::{along_sine, assert_refused};
 
     fn model() -> Gbw<f64> {
         Gbw::new(0.16, 1.2, 0.07, 0.005, 0.02, 1.0).unwrap()
@@ -197,14 +187,11 @@ mod tests {
 
     #[test]
     fn rejects_unbounded_parameters() {
-        assert_eq!(
-            Gbw::new(0.16, 1.0, 0.07, 0.03, 0.02, 1.0).unwrap_err().0,
-            "GBW: B_h + G > |B| (bounded up and down equilibria)"
+        assert_refused(
+            Gbw::new(0.16, 1.0, 0.07, 0.03, 0.02, 1.0),
+            "GBW: B_h + G > |B| (bounded up and down equilibria)",
         );
-        assert_eq!(
-            Gbw::new(0.16, 0.0, 0.07, 0.0, 0.02, 1.0).unwrap_err().0,
-            "GBW: alpha > 0"
-        );
+        assert_refused(Gbw::new(0.16, 0.0, 0.07, 0.0, 0.02, 1.0), "GBW: alpha > 0");
         assert!(Gbw::new(0.16, 1.0, 0.07, 0.0, 0.02, 0.5).is_err());
         assert!(Gbw::new(0.16, 1.0, f64::INFINITY, 0.0, 0.02, 1.0).is_err());
     }
@@ -226,20 +213,19 @@ mod tests {
     #[test]
     fn closed_form_equals_fine_rk4() {
         let m = model();
-        let mut h_exact = 0.0;
-        let mut h_rk4 = 0.0;
-        let mut u = 0.0;
-        for k in 1..2000 {
-            let un = 60.0 * (k as f64 * 0.01).sin();
-            let du = un - u;
-            h_exact = m.advance_h(h_exact, u, du);
-            h_rk4 = if m.slope_raw(h_rk4, du.signum()) < 0.0 {
-                h_rk4
-            } else {
-                rk4_input(h_rk4, u, du, 1e-3, |h, _| m.slope(h, du.signum()))
-            };
-            u = un;
-        }
+        let (h_exact, h_rk4) = along_sine(
+            60.0,
+            0.01,
+            2000,
+            |h, u, du| m.advance_h(h, u, du),
+            |h, u, du| {
+                if m.slope_raw(h, du.signum()) < 0.0 {
+                    h
+                } else {
+                    rk4_input(h, u, du, 1e-3, |h, _| m.slope(h, du.signum()))
+                }
+            },
+        );
         assert!((h_exact - h_rk4).abs() < 1e-8, "{h_exact} vs {h_rk4}");
     }
 

@@ -113,6 +113,27 @@ impl<T: Real> BwState<T> {
     }
 }
 
+/// [`Hysteresis`] for a piezo-form model on a [`BwState`] ([`BwState::step_piezo`]):
+/// `|model, h, u_prev, du, dt| update` is its update of `h` over one sample.
+macro_rules! piezo_form {
+    ($model:ty, |$m:ident, $h:pat_param, $u0:pat_param, $du:pat_param, $dt:pat_param| $update:expr) => {
+        impl<T: Real> Hysteresis<T> for $model {
+            type State = BwState<T>;
+
+            fn init(&self, u0: T) -> BwState<T> {
+                BwState::rest(u0)
+            }
+
+            #[inline]
+            fn step(&self, s: &mut BwState<T>, u: T, $dt: T) -> T {
+                let $m = self;
+                s.step_piezo(self.d, u, |$h, $u0, $du| $update)
+            }
+        }
+    };
+}
+pub(crate) use piezo_form;
+
 /// Copy accessors for a model's parameter fields.
 macro_rules! getters {
     ($($name:ident),* $(,)?) => {
@@ -270,6 +291,48 @@ pub(crate) fn substeps<T: Real>(du: T, max_du: T) -> usize {
     } else {
         MAX_SUBSTEPS
     }
+}
+
+/// Test drive: the input `amp*sin(w*k)` for `k = 1..n` through two updates of `h`, each
+/// called as `update(h, u_prev, du)`; returns both final values.
+#[cfg(test)]
+pub(crate) fn along_sine(
+    amp: f64,
+    w: f64,
+    n: usize,
+    mut exact: impl FnMut(f64, f64, f64) -> f64,
+    mut reference: impl FnMut(f64, f64, f64) -> f64,
+) -> (f64, f64) {
+    let (mut h, mut h_ref, mut u) = (0.0, 0.0, 0.0);
+    for k in 1..n {
+        let un = amp * (k as f64 * w).sin();
+        let du = un - u;
+        h = exact(h, u, du);
+        h_ref = reference(h_ref, u, du);
+        u = un;
+    }
+    (h, h_ref)
+}
+
+/// Test check: `r` is refused with the text `why`.
+#[cfg(test)]
+pub(crate) fn assert_refused<M: core::fmt::Debug>(r: Result<M, ParamError>, why: &str) {
+    assert_eq!(r.unwrap_err().0, why);
+}
+
+/// Test reference: `h' = f(h, t)` integrated over `dt` by `n` classical RK4 steps.
+#[cfg(test)]
+pub(crate) fn rk4_time(mut h: f64, dt: f64, n: usize, f: impl Fn(f64, f64) -> f64) -> f64 {
+    let d = dt / n as f64;
+    for j in 0..n {
+        let t = j as f64 * d;
+        let k1 = f(h, t);
+        let k2 = f(h + 0.5 * d * k1, t + 0.5 * d);
+        let k3 = f(h + 0.5 * d * k2, t + 0.5 * d);
+        let k4 = f(h + d * k3, t + d);
+        h += d / 6.0 * (k1 + 2.0 * (k2 + k3) + k4);
+    }
+    h
 }
 
 #[cfg(test)]

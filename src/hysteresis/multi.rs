@@ -206,6 +206,7 @@ impl<T: Real, const N: usize, const K: usize> MultiBw<T, N, K> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hysteresis::assert_refused;
 
     #[test]
     fn rejects_bad_direct_terms() {
@@ -213,9 +214,9 @@ mod tests {
         let a = [[0.07, 0.01], [0.0, 0.05]];
         let b = [[0.02, 0.0], [0.0, 0.01]];
         let g = [[0.01, 0.0], [0.0, 0.02]];
-        assert_eq!(
-            MultiBw::new(z, a, b, g).unwrap_err().0,
-            "MultiBW: B_jj - Gamma_jj >= 0 (004 eq. 3)"
+        assert_refused(
+            MultiBw::new(z, a, b, g),
+            "MultiBW: B_jj - Gamma_jj >= 0 (004 eq. 3)",
         );
         let mut bad = a;
         bad[0][1] = f64::NAN;

@@ -117,6 +117,27 @@ impl<T: Real, const N: usize> Hysteresis<T> for Pi<T, N> {
     }
 }
 
+/// [`Hysteresis`] for a model built on its PI part `pi`: the PI's state, and its output
+/// mapped by `|model, state, y_pi| output`.
+macro_rules! on_pi {
+    ($model:ty, [$($g:tt)*], |$m:ident, $s:ident, $y:ident| $out:expr) => {
+        impl<T: Real, $($g)*> Hysteresis<T> for $model {
+            type State = PiState<T, N>;
+
+            fn init(&self, u0: T) -> PiState<T, N> {
+                self.pi.init(u0)
+            }
+
+            #[inline]
+            fn step(&self, $s: &mut PiState<T, N>, u: T, dt: T) -> T {
+                let $y = self.pi.step($s, u, dt);
+                let $m = self;
+                $out
+            }
+        }
+    };
+}
+
 /// PI with a cubic polynomial (001 eq. 6-7): `y = c1*u^3 + c2*u + sum_i w_i*H_ri[u]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ppi<T, const N: usize> {
@@ -157,19 +178,7 @@ impl<T: Real, const N: usize> Ppi<T, N> {
     }
 }
 
-impl<T: Real, const N: usize> Hysteresis<T> for Ppi<T, N> {
-    type State = PiState<T, N>;
-
-    fn init(&self, u0: T) -> PiState<T, N> {
-        self.pi.init(u0)
-    }
-
-    #[inline]
-    fn step(&self, s: &mut PiState<T, N>, u: T, dt: T) -> T {
-        let y = self.pi.step(s, u, dt);
-        y + self.c1 * s.u * s.u * s.u
-    }
-}
+on_pi!(Ppi<T, N>, [const N: usize], |m, s, y| y + m.c1 * s.u * s.u * s.u);
 
 /// One-sided dead-zone operator `S_d` (001 eq. 8): `max(y - d, 0)` for `d > 0`, `y` for
 /// `d = 0`.
@@ -250,33 +259,22 @@ impl<T: Real, const N: usize, const M: usize> Dpi<T, N, M> {
     }
 }
 
-impl<T: Real, const N: usize, const M: usize> Hysteresis<T> for Dpi<T, N, M> {
-    type State = PiState<T, N>;
-
-    fn init(&self, u0: T) -> PiState<T, N> {
-        self.pi.init(u0)
-    }
-
-    #[inline]
-    fn step(&self, s: &mut PiState<T, N>, u: T, dt: T) -> T {
-        let p = self.pi.step(s, u, dt);
-        self.dead_zones(p)
-    }
-}
+on_pi!(Dpi<T, N, M>, [const N: usize, const M: usize], |m, _s, p| m.dead_zones(p));
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hysteresis::assert_refused;
 
     #[test]
     fn rejects_bad_thresholds() {
-        assert_eq!(
-            Pi::new(1.0, [0.2, 0.3], [0.0, 1.0]).unwrap_err().0,
-            "PI: thresholds r_i > 0"
+        assert_refused(
+            Pi::new(1.0, [0.2, 0.3], [0.0, 1.0]),
+            "PI: thresholds r_i > 0",
         );
-        assert_eq!(
-            Pi::new(1.0, [0.2, 0.3], [2.0, 1.0]).unwrap_err().0,
-            "PI: thresholds r_i strictly increasing"
+        assert_refused(
+            Pi::new(1.0, [0.2, 0.3], [2.0, 1.0]),
+            "PI: thresholds r_i strictly increasing",
         );
         assert!(Pi::new(f64::NAN, [0.2], [1.0]).is_err());
         assert_eq!(

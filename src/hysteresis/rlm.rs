@@ -195,12 +195,13 @@ impl<T: Real, const L: usize> Hysteresis<T> for Wpmbw<T, L> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hysteresis::assert_refused;
 
     #[test]
     fn rejects_bad_parameters() {
-        assert_eq!(
-            MbwRlm::new(0.5, 0.0, 0.45).unwrap_err().0,
-            "MBW-RLM: lambda > 0 (004 eq. 4)"
+        assert_refused(
+            MbwRlm::new(0.5, 0.0, 0.45),
+            "MBW-RLM: lambda > 0 (004 eq. 4)",
         );
         assert!(MbwRlm::new(f64::NAN, 0.4, 0.45).is_err());
         let m = MbwRlm::new(0.5, 0.4, 0.45).unwrap();

@@ -303,6 +303,7 @@ impl<T: Real> Hysteresis<T> for StructuralBw<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hysteresis::assert_refused;
 
     fn sine(n: usize, fs: f64, f: f64, a: f64) -> Vec<f64> {
         (0..n)
@@ -320,18 +321,9 @@ mod tests {
         let bad = |m, beta, nu, n| {
             StructuralBw::new(m, 10.0, 5e4, 5e4, beta, 0.8, -1.1, nu, n, Hold::First)
         };
-        assert_eq!(
-            bad(0.0, 1e3, 1.0, 4).unwrap_err().0,
-            "structural BW: mass m > 0"
-        );
-        assert_eq!(
-            bad(2.0, -1.0, 1.0, 4).unwrap_err().0,
-            "structural BW: beta >= 0"
-        );
-        assert_eq!(
-            bad(2.0, 1e3, 0.5, 4).unwrap_err().0,
-            "structural BW: nu >= 1"
-        );
+        assert_refused(bad(0.0, 1e3, 1.0, 4), "structural BW: mass m > 0");
+        assert_refused(bad(2.0, -1.0, 1.0, 4), "structural BW: beta >= 0");
+        assert_refused(bad(2.0, 1e3, 0.5, 4), "structural BW: nu >= 1");
         assert!(bad(2.0, 1e3, 1.0, 0).is_err());
         assert!(bad(f64::NAN, 1e3, 1.0, 4).is_err());
         assert!(bad(2.0, 1e3, 1.0, 4).is_ok());

@@ -15,11 +15,20 @@ pub(crate) type Mat = [[f64; NMAX]; NMAX];
 /// Solves `m x = v` for the leading `n x n` block (Gauss, partial pivoting). `None` when
 /// singular.
 pub(crate) fn solve(m: &Mat, v: &[f64; NMAX], n: usize) -> Option<[f64; NMAX]> {
-    let mut m = *m;
-    let mut v = *v;
+    gauss(*m, *v, n, 1e-300)
+}
+
+/// Solves `m x = v` for the leading `n x n` block of any fixed size (Gauss, partial
+/// pivoting). `None` when a pivot is not above `tiny` in magnitude.
+pub(crate) fn gauss<const N: usize>(
+    mut m: [[f64; N]; N],
+    mut v: [f64; N],
+    n: usize,
+    tiny: f64,
+) -> Option<[f64; N]> {
     for k in 0..n {
         let p = (k..n).max_by(|&i, &j| libm::fabs(m[i][k]).total_cmp(&libm::fabs(m[j][k])))?;
-        if !(libm::fabs(m[p][k]) > 1e-300) {
+        if !(libm::fabs(m[p][k]) > tiny) {
             return None;
         }
         m.swap(k, p);
@@ -32,7 +41,7 @@ pub(crate) fn solve(m: &Mat, v: &[f64; NMAX], n: usize) -> Option<[f64; NMAX]> {
             v[i] -= f * v[k];
         }
     }
-    let mut x = [0.0; NMAX];
+    let mut x = [0.0; N];
     for k in (0..n).rev() {
         let s: f64 = (k + 1..n).map(|j| m[k][j] * x[j]).sum();
         x[k] = (v[k] - s) / m[k][k];

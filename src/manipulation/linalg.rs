@@ -33,6 +33,18 @@ pub fn mat_mul<T: Real, const N: usize>(a: &[[T; N]; N], b: &[[T; N]; N]) -> [[T
     c
 }
 
+/// The partial pivot of column `col`: the row at or below `col` with the largest
+/// `|a[r][col]|` (the first of equals), and that magnitude.
+pub fn pivot<T: Real, const N: usize>(a: &[[T; N]; N], col: usize) -> (usize, T) {
+    let mut piv = col;
+    for (r, row) in a.iter().enumerate().skip(col + 1) {
+        if row[col].abs() > a[piv][col].abs() {
+            piv = r;
+        }
+    }
+    (piv, a[piv][col].abs())
+}
+
 /// Solves `a x = b` by Gaussian elimination with partial pivoting; `None` if `a` is singular
 /// (a pivot below `1e-12` of the largest entry) or anything is not finite.
 pub fn solve<T: Real, const N: usize>(mut a: [[T; N]; N], mut b: [T; N]) -> Option<[T; N]> {
@@ -45,13 +57,8 @@ pub fn solve<T: Real, const N: usize>(mut a: [[T; N]; N], mut b: [T; N]) -> Opti
     }
     let tiny = scale * T::from_f64(1e-12);
     for col in 0..N {
-        let mut piv = col;
-        for r in col + 1..N {
-            if a[r][col].abs() > a[piv][col].abs() {
-                piv = r;
-            }
-        }
-        if !(a[piv][col].abs() > tiny) {
+        let (piv, magnitude) = pivot(&a, col);
+        if !(magnitude > tiny) {
             return None;
         }
         a.swap(col, piv);

@@ -89,6 +89,16 @@ pub enum Wave<T> {
 }
 
 impl<T: Real> Wave<T> {
+    /// A sine `offset_um + amplitude_um sin(2 pi freq_hz t)` starting at phase 0.
+    pub fn sine(offset_um: T, amplitude_um: T, freq_hz: T) -> Self {
+        Wave::Sine {
+            offset_um,
+            amplitude_um,
+            freq_hz,
+            phase_turns: T::ZERO,
+        }
+    }
+
     /// A table wave from up to [`TABLE_LEN`] points.
     pub fn table(points: &[T], freq_hz: T) -> Result<Self, ConfigError> {
         if points.len() < 2 || points.len() > TABLE_LEN {

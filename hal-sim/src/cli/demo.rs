@@ -86,6 +86,34 @@ struct Loop {
     extra: Vec<(&'static str, Vec<f64>)>,
 }
 
+impl Loop {
+    /// A loop of output `y` on input `u`, no extra columns.
+    fn of(name: &'static str, ylabel: &'static str, u: &[f64], y: Vec<f64>) -> Self {
+        Self {
+            name,
+            ylabel,
+            u: u.to_vec(),
+            y,
+            extra: vec![],
+        }
+    }
+
+    /// A BW-type model's loop on input `u`, with its hysteresis variable `h`.
+    fn bw<M: Hysteresis<f64, State = BwState<f64>>>(
+        name: &'static str,
+        ylabel: &'static str,
+        model: &M,
+        u: &[f64],
+        dt: f64,
+    ) -> Self {
+        let (y, h) = run_bw(model, u, dt);
+        Self {
+            extra: vec![("h", h)],
+            ..Self::of(name, ylabel, u, y)
+        }
+    }
+}
+
 fn write_csv(path: &Path, t: &[f64], l: &Loop) -> Result<()> {
     let mut f = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
@@ -141,105 +169,42 @@ pub fn run(args: Args) -> Result<()> {
 
     // 000 backup slide, set 1.
     let cbw = Cbw::with_n1(0.16, 0.07, 0.02, 0.01)?;
-    let (y, h) = run_bw(&cbw, &u100, dt);
-    loops.push(Loop {
-        name: "cbw",
-        ylabel: "y [um]",
-        u: u100.clone(),
-        y,
-        extra: vec![("h", h)],
-    });
+    loops.push(Loop::bw("cbw", "y [um]", &cbw, &u100, dt));
 
     // 000 eq. (3): A like set 1, B = 0.003, G = 0.02 (asymmetric equilibria 3.0 / 4.1 um);
     // 60 V keeps the sweep out of the run-away region the model guards (see `Gbw`).
     let gbw = Gbw::new(0.16, 1.0, 0.07, 0.003, 0.02, 1.0)?;
     let u60: Vec<f64> = u100.iter().map(|u| 0.6 * u).collect();
-    let (y, h) = run_bw(&gbw, &u60, dt);
-    loops.push(Loop {
-        name: "gbw",
-        ylabel: "y [um]",
-        u: u60,
-        y,
-        extra: vec![("h", h)],
-    });
+    loops.push(Loop::bw("gbw", "y [um]", &gbw, &u60, dt));
 
     // 000 eq. (4): stiffness like set 1's A_bw, saturation 3 um.
     let dahl = Dahl::new(0.16, 0.07, 3.0, 1.5)?;
-    let (y, h) = run_bw(&dahl, &u100, dt);
-    loops.push(Loop {
-        name: "dahl",
-        ylabel: "y [um]",
-        u: u100.clone(),
-        y,
-        extra: vec![("h", h)],
-    });
+    loops.push(Loop::bw("dahl", "y [um]", &dahl, &u100, dt));
 
     // 001 eq. (4-10): 8 backlash operators, thresholds 0..100 V, weights falling off.
     let r: [f64; 8] = core::array::from_fn(|i| 12.5 * i as f64 + 1.0);
     let w: [f64; 8] = core::array::from_fn(|i| 0.03 * 0.75f64.powi(i as i32));
     let pi = Pi::new(0.1, w, r)?;
-    let y = run_model(&pi, &u100, dt);
-    loops.push(Loop {
-        name: "pi",
-        ylabel: "y [um]",
-        u: u100.clone(),
-        y,
-        extra: vec![],
-    });
+    loops.push(Loop::of("pi", "y [um]", &u100, run_model(&pi, &u100, dt)));
     let ppi = Ppi::new(3e-6, 0.1, w, r)?;
-    let y = run_model(&ppi, &u100, dt);
-    loops.push(Loop {
-        name: "ppi",
-        ylabel: "y [um]",
-        u: u100.clone(),
-        y,
-        extra: vec![],
-    });
+    loops.push(Loop::of("ppi", "y [um]", &u100, run_model(&ppi, &u100, dt)));
     let w_dpi: [f64; 8] = w.map(|w| w + 0.1 / 8.0); // absorb w0 into the bank (eq. 10 has none)
     let dpi = Dpi::new(w_dpi, r, [1.0, 0.4, 0.4], [0.0, 3.0, 6.0])?;
-    let y = run_model(&dpi, &u100, dt);
-    loops.push(Loop {
-        name: "dpi",
-        ylabel: "y [um]",
-        u: u100.clone(),
-        y,
-        extra: vec![],
-    });
+    loops.push(Loop::of("dpi", "y [um]", &u100, run_model(&dpi, &u100, dt)));
 
     // 004 eq. (21) "traditional asymmetric BW" (= 001 eq. 3 in piezo form), 004's values.
     let abw_u = AbwU::new(0.9221, 0.3050, 0.5913, 0.1649, 1.7170, 0.0415)?;
-    let (y, h) = run_bw(&abw_u, &u5, dt);
-    loops.push(Loop {
-        name: "abw_u",
-        ylabel: "y [mrad]",
-        u: u5.clone(),
-        y,
-        extra: vec![("h", h)],
-    });
+    loops.push(Loop::bw("abw_u", "y [mrad]", &abw_u, &u5, dt));
 
     // 002 table 1, asymmetric BW column, mapped to piezo form.
     let abw_abs = AbwAbs::from_002(1.0986, -0.6715, 1.9231, -0.35, 1.0, 0.032)?;
-    let (y, h) = run_bw(&abw_abs, &u5, dt);
-    loops.push(Loop {
-        name: "abw_abs",
-        ylabel: "y [um]",
-        u: u5.clone(),
-        y,
-        extra: vec![("h", h)],
-    });
+    loops.push(Loop::bw("abw_abs", "y [um]", &abw_abs, &u5, dt));
 
     loops.push(mbw_002_loop(&u5, dt)?);
 
     // 004 fig. 5b (rho 0.5, lambda 0.4, mu 0.45) and the identified WPMBW, 004 eq. (19) input.
     let rlm = MbwRlm::new(0.5, 0.4, 0.45)?;
-    let y = run_model(&rlm, &u004, dt);
-    loops.push(Loop {
-        name: "mbw_rlm",
-        ylabel: "w",
-        u: u004.clone(),
-        y,
-        extra: vec![],
-    });
+    loops.push(Loop::of("mbw_rlm", "w", &u004, run_model(&rlm, &u004, dt)));
     let wpmbw = Wpmbw::new(MbwRlm::new(0.6485, 0.7217, 0.7440)?, [0.9268, 0.0048])?;
     let run_rlm = |s: &mut RlmState<f64>, u: f64| (wpmbw.step(s, u, dt), s.w);
     let mut s = wpmbw.init(0.0);

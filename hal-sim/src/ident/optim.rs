@@ -166,21 +166,10 @@ where
 {
     check_bounds(lo, hi)?;
     let dim = lo.len();
-    let np = if cfg.population == 0 {
-        (10 * dim).max(15)
-    } else {
-        cfg.population.max(4)
-    };
+    let np = population_size(cfg.population, dim, 4);
     let mut rng = Rng::new(cfg.seed);
-    let mut pop: Vec<Vec<f64>> = (0..np)
-        .map(|i| match seeds.get(i) {
-            Some(s) if s.len() == dim => clamp(s, lo, hi),
-            _ => (0..dim)
-                .map(|j| lo[j] + rng.uniform() * (hi[j] - lo[j]))
-                .collect(),
-        })
-        .collect();
-    let mut costs: Vec<f64> = pop.par_iter().map(|x| sane(cost(x))).collect();
+    let mut pop = initial_points(&mut rng, np, lo, hi, seeds);
+    let mut costs = costs_of(&cost, &pop);
     let mut evals = np;
     let mut gen = 0;
     let report_every = (cfg.generations / 10).max(1);
@@ -221,7 +210,7 @@ where
                     .collect()
             })
             .collect();
-        let tc: Vec<f64> = trials.par_iter().map(|x| sane(cost(x))).collect();
+        let tc = costs_of(&cost, &trials);
         evals += np;
         for (i, (x, c)) in trials.into_iter().zip(tc).enumerate() {
             if c <= costs[i] {
@@ -230,14 +219,10 @@ where
             }
         }
         gen += 1;
-        if let Some(label) = &cfg.progress {
-            if gen % report_every == 0 {
-                eprintln!(
-                    "{label}: DE generation {gen}/{}: best cost {:.6e}",
-                    cfg.generations,
-                    costs[argmin(&costs)]
-                );
-            }
+        if gen % report_every == 0 {
+            progress(&cfg.progress, "DE generation", gen, cfg.generations, || {
+                costs[argmin(&costs)]
+            });
         }
     }
     let best = argmin(&costs);
@@ -247,6 +232,50 @@ where
         evals,
         iterations: gen,
     })
+}
+
+/// A population of `requested` members, or `max(15, 10 * dim)` for 0; at least `min`.
+fn population_size(requested: usize, dim: usize, min: usize) -> usize {
+    if requested == 0 {
+        (10 * dim).max(15)
+    } else {
+        requested.max(min)
+    }
+}
+
+/// `n` start points: the `seeds` of the right dimension (clamped into the box) first, then
+/// uniform random points of the box.
+fn initial_points(
+    rng: &mut Rng,
+    n: usize,
+    lo: &[f64],
+    hi: &[f64],
+    seeds: &[Vec<f64>],
+) -> Vec<Vec<f64>> {
+    let dim = lo.len();
+    (0..n)
+        .map(|i| match seeds.get(i) {
+            Some(s) if s.len() == dim => clamp(s, lo, hi),
+            _ => (0..dim)
+                .map(|j| lo[j] + rng.uniform() * (hi[j] - lo[j]))
+                .collect(),
+        })
+        .collect()
+}
+
+/// The costs of `points`, evaluated in parallel (non-finite ones rank last).
+fn costs_of<F>(cost: &F, points: &[Vec<f64>]) -> Vec<f64>
+where
+    F: Fn(&[f64]) -> f64 + Sync,
+{
+    points.par_iter().map(|x| sane(cost(x))).collect()
+}
+
+/// A progress line on stderr under `label` (none without one).
+fn progress(label: &Option<String>, what: &str, done: usize, total: usize, best: impl Fn() -> f64) {
+    if let Some(label) = label {
+        eprintln!("{label}: {what} {done}/{total}: best cost {:.6e}", best());
+    }
 }
 
 fn argmin(c: &[f64]) -> usize {

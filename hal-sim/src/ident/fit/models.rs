@@ -114,14 +114,20 @@ pub fn run<M: Hysteresis<f64>>(m: &M, u: &[f64], dt: f64, y: &mut [f64]) {
     }
 }
 
-fn cbw_specs(s: &Scales) -> Vec<ParamSpec> {
+/// The Bouc-Wen family's common box: the gain `d`, the loop's slope `slope` (of the
+/// gain's order) and its saturation `sat` (of `1 / u_range`), then the model's `rest`.
+fn bw_specs(s: &Scales, slope: &str, sat: &str, rest: ParamSpec) -> Vec<ParamSpec> {
     vec![
         ParamSpec::lin("d", 0.0, 3.0 * s.slope),
-        ParamSpec::log("alpha", 1e-3 * s.slope, 3.0 * s.slope),
-        ParamSpec::log("beta", 1e-3 / s.u_range, 1e3 / s.u_range),
-        // gamma = g * beta keeps 004 eq. (3) (|gamma| <= beta) inside the box.
-        ParamSpec::lin("gamma/beta", -1.0, 1.0),
+        ParamSpec::log(slope, 1e-3 * s.slope, 3.0 * s.slope),
+        ParamSpec::log(sat, 1e-3 / s.u_range, 1e3 / s.u_range),
+        rest,
     ]
+}
+
+fn cbw_specs(s: &Scales) -> Vec<ParamSpec> {
+    // gamma = g * beta keeps 004 eq. (3) (|gamma| <= beta) inside the box.
+    bw_specs(s, "alpha", "beta", ParamSpec::lin("gamma/beta", -1.0, 1.0))
 }
 
 fn cbw(p: &[f64]) -> Result<Cbw<f64>, ParamError> {
@@ -149,12 +155,7 @@ fn sim_cbw_n(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamEr
 }
 
 fn gbw_specs(s: &Scales) -> Vec<ParamSpec> {
-    vec![
-        ParamSpec::lin("d", 0.0, 3.0 * s.slope),
-        ParamSpec::log("A", 1e-3 * s.slope, 3.0 * s.slope),
-        ParamSpec::log("G", 1e-3 / s.u_range, 1e3 / s.u_range),
-        ParamSpec::lin("B/G", -0.99, 0.99),
-    ]
+    bw_specs(s, "A", "G", ParamSpec::lin("B/G", -0.99, 0.99))
 }
 
 fn sim_gbw(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {

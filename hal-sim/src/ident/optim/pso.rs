@@ -10,9 +10,8 @@
 //! `tol * |best| + abs_tol` for `stall` iterations (004 sec. 4.2 stopped its PSO the same
 //! way, after 250 epochs without a change above 1e-25).
 
-use super::{check_bounds, clamp, sane, Optimum};
+use super::{argmin, check_bounds, costs_of, initial_points, population_size, progress, Optimum};
 use crate::numeric::Rng;
-use rayon::prelude::*;
 
 /// Particle swarm settings.
 #[derive(Debug, Clone)]
@@ -75,19 +74,10 @@ where
         "PSO: inertia and acceleration coefficients must be finite and >= 0"
     );
     let dim = lo.len();
-    let np = if cfg.particles == 0 {
-        (10 * dim).max(15)
-    } else {
-        cfg.particles.max(2)
-    };
+    let np = population_size(cfg.particles, dim, 2);
     let width: Vec<f64> = lo.iter().zip(hi).map(|(l, h)| h - l).collect();
     let mut rng = Rng::new(cfg.seed);
-    let mut x: Vec<Vec<f64>> = (0..np)
-        .map(|i| match seeds.get(i) {
-            Some(s) if s.len() == dim => clamp(s, lo, hi),
-            _ => (0..dim).map(|j| lo[j] + rng.uniform() * width[j]).collect(),
-        })
-        .collect();
+    let mut x = initial_points(&mut rng, np, lo, hi, seeds);
     // Initial velocities: a random fraction of the box, either direction.
     let mut v: Vec<Vec<f64>> = (0..np)
         .map(|_| {
@@ -96,7 +86,7 @@ where
                 .collect()
         })
         .collect();
-    let mut cost_x: Vec<f64> = x.par_iter().map(|p| sane(cost(p))).collect();
+    let mut cost_x = costs_of(&cost, &x);
     let mut pbest = x.clone();
     let mut pcost = cost_x.clone();
     let mut g = argmin(&pcost);
@@ -131,7 +121,7 @@ where
                 };
             }
         }
-        cost_x = x.par_iter().map(|p| sane(cost(p))).collect();
+        cost_x = costs_of(&cost, &x);
         evals += np;
         let before = pcost[g];
         for (i, c) in cost_x.iter().enumerate() {
@@ -148,13 +138,10 @@ where
         } else {
             since_improved += 1;
         }
-        if let Some(label) = &cfg.progress {
-            if it % report_every == 0 {
-                eprintln!(
-                    "{label}: PSO iteration {it}/{}: best cost {:.6e}",
-                    cfg.iterations, pcost[g]
-                );
-            }
+        if it % report_every == 0 {
+            progress(&cfg.progress, "PSO iteration", it, cfg.iterations, || {
+                pcost[g]
+            });
         }
         if cfg.stall > 0 && since_improved >= cfg.stall {
             break;
@@ -166,16 +153,6 @@ where
         evals,
         iterations: it,
     })
-}
-
-fn argmin(c: &[f64]) -> usize {
-    let mut k = 0;
-    for (i, v) in c.iter().enumerate() {
-        if *v < c[k] {
-            k = i;
-        }
-    }
-    k
 }
 
 #[cfg(test)]
