@@ -3,7 +3,7 @@
 //! with seeded random sizes; train and valid records have different excitations.
 //!
 //! Every seed is run and reported before a case fails, so one run shows the whole picture.
-use hal_sim::ident::diagnose::{diagnose, Cause, Options};
+use hal_sim::ident::diagnose::{diagnose, diagnose_records, Cause, Options};
 use hal_sim::ident::generate::Hidden;
 
 /// Runs one seeded case; `Err` describes what went wrong.
@@ -119,6 +119,52 @@ fn finds_cross_coupling() {
 #[test]
 fn finds_drift() {
     seeds(&[Cause::Drift]);
+}
+
+#[test]
+fn finds_backlash() {
+    seeds(&[Cause::Backlash]);
+}
+
+#[test]
+fn finds_startup_creep() {
+    seeds(&[Cause::StartupCreep]);
+}
+
+/// Several records: one model on two training records, gains on two validation records,
+/// reported per record; one record through `diagnose_records` is `diagnose` exactly.
+#[test]
+fn several_records_one_model() {
+    let mut failed = Vec::new();
+    for (seed, hidden) in [(1, vec![Cause::Delay]), (2, vec![Cause::CrossCoupling])] {
+        let h = Hidden::draw(seed, &hidden);
+        let train = [h.record(0), h.record(2)];
+        let valid = [h.record(1), h.record(3)];
+        let d = diagnose_records(&train, &valid, &Options::default()).unwrap();
+        let found: Vec<Cause> = d.findings.iter().map(|f| f.cause).collect();
+        eprintln!(
+            "seed {seed} hidden {hidden:?} found {found:?} per record {:?}",
+            d.per_valid
+        );
+        let j = d.json();
+        let ok = found == hidden
+            && d.n_train == 2
+            && d.per_valid.len() == 2
+            && d.per_valid.iter().all(|r| r.gain > 0.3)
+            && d.findings[0].gains_per_record.len() == 2
+            && j["records"]["valid"].as_array().map(Vec::len) == Some(2)
+            && j["gain"].as_f64().is_some_and(|g| g > 0.3);
+        if !ok {
+            failed.push(format!("seed {seed} hidden {hidden:?}: {j:#}"));
+        }
+    }
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
+    let h = Hidden::draw(3, &[Cause::Drift]);
+    let (a, b) = (h.record(0), h.record(1));
+    let one = diagnose(&a, &b, &Options::default()).unwrap();
+    let many = diagnose_records(&[a], &[b], &Options::default()).unwrap();
+    assert_eq!(one.json(), many.json());
+    assert!(one.json().get("records").is_none());
 }
 
 const PAIRS: [[Cause; 2]; 5] = [
