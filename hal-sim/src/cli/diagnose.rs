@@ -164,14 +164,19 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
     for f in &d.findings {
         let _ = writeln!(
             s,
-            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %); {}",
+            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %; gains on {:.0} % of the validation blocks, worst block {:+.1} %); {}",
             f.cause.name(),
             f.round,
             f.rmse_valid_before,
             f.rmse_valid,
             100.0 * f.gain,
+            100.0 * f.confidence.share_gaining,
+            100.0 * f.confidence.min_gain,
             f.evidence.text
         );
+    }
+    if let Some(u) = &d.unexplained {
+        let _ = writeln!(s, "unexplained: {}", u.text);
     }
     let _ = writeln!(
         s,

@@ -19,6 +19,7 @@ pub mod model;
 pub mod plots;
 pub mod search;
 mod signals;
+pub mod unexplained;
 
 use rayon::prelude::*;
 use serde::Serialize;
@@ -30,6 +31,7 @@ pub use fitting::Fitted;
 use fitting::{ablate, extend, fit_base, reduce, switched_off, Tiers};
 pub use model::{Cause, Causes, OutputModel, Scales, Shape};
 pub use signals::Signals;
+pub use unexplained::Unexplained;
 
 /// Smallest relative gain on the validation record that counts as real.
 pub const MIN_GAIN: f64 = 0.03;
@@ -97,9 +99,52 @@ pub struct Finding {
     pub rmse_valid: f64,
     pub gain: f64,
     pub evidence: Evidence,
+    /// How well the gain holds up across the validation data.
+    pub confidence: Confidence,
     /// With several validation records: the gain on each (empty with one record).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub gains_per_record: Vec<f64>,
+}
+
+/// How well a named cause's gain holds up: its gain on blocks of the validation records
+/// (each record in quarters), measured when the cause was added.
+#[derive(Debug, Clone, Serialize)]
+pub struct Confidence {
+    pub block_gains: Vec<f64>,
+    pub min_gain: f64,
+    /// Share of the blocks on which the cause gains at least [`MIN_GAIN`].
+    pub share_gaining: f64,
+}
+
+/// Blocks per validation record for [`Confidence`].
+const BLOCKS: usize = 4;
+
+fn confidence(scored: &[Signals], before: &[Vec<Vec<f64>>], after: &[Vec<Vec<f64>>]) -> Confidence {
+    let mut block_gains = Vec::new();
+    for ((s, b), a) in scored.iter().zip(before).zip(after) {
+        let n = s.len();
+        for k in 0..BLOCKS {
+            let (lo, hi) = (k * n / BLOCKS, (k + 1) * n / BLOCKS);
+            let (mut eb, mut ea) = (0.0, 0.0);
+            for ((y, yb), ya) in s.y.iter().zip(b).zip(a) {
+                for j in lo..hi {
+                    eb += (y[j] - yb[j]).powi(2);
+                    ea += (y[j] - ya[j]).powi(2);
+                }
+            }
+            if hi > lo && eb > 0.0 {
+                block_gains.push(1.0 - (ea / eb).sqrt());
+            }
+        }
+    }
+    let min_gain = block_gains.iter().copied().fold(f64::INFINITY, f64::min);
+    let share_gaining = block_gains.iter().filter(|g| **g >= MIN_GAIN).count() as f64
+        / block_gains.len().max(1) as f64;
+    Confidence {
+        block_gains,
+        min_gain,
+        share_gaining,
+    }
 }
 
 /// One validation record's RMSE under the base and the extended model.
@@ -126,6 +171,8 @@ pub struct Diagnosis {
     pub n_train: usize,
     /// Per validation record, in the order given.
     pub per_valid: Vec<RecordScore>,
+    /// The structured residual no named cause explains, if significant.
+    pub unexplained: Option<Unexplained>,
 }
 
 impl Diagnosis {
@@ -177,6 +224,7 @@ impl Diagnosis {
             "findings": self.findings,
             "noise_rms": self.noise_rms,
             "dropped": self.dropped.iter().map(|c| c.name()).collect::<Vec<_>>(),
+            "unexplained": self.unexplained,
             "rule": {"min_gain": MIN_GAIN, "min_abs_gain_of_span": MIN_ABS_GAIN, "min_evidence_r2": MIN_R2},
         })
     }
@@ -471,6 +519,7 @@ pub fn diagnose_records(
             rmse_valid: e,
             gain: 1.0 - e / current_valid,
             evidence: ev,
+            confidence: confidence(&scored, &current_pred, &p),
             gains_per_record,
         });
         current = f;
@@ -513,7 +562,19 @@ pub fn diagnose_records(
             gain: 1.0 - e / b,
         })
         .collect();
+    let residual: Preds = scored
+        .iter()
+        .zip(&current_pred)
+        .map(|(s, p)| {
+            s.y.iter()
+                .zip(p)
+                .map(|(y, m)| y.iter().zip(m).map(|(a, b)| a - b).collect())
+                .collect()
+        })
+        .collect();
+    let unexplained = unexplained::find(&scored, &residual, noise_rms);
     Ok(Diagnosis {
+        unexplained,
         dropped,
         base,
         base_valid,
