@@ -8,8 +8,9 @@
 //! (between-group variance over total variance, less what as many groups explain in white
 //! noise) says how structured the residual is along that signal. The residual is called
 //! unexplained when it is mostly not sensor noise ([`MIN_NON_NOISE`]) and one grouping
-//! explains at least [`MIN_SHARE`] of it; the frequency band where its excess energy lies is
-//! reported beside it.
+//! explains at least [`MIN_SHARE`] of it, or, when no grouping does, when one frequency band
+//! holds that share of its energy above the noise (many lightly damped modes follow no level or
+//! rate); the band is reported either way.
 
 use serde::Serialize;
 
@@ -46,7 +47,7 @@ pub struct Unexplained {
     pub rms: f64,
     pub noise_rms: f64,
     /// The best grouping: `input level`, `position in the loop`, `input rate`, `amplitude`
-    /// or `time since rest`.
+    /// or `time since rest`; else `frequency band`.
     pub location: &'static str,
     pub detail: String,
     /// The frequency band holding most of the residual's energy above the noise.
@@ -170,12 +171,13 @@ fn between(r: &[f64], labels: &[usize], groups: usize) -> (f64, f64, usize) {
     (contrib.iter().sum(), total, top)
 }
 
-/// Energy shares of `r` below 1 Hz, 1-10 Hz, 10-100 Hz and above, less the white noise's
-/// share (mostly in the top band).
-fn band(r: &[f64], dt: f64, noise_rms: f64) -> String {
+/// The band of `r` (below 1 Hz, 1-10, 10-100, 100-1000 Hz, above) holding most of its
+/// energy above the white noise's share of that band: its name and that excess as a share of
+/// the residual's energy.
+fn band(r: &[f64], dt: f64, noise_rms: f64) -> (String, f64) {
     let tau = |hz: f64| 1.0 / (2.0 * std::f64::consts::PI * hz);
     let nyq = 0.5 / dt;
-    let cuts: Vec<f64> = [1.0, 10.0, 100.0]
+    let cuts: Vec<f64> = [1.0, 10.0, 100.0, 1000.0]
         .into_iter()
         .filter(|&hz| hz < 0.5 * nyq)
         .collect();
@@ -185,37 +187,30 @@ fn band(r: &[f64], dt: f64, noise_rms: f64) -> String {
         let m = x.iter().sum::<f64>() / x.len().max(1) as f64;
         x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / x.len().max(1) as f64
     };
-    let mut energies = Vec::new();
+    let total = var(r).max(1e-300);
+    let mut excess = Vec::new();
     let mut prev: Option<&Vec<f64>> = None;
-    for l in &lows {
+    for (k, l) in lows.iter().enumerate() {
         let part: Vec<f64> = match prev {
             Some(p) => l.iter().zip(p).map(|(a, b)| a - b).collect(),
             None => l.clone(),
         };
-        energies.push(var(&part));
+        // White noise spreads evenly up to the Nyquist frequency.
+        let lo = if k == 0 { 0.0 } else { cuts[k - 1] };
+        let hi = cuts.get(k).copied().unwrap_or(nyq);
+        let white = noise_rms * noise_rms * (hi - lo) / nyq;
+        excess.push((var(&part) - white).max(0.0));
         prev = Some(l);
     }
-    if let Some(top) = energies.last_mut() {
-        *top = (*top - noise_rms * noise_rms).max(0.0);
-    }
-    let names: Vec<String> = (0..energies.len())
-        .map(|k| {
-            let lo = if k == 0 { 0.0 } else { cuts[k - 1] };
-            match cuts.get(k) {
-                Some(hi) => format!("{lo:.0}-{hi:.0} Hz"),
-                None => format!("above {lo:.0} Hz"),
-            }
-        })
-        .collect();
-    let total: f64 = energies.iter().sum::<f64>().max(1e-300);
-    let k = (0..energies.len())
-        .max_by(|a, b| energies[*a].total_cmp(&energies[*b]))
+    let k = (0..excess.len())
+        .max_by(|a, b| excess[*a].total_cmp(&excess[*b]))
         .unwrap_or(0);
-    format!(
-        "{} ({:.0} % of the energy above the noise)",
-        names[k],
-        100.0 * energies[k] / total
-    )
+    let lo = if k == 0 { 0.0 } else { cuts[k - 1] };
+    let name = match cuts.get(k) {
+        Some(hi) => format!("{lo:.0}-{hi:.0} Hz"),
+        None => format!("above {lo:.0} Hz"),
+    };
+    (name, (excess[k] / total).clamp(0.0, 1.0))
 }
 
 /// The structured part of `residual` (per record, per output, on the scored samples of
@@ -234,7 +229,7 @@ pub fn find(scored: &[Signals], residual: &[Vec<Vec<f64>>], noise_rms: f64) -> O
     }
     let mut pools: Vec<Pool> = Vec::new();
     let (mut ss, mut count) = (0.0, 0usize);
-    let mut band_of = (0.0, String::new());
+    let mut band_of = (0.0, String::new(), 0.0);
     for (rec, res) in scored.iter().zip(residual) {
         for (i, r) in res.iter().enumerate() {
             let n = r.len();
@@ -268,7 +263,8 @@ pub fn find(scored: &[Signals], residual: &[Vec<Vec<f64>>], noise_rms: f64) -> O
                 }
             }
             if e > band_of.0 {
-                band_of = (e, band(r, rec.dt(), noise_rms));
+                let (name, share) = band(r, rec.dt(), noise_rms);
+                band_of = (e, name, share);
             }
         }
     }
@@ -294,17 +290,29 @@ pub fn find(scored: &[Signals], residual: &[Vec<Vec<f64>>], noise_rms: f64) -> O
         })
         .collect();
     locations.sort_by(|a, b| b.share.total_cmp(&a.share));
-    let best = locations.first()?.clone();
+    // A signal a person can act on first; else the frequency band, when the residual's
+    // excess energy sits in one band (many lightly damped modes: no level or rate groups it).
+    let band_location = Location {
+        name: "frequency band",
+        share: band_of.2,
+        detail: band_of.1.clone(),
+    };
+    let best = match locations.first() {
+        Some(b) if b.share >= MIN_SHARE => b.clone(),
+        _ => band_location.clone(),
+    };
+    locations.push(band_location);
     if non_noise < MIN_NON_NOISE || best.share < MIN_SHARE {
         return None;
     }
     let text = format!(
-        "{:.0} % of the residual (rms {rms:.4}, noise {noise_rms:.4}) is not noise, and no cause in the catalogue explains it: {:.0} % of it follows the {} (largest at {}); its energy lies {}",
+        "{:.0} % of the residual (rms {rms:.4}, noise {noise_rms:.4}) is not noise, and no cause in the catalogue explains it: {:.0} % of it follows the {} (largest at {}); its energy above the noise lies mostly in {} ({:.0} % of the residual)",
         100.0 * non_noise,
         100.0 * best.share,
         best.name,
         best.detail,
-        band_of.1
+        band_of.1,
+        100.0 * band_of.2
     );
     Some(Unexplained {
         share: best.share,
