@@ -132,6 +132,27 @@ fn finds_startup_creep() {
     seeds(&[Cause::StartupCreep]);
 }
 
+/// The new causes hold up with train and valid swapped (each record starts from rest).
+#[test]
+fn new_causes_hold_up_when_train_and_valid_swap() {
+    let mut failed = Vec::new();
+    for cause in [Cause::Backlash, Cause::StartupCreep] {
+        for seed in 1..=seed_count() {
+            let h = Hidden::draw(seed, &[cause]);
+            let d = diagnose(&h.record(1), &h.record(0), &Options::default()).unwrap();
+            let found: Vec<Cause> = d.findings.iter().map(|f| f.cause).collect();
+            eprintln!(
+                "swapped seed {seed} hidden {cause:?} found {found:?} gain {:.3}",
+                d.gain()
+            );
+            if found != [cause] || d.gain().is_nan() || d.gain() <= 0.0 {
+                failed.push(format!("seed {seed} {cause:?}: found {found:?}"));
+            }
+        }
+    }
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
+}
+
 /// Several records: one model on two training records, gains on two validation records,
 /// reported per record; one record through `diagnose_records` is `diagnose` exactly.
 #[test]
