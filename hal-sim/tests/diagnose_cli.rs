@@ -61,6 +61,61 @@ fn json_and_predict_agree() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Several records: `--train` and `--valid` repeated; the JSON reports each validation
+/// record, `--predict` writes a `record` column, and the overall gain is recomputed from it.
+#[test]
+fn several_records_json_and_predict_agree() {
+    let dir = std::env::temp_dir().join(format!("diagnose_cli_many_{}", std::process::id()));
+    let plant = Plant::draw(6, &[Cause::Delay]);
+    let recs: Vec<Signals> = (0..4).map(|w| plant.record(6, w)).collect();
+    for (k, r) in recs.iter().enumerate() {
+        write(&dir.join(format!("r{k}.csv")), r);
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_piezo"))
+        .args(["diagnose", "--json"])
+        .arg("--train")
+        .arg(dir.join("r0.csv"))
+        .arg("--train")
+        .arg(dir.join("r2.csv"))
+        .arg("--valid")
+        .arg(dir.join("r1.csv"))
+        .arg("--valid")
+        .arg(dir.join("r3.csv"))
+        .arg("--predict")
+        .arg(dir.join("p.csv"))
+        .output()
+        .unwrap();
+    cli_support::ok(&out);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(j["cause"], "delay", "{j:#}");
+    assert_eq!(j["records"]["train"], 2);
+    assert_eq!(j["records"]["valid"].as_array().unwrap().len(), 2);
+    assert!(j.get("unexplained").is_some());
+    let text = std::fs::read_to_string(dir.join("p.csv")).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("record,t,y_base,y_ext"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let (mut sb, mut se, mut n) = (0.0, 0.0, 0.0);
+    for (k, v) in [(1.0, &recs[1]), (2.0, &recs[3])] {
+        let rs: Vec<&Vec<f64>> = rows.iter().filter(|r| r[0] == k).collect();
+        assert_eq!(rs.len(), v.len());
+        for (r, y) in rs.iter().zip(&v.y[0]) {
+            sb += (r[2] - y).powi(2);
+            se += (r[3] - y).powi(2);
+            n += 1.0;
+        }
+        let per = &j["records"]["valid"][k as usize - 1];
+        let b = rmse(&rs.iter().map(|r| r[2]).collect::<Vec<_>>(), &v.y[0]);
+        assert!((per["rmse_base"].as_f64().unwrap() - b).abs() < 1e-9 * b.max(1.0));
+    }
+    let gain = j["gain"].as_f64().unwrap();
+    let recomputed = 1.0 - (se / n).sqrt() / (sb / n).sqrt();
+    assert!((gain - recomputed).abs() < 1e-9, "{gain} vs {recomputed}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn malformed_csv_names_the_line() {
     let dir = std::env::temp_dir().join(format!("diagnose_bad_{}", std::process::id()));

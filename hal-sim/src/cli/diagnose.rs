@@ -3,6 +3,7 @@
 //! ```text
 //! piezo diagnose --train A.csv --valid B.csv [--json] [--predict OUT.csv] [--out DIR]
 //! piezo diagnose --train A.csv --split 0.5        # one record: first half fits, second validates
+//! piezo diagnose --train A.csv --train B.csv --valid C.csv --valid D.csv   # one model for A and B
 //! ```
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
@@ -14,12 +15,14 @@ use crate::record::Record;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yk`); all parameters are fitted on it.
-    #[arg(long)]
-    pub train: PathBuf,
+    /// Repeat for several records: one model is fitted on all of them.
+    #[arg(long, required = true)]
+    pub train: Vec<PathBuf>,
     /// Validation record, ideally with a different excitation; gains are measured on it.
+    /// Repeat for several records: gains are measured on all of them (and per record).
     #[arg(long, conflicts_with = "split")]
-    pub valid: Option<PathBuf>,
-    /// Without --valid: split the training record at this fraction of its samples (first
+    pub valid: Vec<PathBuf>,
+    /// Without --valid: split every training record at this fraction of its samples (first
     /// part fits, the rest validates).
     #[arg(long)]
     pub split: Option<f64>,
@@ -27,7 +30,7 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// Write `t, y_base, y_ext` (suffixed per output for several outputs) on the validation
-    /// samples to this CSV.
+    /// samples to this CSV (several validation records: a first column `record`, 1-based).
     #[arg(long)]
     pub predict: Option<PathBuf>,
     /// Write plots (loops before/after, residual against the cause's signal) into this folder.
@@ -41,29 +44,52 @@ fn read(path: &PathBuf) -> Result<Signals> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let whole = read(&args.train)?;
-    let (train, valid, split_note) = match (&args.valid, args.split) {
-        (Some(v), None) => (whole, read(v)?, None),
-        (None, split) => {
-            let f = split.unwrap_or(0.5);
-            anyhow::ensure!(
-                f.is_finite() && (0.1..=0.9).contains(&f),
-                "--split must be within 0.1..0.9, got {f}"
-            );
+    let records = args.train.iter().map(read).collect::<Result<Vec<_>>>()?;
+    let (train, valid, split_note) = if args.valid.is_empty() {
+        let f = args.split.unwrap_or(0.5);
+        anyhow::ensure!(
+            f.is_finite() && (0.1..=0.9).contains(&f),
+            "--split must be within 0.1..0.9, got {f}"
+        );
+        let mut notes = Vec::new();
+        let (mut train, mut valid) = (Vec::new(), Vec::new());
+        for (whole, path) in records.into_iter().zip(&args.train) {
             let k = (whole.len() as f64 * f) as usize;
-            let note = format!(
-                "no --valid: samples 0..{k} of {} fit, {k}..{} validate (the model runs through the first part to reach them)",
-                args.train.display(),
+            notes.push(format!(
+                "samples 0..{k} of {} fit, {k}..{} validate",
+                path.display(),
                 whole.len()
-            );
-            (whole.slice(0, k), whole.with_warmup(k), Some(note))
+            ));
+            train.push(whole.slice(0, k));
+            valid.push(whole.with_warmup(k));
         }
-        (Some(_), Some(_)) => anyhow::bail!("--split and --valid exclude each other"),
+        let note = format!(
+            "no --valid: {} (the model runs through the first part to reach them)",
+            notes.join("; ")
+        );
+        (train, valid, Some(note))
+    } else {
+        anyhow::ensure!(
+            args.split.is_none(),
+            "--split and --valid exclude each other"
+        );
+        let valid = args.valid.iter().map(read).collect::<Result<Vec<_>>>()?;
+        (records, valid, None)
     };
-    let d = diagnose::diagnose(&train, &valid, &Options::default())?;
+    let d = diagnose::diagnose_records(&train, &valid, &Options::default())?;
     let mut plots = Vec::new();
     if let Some(dir) = &args.out {
-        plots = diagnose::plots::write(dir, &d, &valid)?;
+        if valid.len() == 1 {
+            plots = diagnose::plots::write(dir, &d, &valid[0])?;
+        } else {
+            for (k, v) in valid.iter().enumerate() {
+                plots.extend(diagnose::plots::write(
+                    &dir.join(format!("valid{}", k + 1)),
+                    &d,
+                    v,
+                )?);
+            }
+        }
     }
     if let Some(path) = &args.predict {
         write_predict(path, &d, &valid)?;
@@ -72,6 +98,19 @@ pub fn run(args: Args) -> Result<()> {
         let mut j = d.json();
         if let Some(note) = &split_note {
             j["split"] = serde_json::json!(note);
+        }
+        if j.get("records").is_some() {
+            j["records"]["train_files"] = serde_json::json!(args
+                .train
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>());
+            let valid_files: Vec<String> = if args.valid.is_empty() {
+                args.train.iter().map(|p| p.display().to_string()).collect()
+            } else {
+                args.valid.iter().map(|p| p.display().to_string()).collect()
+            };
+            j["records"]["valid_files"] = serde_json::json!(valid_files);
         }
         j["plots"] = serde_json::json!(plots
             .iter()
@@ -125,14 +164,19 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
     for f in &d.findings {
         let _ = writeln!(
             s,
-            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %); {}",
+            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %; gains on {:.0} % of the validation blocks, worst block {:+.1} %); {}",
             f.cause.name(),
             f.round,
             f.rmse_valid_before,
             f.rmse_valid,
             100.0 * f.gain,
+            100.0 * f.confidence.share_gaining,
+            100.0 * f.confidence.min_gain,
             f.evidence.text
         );
+    }
+    if let Some(u) = &d.unexplained {
+        let _ = writeln!(s, "unexplained: {}", u.text);
     }
     let _ = writeln!(
         s,
@@ -142,14 +186,25 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
         d.extended_valid,
         100.0 * d.gain()
     );
+    if d.n_train > 1 || d.per_valid.len() > 1 {
+        let _ = writeln!(s, "{} training records; per validation record:", d.n_train);
+        for (k, r) in d.per_valid.iter().enumerate() {
+            let _ = writeln!(
+                s,
+                "  valid {}: rmse base {:.4} -> extended {:.4} (gain {:.1} %)",
+                k + 1,
+                r.rmse_base,
+                r.rmse_extended,
+                100.0 * r.gain
+            );
+        }
+    }
     s
 }
 
-fn write_predict(path: &PathBuf, d: &Diagnosis, valid: &Signals) -> Result<()> {
-    let base = d.base.predict(valid);
-    let ext = d.extended.predict(valid);
-    let valid = &valid.scored();
-    let n_out = valid.y.len();
+fn write_predict(path: &PathBuf, d: &Diagnosis, valid: &[Signals]) -> Result<()> {
+    let several = valid.len() > 1;
+    let n_out = valid[0].y.len();
     let suffix = |i: usize| {
         if n_out == 1 {
             String::new()
@@ -157,17 +212,25 @@ fn write_predict(path: &PathBuf, d: &Diagnosis, valid: &Signals) -> Result<()> {
             (i + 1).to_string()
         }
     };
-    let mut text = String::from("t");
+    let mut text = String::from(if several { "record,t" } else { "t" });
     for i in 0..n_out {
         let _ = write!(text, ",y_base{0},y_ext{0}", suffix(i));
     }
     text.push('\n');
-    for k in 0..valid.len() {
-        let _ = write!(text, "{}", valid.t[k]);
-        for i in 0..n_out {
-            let _ = write!(text, ",{},{}", base[i][k], ext[i][k]);
+    for (r, v) in valid.iter().enumerate() {
+        let base = d.base.predict(v);
+        let ext = d.extended.predict(v);
+        let v = &v.scored();
+        for k in 0..v.len() {
+            if several {
+                let _ = write!(text, "{},", r + 1);
+            }
+            let _ = write!(text, "{}", v.t[k]);
+            for i in 0..n_out {
+                let _ = write!(text, ",{},{}", base[i][k], ext[i][k]);
+            }
+            text.push('\n');
         }
-        text.push('\n');
     }
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;

@@ -14,10 +14,12 @@
 //! Errors are RMSE (004 eq. 23); all parameters are fitted on the training record only.
 
 pub mod evidence;
+mod fitting;
 pub mod model;
 pub mod plots;
 pub mod search;
 mod signals;
+pub mod unexplained;
 
 use rayon::prelude::*;
 use serde::Serialize;
@@ -25,9 +27,11 @@ use serde_json::{json, Value};
 
 use crate::numeric::rmse_all;
 pub use evidence::Evidence;
-use model::{creep_taus, fit_linear, Coords};
+pub use fitting::Fitted;
+use fitting::{ablate, extend, fit_base, reduce, switched_off, Tiers};
 pub use model::{Cause, Causes, OutputModel, Scales, Shape};
 pub use signals::Signals;
+pub use unexplained::Unexplained;
 
 /// Smallest relative gain on the validation record that counts as real.
 pub const MIN_GAIN: f64 = 0.03;
@@ -67,104 +71,11 @@ impl Default for Options {
     }
 }
 
-/// The training record at three resolutions: global search, polish, final least squares.
-struct Tiers<'a> {
-    full: &'a Signals,
-    medium: Signals,
-    coarse: Signals,
-}
+/// Predictions on several records: per record, per output.
+type Preds = Vec<Vec<Vec<f64>>>;
 
-impl<'a> Tiers<'a> {
-    fn new(full: &'a Signals, opt: &Options) -> Self {
-        let n = full.len();
-        let coarse = n.div_ceil(opt.coarse_samples.max(100)).max(1);
-        let by_rate = (1.0 / (full.dt() * opt.medium_rate_hz)).floor().max(1.0) as usize;
-        let medium = n.div_ceil(opt.medium_samples.max(100)).clamp(1, by_rate);
-        Self {
-            full,
-            medium: full.decimate(medium),
-            coarse: full.decimate(coarse),
-        }
-    }
-}
-
-/// A fitted model: one [`OutputModel`] per output, all with the same causes.
-#[derive(Debug, Clone)]
-pub struct Fitted {
-    pub causes: Causes,
-    pub outputs: Vec<OutputModel>,
-    pub scales: Vec<Scales>,
-    pub taus: Vec<f64>,
-    pub rmse_train: f64,
-}
-
-impl Fitted {
-    /// Model outputs on the scored samples of `data` (after its warm-up), one vector per
-    /// output.
-    pub fn predict(&self, data: &Signals) -> Vec<Vec<f64>> {
-        (0..self.outputs.len())
-            .into_par_iter()
-            .map(|i| {
-                let mut y = model::predict(
-                    data,
-                    i,
-                    self.causes,
-                    &self.outputs[i],
-                    &self.scales[i],
-                    &self.taus,
-                );
-                y.drain(..data.warmup.min(y.len()));
-                y
-            })
-            .collect()
-    }
-
-    /// Parameters as JSON, per output.
-    pub fn params(&self) -> Value {
-        let per: Vec<Value> = self
-            .outputs
-            .iter()
-            .enumerate()
-            .map(|(i, m)| {
-                let s = &m.shape;
-                let mut o = serde_json::Map::new();
-                o.insert("output".into(), json!(format!("y{}", i + 1)));
-                let mut put = |k: &str, v: f64| {
-                    o.insert(k.into(), json!(v));
-                };
-                put("beta", s.beta);
-                put("gamma", s.gamma);
-                for (name, c) in m.names.iter().zip(&m.coef) {
-                    put(name, *c);
-                }
-                let c = self.causes;
-                if c.has(Cause::Delay) {
-                    put("delay_s", s.delay_s);
-                }
-                if c.has(Cause::Saturation) {
-                    put("rail_lo_v", s.rail_lo_v);
-                    put("rail_hi_v", s.rail_hi_v);
-                }
-                if c.has(Cause::SlewLimit) {
-                    put("slew_v_per_s", s.slew_v_per_s);
-                }
-                if c.has(Cause::Dynamics) {
-                    put("wn_hz", s.wn_hz);
-                    put("zeta", s.zeta);
-                }
-                if c.has(Cause::Creep) {
-                    put("creep_taus_s", f64::NAN);
-                    o.insert("creep_taus_s".into(), json!(self.taus));
-                }
-                Value::Object(o)
-            })
-            .collect();
-        Value::Array(per)
-    }
-}
-
-/// A fitted extension, its validation prediction and RMSE.
-type Tried = (Fitted, Vec<Vec<f64>>, f64);
+/// A fitted extension, its validation predictions and RMSE.
+type Tried = (Fitted, Preds, f64);
 
 /// One tried extension.
 #[derive(Debug, Clone, Serialize)]
@@ -188,6 +99,60 @@ pub struct Finding {
     pub rmse_valid: f64,
     pub gain: f64,
     pub evidence: Evidence,
+    /// How well the gain holds up across the validation data.
+    pub confidence: Confidence,
+    /// With several validation records: the gain on each (empty with one record).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub gains_per_record: Vec<f64>,
+}
+
+/// How well a named cause's gain holds up: its gain on blocks of the validation records
+/// (each record in quarters), measured when the cause was added.
+#[derive(Debug, Clone, Serialize)]
+pub struct Confidence {
+    pub block_gains: Vec<f64>,
+    pub min_gain: f64,
+    /// Share of the blocks on which the cause gains at least [`MIN_GAIN`].
+    pub share_gaining: f64,
+}
+
+/// Blocks per validation record for [`Confidence`].
+const BLOCKS: usize = 4;
+
+fn confidence(scored: &[Signals], before: &[Vec<Vec<f64>>], after: &[Vec<Vec<f64>>]) -> Confidence {
+    let mut block_gains = Vec::new();
+    for ((s, b), a) in scored.iter().zip(before).zip(after) {
+        let n = s.len();
+        for k in 0..BLOCKS {
+            let (lo, hi) = (k * n / BLOCKS, (k + 1) * n / BLOCKS);
+            let (mut eb, mut ea) = (0.0, 0.0);
+            for ((y, yb), ya) in s.y.iter().zip(b).zip(a) {
+                for j in lo..hi {
+                    eb += (y[j] - yb[j]).powi(2);
+                    ea += (y[j] - ya[j]).powi(2);
+                }
+            }
+            if hi > lo && eb > 0.0 {
+                block_gains.push(1.0 - (ea / eb).sqrt());
+            }
+        }
+    }
+    let min_gain = block_gains.iter().copied().fold(f64::INFINITY, f64::min);
+    let share_gaining = block_gains.iter().filter(|g| **g >= MIN_GAIN).count() as f64
+        / block_gains.len().max(1) as f64;
+    Confidence {
+        block_gains,
+        min_gain,
+        share_gaining,
+    }
+}
+
+/// One validation record's RMSE under the base and the extended model.
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordScore {
+    pub rmse_base: f64,
+    pub rmse_extended: f64,
+    pub gain: f64,
 }
 
 /// Everything `diagnose` found.
@@ -202,6 +167,12 @@ pub struct Diagnosis {
     pub noise_rms: f64,
     /// Causes found, then dropped by the backward check (a later cause made them redundant).
     pub dropped: Vec<Cause>,
+    /// Number of training records.
+    pub n_train: usize,
+    /// Per validation record, in the order given.
+    pub per_valid: Vec<RecordScore>,
+    /// The structured residual no named cause explains, if significant.
+    pub unexplained: Option<Unexplained>,
 }
 
 impl Diagnosis {
@@ -216,6 +187,17 @@ impl Diagnosis {
     /// The JSON report (stable contract: `base`, `causes`, `cause`, `extended`, `gain`,
     /// `candidates`; the rest is extra detail).
     pub fn json(&self) -> Value {
+        let mut j = self.json_common();
+        if self.n_train > 1 || self.per_valid.len() > 1 {
+            j["records"] = json!({
+                "train": self.n_train,
+                "valid": self.per_valid,
+            });
+        }
+        j
+    }
+
+    fn json_common(&self) -> Value {
         let model = |f: &Fitted, valid: f64| {
             json!({
                 "model": f.causes.label(),
@@ -242,314 +224,10 @@ impl Diagnosis {
             "findings": self.findings,
             "noise_rms": self.noise_rms,
             "dropped": self.dropped.iter().map(|c| c.name()).collect::<Vec<_>>(),
+            "unexplained": self.unexplained,
             "rule": {"min_gain": MIN_GAIN, "min_abs_gain_of_span": MIN_ABS_GAIN, "min_evidence_r2": MIN_R2},
         })
     }
-}
-
-/// CBW shapes every fit also starts from: `ln((beta + gamma) * span)`, `ln((beta - gamma) /
-/// (beta + gamma))`.
-const SHAPE_GRID: [(f64, f64); 6] = [
-    (0.5, -1.0),
-    (0.5, 0.0),
-    (2.0, -1.0),
-    (2.0, 0.0),
-    (3.5, -1.0),
-    (3.5, 0.0),
-];
-
-/// Starting shapes for adding `cause` to a model whose output has `shape`.
-fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
-    let mut v = Vec::new();
-    let span = scales.span();
-    match cause {
-        None | Some(Cause::Asymmetry | Cause::Creep | Cause::CrossCoupling | Cause::Drift) => {
-            v.push(*shape)
-        }
-        Some(Cause::Delay) => {
-            for ms in [0.3, 1.0, 3.0, 10.0, 30.0] {
-                v.push(Shape {
-                    delay_s: ms * 1e-3,
-                    ..*shape
-                });
-            }
-        }
-        Some(Cause::Saturation) => {
-            for (lo, hi) in [
-                (0.0, 0.02),
-                (0.0, 0.07),
-                (0.0, 0.2),
-                (0.02, 0.0),
-                (0.07, 0.0),
-                (0.2, 0.0),
-                (0.03, 0.03),
-                (0.1, 0.1),
-            ] {
-                v.push(Shape {
-                    rail_lo_v: scales.u_lo + lo * span,
-                    rail_hi_v: scales.u_hi - hi * span,
-                    ..*shape
-                });
-            }
-        }
-        Some(Cause::SlewLimit) => {
-            for f in [0.8, 0.5, 0.25, 0.1, 0.03] {
-                v.push(Shape {
-                    slew_v_per_s: f * scales.rate_max,
-                    ..*shape
-                });
-            }
-        }
-        Some(Cause::Dynamics) => {
-            for hz in [3.0, 10.0, 30.0, 100.0, 300.0, 1000.0] {
-                if hz < 0.4 / scales.dt {
-                    for zeta in [0.15, 0.7] {
-                        v.push(Shape {
-                            wn_hz: hz,
-                            zeta,
-                            ..*shape
-                        });
-                    }
-                }
-            }
-        }
-    }
-    v
-}
-
-/// Fits output `i` with `causes`, from the best of `starts`.
-#[allow(clippy::too_many_arguments)]
-fn fit_output(
-    tiers: &Tiers,
-    i: usize,
-    causes: Causes,
-    starts: &[Shape],
-    scales: &Scales,
-    taus: &[f64],
-    opt: &Options,
-) -> (OutputModel, f64) {
-    let coords = Coords {
-        causes,
-        scales: *scales,
-    };
-    let dim = coords.dim();
-    let cost_on = |data: &Signals, x: &[f64]| {
-        let (shape, excess) = coords.shape_and_excess(x);
-        fit_linear(data, i, causes, &shape, scales, taus).1 * (1.0 + excess)
-    };
-    let (coarse, medium) = (&tiers.coarse, &tiers.medium);
-    // Rank the starts, keep two (one when only the CBW shape is searched).
-    let mut ranked: Vec<(Vec<f64>, f64)> = starts
-        .iter()
-        .map(|s| {
-            let x = coords.coords(s);
-            let c = cost_on(coarse, &x);
-            (x, c)
-        })
-        .collect();
-    ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
-    // The best extension setting again with fresh CBW shapes: the current shape may sit in
-    // a corner the missing cause pushed it into.
-    if let Some((x, _)) = ranked.first().cloned() {
-        for (a, r) in SHAPE_GRID {
-            let mut x = x.clone();
-            x[0] = a;
-            x[1] = r;
-            let c = cost_on(coarse, &x);
-            ranked.push((x, c));
-        }
-        ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
-    }
-    ranked.truncate(if dim > 2 { 2 } else { 1 });
-    let steps = coords.steps();
-    // Only the CBW shape to search (the extension is linear): a short search suffices.
-    let global = if dim > 2 {
-        opt.global_evals.0 + opt.global_evals.1 * dim
-    } else {
-        opt.global_evals.0
-    };
-    // The starts run in parallel (the other core is idle while the control fits).
-    let best = ranked
-        .par_iter()
-        .map(|(x0, _)| {
-            let (x, _) = search::nelder_mead(&mut |x| cost_on(coarse, x), x0, &steps, global, 1e-7);
-            // A restart with fresh steps: a collapsed simplex is the usual Nelder-Mead failure.
-            search::nelder_mead(&mut |x| cost_on(coarse, x), &x, &steps, global / 3, 1e-7)
-        })
-        .min_by(|a, b| a.1.total_cmp(&b.1));
-    let x = best.map_or_else(|| coords.coords(&starts[0]), |b| b.0);
-    let fine_steps: Vec<f64> = steps.iter().map(|s| 0.1 * s).collect();
-    let local = opt.local_evals.0 + opt.local_evals.1 * dim;
-    let (x, _) = search::nelder_mead(&mut |x| cost_on(medium, x), &x, &fine_steps, local, 1e-9);
-    fit_linear(tiers.full, i, causes, &coords.shape(&x), scales, taus)
-}
-
-/// The base fit: a grid over the CBW shape, then the same search as the extensions.
-fn fit_base(tiers: &Tiers, opt: &Options) -> Fitted {
-    let full = tiers.full;
-    let taus = creep_taus(full.dt() * full.len() as f64, full.dt());
-    let n_out = full.y.len();
-    let scales: Vec<Scales> = (0..n_out)
-        .map(|i| Scales::of(&full.t, &full.u[model::own_input(i, full.u.len())]))
-        .collect();
-    let outputs: Vec<(OutputModel, f64)> = (0..n_out)
-        .into_par_iter()
-        .map(|i| {
-            let coords = Coords {
-                causes: Causes::default(),
-                scales: scales[i],
-            };
-            let mut grid = Vec::new();
-            for a in [0.0, 1.0, 2.0, 3.5, 5.0] {
-                for r in [-3.0, -1.0, 0.0, 1.0] {
-                    grid.push(coords.shape(&[a, r]));
-                }
-            }
-            fit_output(tiers, i, Causes::default(), &grid, &scales[i], &taus, opt)
-        })
-        .collect();
-    assemble(Causes::default(), outputs, scales, taus, full)
-}
-
-fn assemble(
-    causes: Causes,
-    outputs: Vec<(OutputModel, f64)>,
-    scales: Vec<Scales>,
-    taus: Vec<f64>,
-    full: &Signals,
-) -> Fitted {
-    let n: f64 = full.len() as f64 * outputs.len() as f64;
-    let mse: f64 = outputs
-        .iter()
-        .map(|(_, e)| e * e * full.len() as f64)
-        .sum::<f64>()
-        / n.max(1.0);
-    Fitted {
-        causes,
-        outputs: outputs.into_iter().map(|(m, _)| m).collect(),
-        scales,
-        taus,
-        rmse_train: mse.sqrt(),
-    }
-}
-
-/// Extends `current` by `cause` and refits every output from its current shape.
-fn extend(current: &Fitted, cause: Option<Cause>, tiers: &Tiers, opt: &Options) -> Fitted {
-    let causes = cause.map_or(current.causes, |c| current.causes.with(c));
-    let mut scales = current.scales.clone();
-    if cause == Some(Cause::Creep) {
-        // Creep of the current model's static displacement `d*v - alpha*g`.
-        for (s, m) in scales.iter_mut().zip(&current.outputs) {
-            let coef = |n: &str| m.names.iter().position(|x| x == n).map(|k| m.coef[k]);
-            if let (Some(d), Some(a)) = (coef("d"), coef("alpha")) {
-                let rho = a / d;
-                s.creep_rho = if rho.is_finite() {
-                    rho.clamp(-2.0, 2.0)
-                } else {
-                    0.0
-                };
-            }
-        }
-    }
-    let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
-        .into_par_iter()
-        .map(|i| {
-            let st = starts(cause, &current.outputs[i].shape, &scales[i]);
-            fit_output(tiers, i, causes, &st, &scales[i], &current.taus, opt)
-        })
-        .collect();
-    assemble(causes, outputs, scales, current.taus.clone(), tiers.full)
-}
-
-/// `current` refitted without `cause`, from its current shapes.
-fn reduce(current: &Fitted, cause: Cause, tiers: &Tiers, opt: &Options) -> Fitted {
-    let causes = current.causes.without(cause);
-    let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
-        .into_par_iter()
-        .map(|i| {
-            let st = [neutral(current.outputs[i].shape, cause)];
-            fit_output(
-                tiers,
-                i,
-                causes,
-                &st,
-                &current.scales[i],
-                &current.taus,
-                opt,
-            )
-        })
-        .collect();
-    assemble(
-        causes,
-        outputs,
-        current.scales.clone(),
-        current.taus.clone(),
-        tiers.full,
-    )
-}
-
-/// `shape` without the input-side or dynamic extension of `cause`.
-fn neutral(mut shape: Shape, cause: Cause) -> Shape {
-    match cause {
-        Cause::Delay => shape.delay_s = 0.0,
-        Cause::Saturation => {
-            shape.rail_lo_v = f64::NEG_INFINITY;
-            shape.rail_hi_v = f64::INFINITY;
-        }
-        Cause::SlewLimit => shape.slew_v_per_s = f64::INFINITY,
-        Cause::Dynamics => {
-            shape.wn_hz = f64::INFINITY;
-            shape.zeta = 1.0;
-        }
-        Cause::Asymmetry | Cause::Creep | Cause::CrossCoupling | Cause::Drift => {}
-    }
-    shape
-}
-
-/// Coefficient-name prefix of the linear terms of `cause` (none for input-side causes).
-fn coef_prefix(cause: Cause) -> Option<&'static str> {
-    match cause {
-        Cause::Asymmetry => Some("asym_"),
-        Cause::Creep => Some("creep_"),
-        Cause::CrossCoupling => Some("couple_"),
-        Cause::Drift => Some("drift_"),
-        _ => None,
-    }
-}
-
-/// `f` with `cause` switched off and nothing refitted: its prediction shows what the cause's
-/// extension contributes.
-fn switched_off(f: &Fitted, cause: Cause) -> Fitted {
-    let mut g = f.clone();
-    for m in g.outputs.iter_mut() {
-        m.shape = neutral(m.shape, cause);
-        if let Some(p) = coef_prefix(cause) {
-            for (name, c) in m.names.iter().zip(m.coef.iter_mut()) {
-                if name.starts_with(p) {
-                    *c = 0.0;
-                }
-            }
-        }
-    }
-    g
-}
-
-/// `f` (fitted with `causes` plus `cause`) with `cause` switched off and the linear part
-/// refitted on the training record.
-fn ablate(f: &Fitted, causes: Causes, cause: Cause, tiers: &Tiers) -> Fitted {
-    let outputs: Vec<(OutputModel, f64)> = (0..f.outputs.len())
-        .map(|i| {
-            let shape = neutral(f.outputs[i].shape, cause);
-            fit_linear(tiers.full, i, causes, &shape, &f.scales[i], &f.taus)
-        })
-        .collect();
-    assemble(
-        causes,
-        outputs,
-        f.scales.clone(),
-        f.taus.clone(),
-        tiers.full,
-    )
 }
 
 /// Evidence for `cause` in the residual of `y_model` on `valid`; the output with the
@@ -572,6 +250,42 @@ fn evidence_for(valid: &Signals, cause: Cause, y_model: &[Vec<f64>], fitted: &Fi
         })
 }
 
+/// Evidence for `cause` over several records: the R² averaged over the records weighted by
+/// their length, the text of the record where it is strongest (one record: its evidence).
+fn evidence_set(
+    records: &[Signals],
+    cause: Cause,
+    y_model: &[Vec<Vec<f64>>],
+    fitted: &Fitted,
+) -> Evidence {
+    let mut each: Vec<(Evidence, usize)> = records
+        .iter()
+        .zip(y_model)
+        .map(|(r, y)| (evidence_for(r, cause, y, fitted), r.len()))
+        .collect();
+    if each.len() == 1 {
+        return each.remove(0).0;
+    }
+    let n: usize = each.iter().map(|e| e.1).sum();
+    let r2 = each.iter().map(|(e, k)| e.r2 * *k as f64).sum::<f64>() / n.max(1) as f64;
+    let (k, (best, _)) = each
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1 .0.r2.total_cmp(&b.1 .0.r2))
+        .expect("at least one record");
+    Evidence {
+        signal: best.signal.clone(),
+        r2,
+        text: format!(
+            "{} (strongest in record {} of {}; {:.0} % averaged over the records)",
+            best.text,
+            k + 1,
+            each.len(),
+            100.0 * r2
+        ),
+    }
+}
+
 /// Causes that apply to records with these channels.
 fn applicable(train: &Signals) -> Vec<Cause> {
     Cause::ALL
@@ -580,52 +294,105 @@ fn applicable(train: &Signals) -> Vec<Cause> {
         .collect()
 }
 
-/// Checks that train and valid describe the same system.
-fn check_pair(train: &Signals, valid: &Signals) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        train.u.len() == valid.u.len() && train.y.len() == valid.y.len(),
-        "train has {} inputs/{} outputs but valid has {}/{}",
-        train.u.len(),
-        train.y.len(),
-        valid.u.len(),
-        valid.y.len()
-    );
-    for (k, u) in train.u.iter().enumerate() {
-        let (lo, hi) = model::min_max(u);
-        anyhow::ensure!(
-            hi > lo,
-            "train input u{} is constant: nothing to identify",
-            k + 1
-        );
+/// Checks that all records describe the same system.
+fn check_records(train: &[Signals], valid: &[Signals]) -> anyhow::Result<()> {
+    anyhow::ensure!(!train.is_empty(), "no training record");
+    anyhow::ensure!(!valid.is_empty(), "no validation record");
+    let first = &train[0];
+    for (what, set) in [("train", train), ("valid", valid)] {
+        for (k, r) in set.iter().enumerate() {
+            let name = if set.len() == 1 {
+                what.to_string()
+            } else {
+                format!("{what} record {}", k + 1)
+            };
+            anyhow::ensure!(
+                r.u.len() == first.u.len() && r.y.len() == first.y.len(),
+                "train has {} inputs/{} outputs but {name} has {}/{}",
+                first.u.len(),
+                first.y.len(),
+                r.u.len(),
+                r.y.len()
+            );
+            if what == "train" {
+                for (j, u) in r.u.iter().enumerate() {
+                    let (lo, hi) = model::min_max(u);
+                    anyhow::ensure!(
+                        hi > lo,
+                        "{name} input u{} is constant: nothing to identify",
+                        j + 1
+                    );
+                }
+            }
+        }
     }
     Ok(())
+}
+
+/// The measured outputs of the scored samples of every record, one vector per (record,
+/// output): [`rmse_all`] over them is the RMSE over all records.
+fn flat_outputs(scored: &[Signals]) -> Vec<Vec<f64>> {
+    scored.iter().flat_map(|s| s.y.iter().cloned()).collect()
+}
+
+fn flat(pred: &[Vec<Vec<f64>>]) -> Vec<Vec<f64>> {
+    pred.iter().flat_map(|p| p.iter().cloned()).collect()
+}
+
+/// RMSE of each record.
+fn per_record(scored: &[Signals], pred: &[Vec<Vec<f64>>]) -> Vec<f64> {
+    scored
+        .iter()
+        .zip(pred)
+        .map(|(s, p)| rmse_all(&s.y, p))
+        .collect()
 }
 
 /// Runs the discovery on a training and a validation record.
 ///
 /// `valid` may start with warm-up samples (see [`Signals::warmup`]); only the rest is scored.
 pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Result<Diagnosis> {
-    check_pair(train, valid)?;
-    let scored = valid.scored();
+    diagnose_records(
+        std::slice::from_ref(train),
+        std::slice::from_ref(valid),
+        opt,
+    )
+}
+
+/// Runs the discovery on several training and validation records: one model is fitted on
+/// all training records (the sum of their squared errors), every gain is measured on all
+/// validation records together (and reported per record).
+///
+/// Validation records may start with warm-up samples (see [`Signals::warmup`]).
+pub fn diagnose_records(
+    train: &[Signals],
+    valid: &[Signals],
+    opt: &Options,
+) -> anyhow::Result<Diagnosis> {
+    check_records(train, valid)?;
+    let scored: Vec<Signals> = valid.iter().map(Signals::scored).collect();
+    let measured = flat_outputs(&scored);
+    let score = |pred: &[Vec<Vec<f64>>]| rmse_all(&measured, &flat(pred));
+    let several = valid.len() > 1;
     let tiers = Tiers::new(train, opt);
     let mut base = fit_base(&tiers, opt);
-    let base_pred = base.predict(valid);
-    let mut base_valid = rmse_all(&scored.y, &base_pred);
+    let mut base_pred = base.predict_all(valid);
+    let mut base_valid = score(&base_pred);
     anyhow::ensure!(
         base_valid.is_finite(),
         "base model diverged on the validation record"
     );
     let noise_rms = {
-        let s: f64 = scored
-            .y
+        let (s, n) = scored
             .iter()
+            .flat_map(|r| r.y.iter())
             .map(|y| evidence::noise_rms(y).powi(2))
-            .sum();
-        (s / scored.y.len() as f64).sqrt()
+            .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+        (s / n as f64).sqrt()
     };
     let y_span = scored
-        .y
         .iter()
+        .flat_map(|r| r.y.iter())
         .map(|y| {
             let (lo, hi) = model::min_max(y);
             hi - lo
@@ -633,10 +400,11 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
         .fold(0.0, f64::max);
     let mut current = base.clone();
     let mut current_valid = base_valid;
+    let mut current_pred = base_pred.clone();
     let mut findings = Vec::new();
     let mut candidates = Vec::new();
     for round in 1..=MAX_ROUNDS {
-        let todo: Vec<Cause> = applicable(train)
+        let todo: Vec<Cause> = applicable(&train[0])
             .into_iter()
             .filter(|c| !current.causes.has(*c))
             .collect();
@@ -648,12 +416,12 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
         let runs: Vec<Option<Cause>> = std::iter::once(None)
             .chain(todo.iter().copied().map(Some))
             .collect();
-        let mut tried: Vec<(Fitted, Vec<Vec<f64>>, f64)> = runs
+        let mut tried: Vec<Tried> = runs
             .par_iter()
             .map(|&c| {
                 let f = extend(&current, c, &tiers, opt);
-                let pred = f.predict(valid);
-                let e = rmse_all(&scored.y, &pred);
+                let pred = f.predict_all(valid);
+                let e = score(&pred);
                 (f, pred, e)
             })
             .collect();
@@ -672,17 +440,18 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             .min_by(|a, b| a.rmse_train.total_cmp(&b.rmse_train))
             .expect("control is always there");
         let control = if best_same.rmse_train < control.0.rmse_train {
-            let pred = best_same.predict(valid);
-            let e = rmse_all(&scored.y, &pred);
+            let pred = best_same.predict_all(valid);
+            let e = score(&pred);
             (best_same, pred, e)
         } else {
             control
         };
         if control.0.rmse_train < current.rmse_train && control.2.is_finite() {
-            (current, _, current_valid) = control;
+            (current, current_pred, current_valid) = control;
             if findings.is_empty() {
                 // Still the base model, only better converged.
                 base = current.clone();
+                base_pred = current_pred.clone();
                 base_valid = current_valid;
             }
         }
@@ -697,8 +466,8 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
                 // cause can distort the training fit (and so the validation) while showing
                 // little in the validation record itself.
                 let off = switched_off(&f, c);
-                let ev_valid = evidence_for(&scored, c, &off.predict(valid), &f);
-                let mut ev_train = evidence_for(train, c, &off.predict(train), &f);
+                let ev_valid = evidence_set(&scored, c, &off.predict_all(valid), &f);
+                let mut ev_train = evidence_set(train, c, &off.predict_all(train), &f);
                 let ev = if ev_train.r2 > ev_valid.r2 {
                     ev_train.text.push_str(" (training record)");
                     ev_train
@@ -730,10 +499,19 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             }
         }
         let Some(b) = best else { break };
-        let Some((f, _, e)) = tried.into_iter().nth(b) else {
+        let Some((f, p, e)) = tried.into_iter().nth(b) else {
             break;
         };
         let ev = evidence.swap_remove(b);
+        let gains_per_record = if several {
+            per_record(&scored, &current_pred)
+                .iter()
+                .zip(per_record(&scored, &p))
+                .map(|(before, after)| 1.0 - after / before)
+                .collect()
+        } else {
+            Vec::new()
+        };
         findings.push(Finding {
             cause: todo[b],
             round,
@@ -741,8 +519,11 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
             rmse_valid: e,
             gain: 1.0 - e / current_valid,
             evidence: ev,
+            confidence: confidence(&scored, &current_pred, &p),
+            gains_per_record,
         });
         current = f;
+        current_pred = p;
         current_valid = e;
     }
     // Backward check: a cause found early can be made redundant by a later one (dynamics
@@ -750,16 +531,17 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
     // cause; drop the cheapest to lose while losing it costs less than the rule for a gain.
     let mut dropped = Vec::new();
     while findings.len() > 1 {
-        let tried: Vec<(usize, Fitted, f64)> = findings
+        let tried: Vec<(usize, Fitted, Preds, f64)> = findings
             .par_iter()
             .enumerate()
             .map(|(k, fd)| {
                 let f = reduce(&current, fd.cause, &tiers, opt);
-                let e = rmse_all(&scored.y, &f.predict(valid));
-                (k, f, e)
+                let p = f.predict_all(valid);
+                let e = score(&p);
+                (k, f, p, e)
             })
             .collect();
-        let Some((k, f, e)) = tried.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)) else {
+        let Some((k, f, p, e)) = tried.into_iter().min_by(|a, b| a.3.total_cmp(&b.3)) else {
             break;
         };
         let gain = 1.0 - current_valid / e;
@@ -768,9 +550,31 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
         }
         dropped.push(findings.remove(k).cause);
         current = f;
+        current_pred = p;
         current_valid = e;
     }
+    let per_valid = per_record(&scored, &base_pred)
+        .into_iter()
+        .zip(per_record(&scored, &current_pred))
+        .map(|(b, e)| RecordScore {
+            rmse_base: b,
+            rmse_extended: e,
+            gain: 1.0 - e / b,
+        })
+        .collect();
+    let residual: Preds = scored
+        .iter()
+        .zip(&current_pred)
+        .map(|(s, p)| {
+            s.y.iter()
+                .zip(p)
+                .map(|(y, m)| y.iter().zip(m).map(|(a, b)| a - b).collect())
+                .collect()
+        })
+        .collect();
+    let unexplained = unexplained::find(&scored, &residual, noise_rms);
     Ok(Diagnosis {
+        unexplained,
         dropped,
         base,
         base_valid,
@@ -779,6 +583,8 @@ pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Resu
         findings,
         candidates,
         noise_rms,
+        n_train: train.len(),
+        per_valid,
     })
 }
 

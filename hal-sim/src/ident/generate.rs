@@ -15,6 +15,8 @@
 //! | `slew-limit` | amplifier current limit into the piezo capacitance | `I/C` 1-3 kV/s |
 //! | `cross-coupling` | 2 axes, displacement coupling | +-(2-6) % each way |
 //! | `drift` | thermal drift (linear plus a slow exponential) | +-(1-4) % of the stroke over the record |
+//! | `backlash` | a play between actuator and output ([`crate::scenario::Backlash`]) | width 0.8-2.5 um |
+//! | `startup-creep` | start-up deficit after a long rest ([`crate::scenario::StartupCreep`]) | depth 4-10 %, travel 40-150 V |
 //!
 //! Sensor noise is 5-20 nm RMS. [`Hidden::record`] drives the stage with a seeded
 //! excitation, a different draw for each record (`which`: 0 train, 1 valid): two sines
@@ -117,6 +119,9 @@ impl Hidden {
         let drift_um = r.range(0.01, 0.04) * STROKE_UM * r.sign();
         let drift_exp = r.range(0.0, 0.6);
         let drift_tau = r.range(2.0, 6.0) * duration_s;
+        let play_um = r.range(0.8, 2.5);
+        let startup_depth = r.range(0.04, 0.1);
+        let startup_travel = r.log_uniform(40.0, 150.0);
         let mut hidden = Self {
             seed,
             causes: causes.to_vec(),
@@ -166,6 +171,21 @@ impl Hidden {
                     sizes.push(format!(
                         "coupling {:+.3} (y1 <- y2), {:+.3} (y2 <- y1)",
                         coupling[0], coupling[1]
+                    ));
+                }
+                Cause::Backlash => {
+                    st.backlash.enabled = true;
+                    st.backlash.width_um = play_um;
+                    sizes.push(format!("play {play_um:.2} um"));
+                }
+                Cause::StartupCreep => {
+                    st.startup_creep.enabled = true;
+                    st.startup_creep.depth = startup_depth;
+                    st.startup_creep.travel_v = startup_travel;
+                    st.startup_creep.rest_tau_s = 60.0;
+                    sizes.push(format!(
+                        "start-up deficit {:.1} % decaying over {startup_travel:.0} V of travel",
+                        100.0 * startup_depth
                     ));
                 }
                 Cause::Drift => {

@@ -94,6 +94,8 @@ impl Plant {
             },
             wn_hz: f64::INFINITY,
             zeta: 1.0,
+            play_um: 0.0,
+            startup_travel_v: f64::INFINITY,
         };
         let v = effective_input(&u[i], dt, &shape);
         let g = hysteresis(&v, self.beta, self.gamma);

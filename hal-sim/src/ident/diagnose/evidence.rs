@@ -7,7 +7,7 @@
 
 use serde::Serialize;
 
-use super::model::{effective_input, least_squares, own_input, Cause, Shape};
+use super::model::{effective_input, least_squares, own_input, play, startup_decay, Cause, Shape};
 use super::Signals;
 use crate::numeric::lowpass;
 
@@ -130,6 +130,16 @@ pub fn signal(
                 .collect(),
         ),
         Some(Cause::Drift) => ("time [s]".into(), data.t.clone()),
+        Some(Cause::StartupCreep) => (
+            "input travel since the record's start [V]".into(),
+            u.iter()
+                .scan((u[0], 0.0), |(prev, sum), &x| {
+                    *sum += (x - *prev).abs();
+                    *prev = x;
+                    Some(*sum)
+                })
+                .collect(),
+        ),
         Some(Cause::CrossCoupling) => {
             let j = if a == 0 { 1 } else { 0 };
             match data.u.get(j) {
@@ -311,6 +321,76 @@ pub fn evidence(
                 ),
             }
         }
+        Cause::Backlash => {
+            let (lo, hi) = (quantile(u, 0.0), quantile(u, 1.0));
+            let span = (hi - lo).max(1e-12);
+            // The lag of a played input behind the input, for play widths around the fitted one.
+            // The fitted play (output units) as input volts: the output spans about the input's
+            // span times the gain.
+            let (y_lo, y_hi) = (quantile(y_model, 0.0), quantile(y_model, 1.0));
+            let per_v = ((y_hi - y_lo) / span).max(1e-12);
+            let fitted_v = fitted.play_um / per_v;
+            let sig: Vec<Vec<f64>> = [0.003 * span, 0.02 * span, fitted_v]
+                .iter()
+                .filter(|b| **b > 0.0)
+                .map(|&b| {
+                    let mut p = u.clone();
+                    play(&mut p, b);
+                    p.iter().zip(u).map(|(p, u)| p - u).collect()
+                })
+                .collect();
+            let r2 = explained(r, &sig);
+            let rate = derivative(u, dt);
+            // Right after a reversal: within the fitted play's travel of the last turning point.
+            let mut turned = vec![false; n];
+            let (mut extreme, mut dir) = (u[0], 0.0f64);
+            let width = 2.0 * fitted_v.max(0.005 * span);
+            for k in 0..n {
+                let d = rate[k].signum();
+                if d != 0.0 && d != dir {
+                    dir = d;
+                    extreme = u[k];
+                }
+                turned[k] = (u[k] - extreme).abs() < width;
+            }
+            let (e_turn, e_run) = (rms_where(r, |k| turned[k]), rms_where(r, |k| !turned[k]));
+            Evidence {
+                signal: "played input minus input (dead zone after reversals)".into(),
+                r2,
+                text: format!(
+                    "residual rms {e_turn:.3} within {width:.2} V of a reversal vs {e_run:.3} elsewhere; a play's dead zone explains {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::StartupCreep => {
+            let (lo, hi) = (quantile(u, 0.0), quantile(u, 1.0));
+            let span = (hi - lo).max(1e-12);
+            let u0 = u[0];
+            let sig: Vec<Vec<f64>> = [0.3 * span, span, fitted.startup_travel_v]
+                .iter()
+                .filter(|t| t.is_finite() && **t > 0.0)
+                .map(|&tv| {
+                    startup_decay(u, tv)
+                        .iter()
+                        .zip(u)
+                        .map(|(e, u)| e * (u - u0))
+                        .collect()
+                })
+                .collect();
+            let r2 = explained(r, &sig);
+            let early = startup_decay(u, fitted.startup_travel_v.min(1e3 * span));
+            let first = |k: usize| early[k] > 0.3;
+            let (e_first, e_later) = (rms_where(r, first), rms_where(r, |k| !first(k)));
+            Evidence {
+                signal: "displacement from rest times a deficit decaying with travel".into(),
+                r2,
+                text: format!(
+                    "residual rms {e_first:.3} in the first motion after rest vs {e_later:.3} later; a deficit decaying with the input's travel explains {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
         Cause::Drift => {
             let r2 = explained(r, std::slice::from_ref(&data.t));
             let t_mean = data.t.iter().sum::<f64>() / n.max(1) as f64;
@@ -344,6 +424,8 @@ pub fn no_shape() -> Shape {
         slew_v_per_s: f64::INFINITY,
         wn_hz: f64::INFINITY,
         zeta: 1.0,
+        play_um: 0.0,
+        startup_travel_v: f64::INFINITY,
     }
 }
 

@@ -35,10 +35,16 @@ pub enum Cause {
     CrossCoupling,
     /// Slow drift in time: linear plus a settling exponential.
     Drift,
+    /// A play (dead zone) at reversals: after the input turns, the output stands still until
+    /// the input has moved the play's width back (the micromanipulator's mechanism).
+    Backlash,
+    /// The slow start after a long rest: the first motion falls short by a fraction that
+    /// decays with the input's travel, so it shows in the first cycles only.
+    StartupCreep,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 8] = [
+    pub const ALL: [Cause; 10] = [
         Cause::Dynamics,
         Cause::Asymmetry,
         Cause::Creep,
@@ -47,6 +53,8 @@ impl Cause {
         Cause::SlewLimit,
         Cause::CrossCoupling,
         Cause::Drift,
+        Cause::Backlash,
+        Cause::StartupCreep,
     ];
 
     pub fn name(self) -> &'static str {
@@ -59,6 +67,8 @@ impl Cause {
             Cause::SlewLimit => "slew-limit",
             Cause::CrossCoupling => "cross-coupling",
             Cause::Drift => "drift",
+            Cause::Backlash => "backlash",
+            Cause::StartupCreep => "startup-creep",
         }
     }
 
@@ -118,6 +128,11 @@ pub struct Shape {
     pub wn_hz: f64,
     /// Damping ratio of `G`.
     pub zeta: f64,
+    /// Half the width of the play on the output (its units, um); 0: no play.
+    pub play_um: f64,
+    /// Input travel (V, summed `|dv|` since the record's start from rest) over which the
+    /// start-up deficit decays by `e`.
+    pub startup_travel_v: f64,
 }
 
 /// What the search coordinates are scaled by: the training input of this output.
@@ -131,6 +146,8 @@ pub struct Scales {
     /// Creep acts on `v - creep_rho * g`: the static displacement's shape, `alpha/d` of the
     /// model the creep was added to (0: on the voltage alone).
     pub creep_rho: f64,
+    /// Span of the measured output (the play's width is scaled by it).
+    pub y_span: f64,
 }
 
 impl Scales {
@@ -152,7 +169,23 @@ impl Scales {
             dt,
             duration_s: dt * t.len() as f64,
             creep_rho: 0.0,
+            y_span: 1.0,
         }
+    }
+    /// The scales of several records of the same input: the widest range, the fastest rate,
+    /// the shortest sample period and the longest record (one record: [`Scales::of`]).
+    pub fn of_all(records: &[Signals], input: usize) -> Self {
+        let mut all = records.iter().map(|r| Self::of(&r.t, &r.u[input]));
+        let first = all.next().unwrap_or_else(|| Self::of(&[], &[]));
+        all.fold(first, |a, b| Self {
+            u_lo: a.u_lo.min(b.u_lo),
+            u_hi: a.u_hi.max(b.u_hi),
+            rate_max: a.rate_max.max(b.rate_max),
+            dt: a.dt.min(b.dt),
+            duration_s: a.duration_s.max(b.duration_s),
+            creep_rho: 0.0,
+            y_span: 1.0,
+        })
     }
     pub fn span(&self) -> f64 {
         (self.u_hi - self.u_lo).max(1e-12)
@@ -183,6 +216,8 @@ impl Coords {
             + 2 * usize::from(c.has(Cause::Saturation))
             + usize::from(c.has(Cause::SlewLimit))
             + 2 * usize::from(c.has(Cause::Dynamics))
+            + usize::from(c.has(Cause::Backlash))
+            + usize::from(c.has(Cause::StartupCreep))
     }
 
     /// Shape from coordinates; every coordinate is clamped into its valid range.
@@ -216,6 +251,8 @@ impl Coords {
             slew_v_per_s: f64::INFINITY,
             wn_hz: f64::INFINITY,
             zeta: 1.0,
+            play_um: 0.0,
+            startup_travel_v: f64::INFINITY,
         };
         let c = self.causes;
         if c.has(Cause::Delay) {
@@ -238,6 +275,12 @@ impl Coords {
         if c.has(Cause::Dynamics) {
             shape.wn_hz = next(0.2f64.ln(), s.max_wn_hz().ln()).exp();
             shape.zeta = next(-3.0, 1.6).exp();
+        }
+        if c.has(Cause::Backlash) {
+            shape.play_um = s.y_span * next(PLAY_MIN.ln(), PLAY_MAX.ln()).exp();
+        }
+        if c.has(Cause::StartupCreep) {
+            shape.startup_travel_v = span * next(TRAVEL_MIN.ln(), TRAVEL_MAX.ln()).exp();
         }
         (shape, excess)
     }
@@ -271,6 +314,20 @@ impl Coords {
             x.push(shape.wn_hz.min(s.max_wn_hz()).ln());
             x.push(shape.zeta.ln());
         }
+        if c.has(Cause::Backlash) {
+            x.push((shape.play_um / s.y_span).clamp(PLAY_MIN, PLAY_MAX).ln());
+        }
+        if c.has(Cause::StartupCreep) {
+            let f = shape.startup_travel_v / span;
+            x.push(
+                if f.is_finite() {
+                    f.clamp(TRAVEL_MIN, TRAVEL_MAX)
+                } else {
+                    1.0
+                }
+                .ln(),
+            );
+        }
         x
     }
 
@@ -290,9 +347,22 @@ impl Coords {
         if c.has(Cause::Dynamics) {
             v.extend([0.4, 0.4]);
         }
+        if c.has(Cause::Backlash) {
+            v.push(0.5);
+        }
+        if c.has(Cause::StartupCreep) {
+            v.push(0.5);
+        }
         v
     }
 }
+
+/// Range of the play's half width, as a fraction of the output span.
+pub const PLAY_MIN: f64 = 1e-4;
+pub const PLAY_MAX: f64 = 0.15;
+/// Range of the start-up travel, as a multiple of the input span.
+pub const TRAVEL_MIN: f64 = 0.05;
+pub const TRAVEL_MAX: f64 = 50.0;
 
 /// Rails closer than this (fraction of the span) to the training input's extremes count as
 /// never hit.
@@ -329,6 +399,29 @@ pub fn own_input(i: usize, n_inputs: usize) -> usize {
     } else {
         0
     }
+}
+
+/// A play of half width `half` on `x`, at rest at its first value.
+pub fn play(x: &mut [f64], half: f64) {
+    let mut p = x.first().copied().unwrap_or(0.0);
+    for v in x.iter_mut() {
+        p = p.clamp(*v - half, *v + half);
+        *v = p;
+    }
+}
+
+/// `exp(-travel/travel_v)`: the share of the start-up deficit left after the input's travel
+/// since the record's first sample (the stage at rest before it).
+pub fn startup_decay(v: &[f64], travel_v: f64) -> Vec<f64> {
+    let mut travel = 0.0;
+    let mut prev = v.first().copied().unwrap_or(0.0);
+    v.iter()
+        .map(|&x| {
+            travel += (x - prev).abs();
+            prev = x;
+            (-travel / travel_v).exp()
+        })
+        .collect()
 }
 
 /// Delay (linear interpolation), slew limit, then rails: the input the actuator sees.
@@ -468,6 +561,18 @@ pub fn regressors(
             names.push(NAMES[k]);
         }
     }
+    if causes.has(Cause::StartupCreep) {
+        // The static displacement away from the rest position, short by a deficit that
+        // decays with the travel: `-s(T) * (d*(v - v0) - alpha*(g - g0))`, both parts free.
+        let e = startup_decay(&v, shape.startup_travel_v);
+        let (v0, g0) = (
+            v.first().copied().unwrap_or(0.0),
+            g.first().copied().unwrap_or(0.0),
+        );
+        cols.push(v.iter().zip(&e).map(|(v, e)| e * (v - v0)).collect());
+        cols.push(g.iter().zip(&e).map(|(g, e)| -e * (g - g0)).collect());
+        names.extend(["startup_v", "startup_h"]);
+    }
     if causes.has(Cause::CrossCoupling) {
         const NAMES: [&str; 8] = [
             "couple_u1",
@@ -594,26 +699,82 @@ pub fn min_max(x: &[f64]) -> (f64, f64) {
         })
 }
 
-/// Fits the linear coefficients of output `i` for a given shape; returns the model and its
-/// training RMSE.
+/// Fits the linear coefficients of output `i` for a given shape on all of `data` (one
+/// model for every record, each record's model state starting from its own first sample);
+/// returns the model and its training RMSE over all samples.
 pub fn fit_linear(
-    data: &Signals,
+    data: &[Signals],
     i: usize,
     causes: Causes,
     shape: &Shape,
     scales: &Scales,
     taus: &[f64],
 ) -> (OutputModel, f64) {
-    let (names, cols) = regressors(data, i, causes, shape, scales, taus);
-    let coef = least_squares(&cols, &data.y[i]);
-    let y = combine(&cols, &coef);
-    let e = rmse(&y, &data.y[i]);
+    let mut names = Vec::new();
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut joined = Vec::new();
+    for (k, d) in data.iter().enumerate() {
+        let (n, c) = regressors(d, i, causes, shape, scales, taus);
+        if k == 0 {
+            (names, cols) = (n, c);
+        } else {
+            for (a, b) in cols.iter_mut().zip(c) {
+                a.extend(b);
+            }
+        }
+        if data.len() > 1 {
+            joined.extend_from_slice(&d.y[i]);
+        }
+    }
+    let y_meas: &[f64] = match data {
+        [one] => &one.y[i],
+        _ => &joined,
+    };
+    let (coef, y) = if causes.has(Cause::Backlash) && shape.play_um > 0.0 {
+        // The play acts on the model's output, which the coefficients make: a fixed point.
+        // Fit the coefficients to the measurement minus the play's offset of the last
+        // iterate, then recompute that offset.
+        let lens: Vec<usize> = data.iter().map(Signals::len).collect();
+        let mut target = y_meas.to_vec();
+        let mut coef = least_squares(&cols, &target);
+        for _ in 0..PLAY_ITERATIONS {
+            let m = combine(&cols, &coef);
+            let p = played(&m, &lens, shape.play_um);
+            for ((t, y), (p, m)) in target.iter_mut().zip(y_meas).zip(p.iter().zip(&m)) {
+                *t = y - (p - m);
+            }
+            coef = least_squares(&cols, &target);
+        }
+        let y = played(&combine(&cols, &coef), &lens, shape.play_um);
+        (coef, y)
+    } else {
+        let coef = least_squares(&cols, y_meas);
+        let y = combine(&cols, &coef);
+        (coef, y)
+    };
+    let e = rmse(&y, y_meas);
     let model = OutputModel {
         shape: *shape,
         names: names.into_iter().map(String::from).collect(),
         coef,
     };
     (model, if e.is_finite() { e } else { f64::INFINITY })
+}
+
+/// Fixed-point iterations of the play's fit.
+const PLAY_ITERATIONS: usize = 3;
+
+/// `m` (records of lengths `lens` one after the other) through a play of half width `half`,
+/// each record from rest at its first value.
+fn played(m: &[f64], lens: &[usize], half: f64) -> Vec<f64> {
+    let mut out = m.to_vec();
+    let mut at = 0;
+    for &n in lens {
+        let end = (at + n).min(out.len());
+        play(&mut out[at..end], half);
+        at = end;
+    }
+    out
 }
 
 /// Output `i` of `model` on `data`.
@@ -626,7 +787,11 @@ pub fn predict(
     taus: &[f64],
 ) -> Vec<f64> {
     let (_, cols) = regressors(data, i, causes, &model.shape, scales, taus);
-    combine(&cols, &model.coef)
+    let mut y = combine(&cols, &model.coef);
+    if causes.has(Cause::Backlash) && model.shape.play_um > 0.0 {
+        play(&mut y, model.shape.play_um);
+    }
+    y
 }
 
 #[cfg(test)]
@@ -658,12 +823,15 @@ mod tests {
             dt: 1e-3,
             duration_s: 4.0,
             creep_rho: 0.0,
+            y_span: 20.0,
         };
         let causes = Causes::default()
             .with(Cause::Delay)
             .with(Cause::Saturation)
             .with(Cause::SlewLimit)
-            .with(Cause::Dynamics);
+            .with(Cause::Dynamics)
+            .with(Cause::Backlash)
+            .with(Cause::StartupCreep);
         let c = Coords { causes, scales };
         let shape = Shape {
             beta: 0.03,
@@ -674,6 +842,8 @@ mod tests {
             slew_v_per_s: 200.0,
             wn_hz: 120.0,
             zeta: 0.3,
+            play_um: 1.5,
+            startup_travel_v: 250.0,
         };
         let back = c.shape(&c.coords(&shape));
         for (a, b) in [
@@ -685,6 +855,8 @@ mod tests {
             (back.slew_v_per_s, shape.slew_v_per_s),
             (back.wn_hz, shape.wn_hz),
             (back.zeta, shape.zeta),
+            (back.play_um, shape.play_um),
+            (back.startup_travel_v, shape.startup_travel_v),
         ] {
             assert!((a - b).abs() < 1e-9 * b.abs().max(1.0), "{a} vs {b}");
         }
