@@ -3,17 +3,15 @@
 //! `cargo bench -p hal-sim --bench diagnose`
 use criterion::{criterion_group, criterion_main, Criterion};
 use hal_sim::ident::diagnose::{diagnose, Cause, Options};
-
-#[path = "../tests/diagnose_support/mod.rs"]
-mod diagnose_support;
+use hal_sim::ident::generate::Hidden;
 
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("diagnose");
     g.sample_size(10);
     for (name, effects) in [("clean", vec![]), ("dynamics", vec![Cause::Dynamics])] {
-        let plant = diagnose_support::Plant::draw(3, &effects);
-        let train = plant.record_at(3, 0, 10_000.0, 10.0);
-        let valid = plant.record_at(3, 1, 10_000.0, 10.0);
+        // hal-sim's simulated stage with the hidden cause (the hidden-effect tests' generator).
+        let plant = Hidden::draw_at(3, &effects, 10_000.0, 10.0).expect("valid draw");
+        let (train, valid) = (plant.record(0), plant.record(1));
         let d = diagnose(&train, &valid, &Options::default()).expect("diagnose runs");
         eprintln!("{name}: cause {} gain {:.3}", d.cause(), d.gain());
         g.bench_function(format!("10kHz_10s_{name}"), |b| {
