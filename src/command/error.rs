@@ -2,138 +2,82 @@
 
 use core::fmt;
 
-/// Everything that can be wrong with a command line. Codes are stable.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Error {
+/// Declares [`Error`] from one table: variant, stable code, message. The enum, its
+/// [`Error::ALL`] list, [`Error::code`] and [`Error::message`] come from the same rows, so a
+/// new error cannot be left out of one of them.
+macro_rules! errors {
+    ($($(#[doc = $doc:expr])* $v:ident = $code:literal => $msg:literal,)*) => {
+        /// Everything that can be wrong with a command line. Codes are stable.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        pub enum Error {
+            $($(#[doc = $doc])* $v,)*
+        }
+
+        impl Error {
+            /// Every error, in code order: hosts map a reply's code back with
+            /// [`Error::from_code`].
+            pub const ALL: [Error; [$($code),*].len()] = [$(Error::$v),*];
+
+            /// Stable numeric code sent in `err <code> <message>`.
+            pub fn code(self) -> u8 {
+                match self {
+                    $(Error::$v => $code,)*
+                }
+            }
+
+            /// Human-readable message (one line, no trailing newline).
+            pub fn message(self) -> &'static str {
+                match self {
+                    $(Error::$v => $msg,)*
+                }
+            }
+        }
+    };
+}
+
+errors! {
     /// The line exceeded [`MAX_LINE`](super::MAX_LINE) bytes; it was discarded.
-    LineTooLong,
+    LineTooLong = 1 => "line too long (max 96 bytes)",
     /// A byte outside printable ASCII.
-    NotAscii,
+    NotAscii = 2 => "non-ASCII or control byte in line",
     /// The first word is not a command.
-    UnknownCommand,
+    UnknownCommand = 3 => "unknown command (try help)",
     /// A required argument is missing.
-    MissingArgument,
+    MissingArgument = 4 => "missing argument",
     /// More arguments than the command takes.
-    TooManyArguments,
+    TooManyArguments = 5 => "too many arguments",
     /// An argument is not a finite number (or not a non-negative integer where one is needed).
-    BadNumber,
+    BadNumber = 6 => "argument is not a finite number",
     /// No parameter of that name.
-    UnknownParam,
+    UnknownParam = 7 => "unknown parameter",
     /// The value is outside the parameter's range.
-    OutOfRange,
+    OutOfRange = 8 => "value out of range",
     /// No feedback law / feedforward compensator of that name.
-    UnknownMode,
+    UnknownMode = 9 => "unknown mode name",
     /// No signal of that name, or no such recorder channel.
-    UnknownSignal,
+    UnknownSignal = 10 => "unknown signal or channel",
     /// A sub-command word is not one the command knows.
-    BadKeyword,
+    BadKeyword = 11 => "unknown sub-command",
     /// The command is valid but cannot run now (e.g. reading a recorder while it records).
-    Busy,
+    Busy = 12 => "not possible in the current state",
     /// This board does not implement the command.
-    Unsupported,
+    Unsupported = 13 => "not supported on this board",
     /// A number with more than [`MAX_DIGITS`](super::MAX_DIGITS) significant digits.
-    TooManyDigits,
+    TooManyDigits = 14 => "number has more than 19 significant digits",
     /// `load`: the flash holds no settings record.
-    NoSettings,
+    NoSettings = 15 => "no settings stored",
     /// `load`: the stored record is damaged or of another version; nothing was changed.
-    BadSettings,
+    BadSettings = 16 => "stored settings damaged or stale; nothing changed",
     /// The settings flash failed (erase/program/read error).
-    Flash,
-    /// The law with this feedforward does not fit the control period at this rate
-    /// ([`crate::firmware::Budget`]); nothing changed.
-    OverBudget,
+    Flash = 17 => "settings flash failed",
+    /// The law with this feedforward does not fit the control period at this rate ([`crate::firmware::Budget`]); nothing changed.
+    OverBudget = 18 => "mode does not fit the control period at this rate",
 }
 
 impl Error {
-    /// Every error, in code order: hosts map a reply's code back with [`Error::from_code`].
-    /// A new variant breaks the exhaustive match of [`Error::is_listed`] until it is added here.
-    pub const ALL: [Error; 18] = {
-        use Error::*;
-        [
-            LineTooLong,
-            NotAscii,
-            UnknownCommand,
-            MissingArgument,
-            TooManyArguments,
-            BadNumber,
-            UnknownParam,
-            OutOfRange,
-            UnknownMode,
-            UnknownSignal,
-            BadKeyword,
-            Busy,
-            Unsupported,
-            TooManyDigits,
-            NoSettings,
-            BadSettings,
-            Flash,
-            OverBudget,
-        ]
-    };
-
     /// The error of a numbered reply code.
     pub fn from_code(code: u8) -> Option<Error> {
         Self::ALL.into_iter().find(|e| e.code() == code)
-    }
-
-    /// Compile-time reminder: every variant named here must be in [`Error::ALL`].
-    #[allow(dead_code)]
-    const fn is_listed(self) {
-        use Error::*;
-        match self {
-            LineTooLong | NotAscii | UnknownCommand | MissingArgument | TooManyArguments
-            | BadNumber | UnknownParam | OutOfRange | UnknownMode | UnknownSignal | BadKeyword
-            | Busy | Unsupported | TooManyDigits | NoSettings | BadSettings | Flash
-            | OverBudget => {}
-        }
-    }
-
-    /// Stable numeric code sent in `err <code> <message>`.
-    pub fn code(self) -> u8 {
-        match self {
-            Error::LineTooLong => 1,
-            Error::NotAscii => 2,
-            Error::UnknownCommand => 3,
-            Error::MissingArgument => 4,
-            Error::TooManyArguments => 5,
-            Error::BadNumber => 6,
-            Error::UnknownParam => 7,
-            Error::OutOfRange => 8,
-            Error::UnknownMode => 9,
-            Error::UnknownSignal => 10,
-            Error::BadKeyword => 11,
-            Error::Busy => 12,
-            Error::Unsupported => 13,
-            Error::TooManyDigits => 14,
-            Error::NoSettings => 15,
-            Error::BadSettings => 16,
-            Error::Flash => 17,
-            Error::OverBudget => 18,
-        }
-    }
-
-    /// Human-readable message (one line, no trailing newline).
-    pub fn message(self) -> &'static str {
-        match self {
-            Error::LineTooLong => "line too long (max 96 bytes)",
-            Error::NotAscii => "non-ASCII or control byte in line",
-            Error::UnknownCommand => "unknown command (try help)",
-            Error::MissingArgument => "missing argument",
-            Error::TooManyArguments => "too many arguments",
-            Error::BadNumber => "argument is not a finite number",
-            Error::UnknownParam => "unknown parameter",
-            Error::OutOfRange => "value out of range",
-            Error::UnknownMode => "unknown mode name",
-            Error::UnknownSignal => "unknown signal or channel",
-            Error::BadKeyword => "unknown sub-command",
-            Error::Busy => "not possible in the current state",
-            Error::Unsupported => "not supported on this board",
-            Error::TooManyDigits => "number has more than 19 significant digits",
-            Error::NoSettings => "no settings stored",
-            Error::BadSettings => "stored settings damaged or stale; nothing changed",
-            Error::Flash => "settings flash failed",
-            Error::OverBudget => "mode does not fit the control period at this rate",
-        }
     }
 }
 
