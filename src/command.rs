@@ -68,6 +68,8 @@
 //! | `lambda2` | 1/s | robust law gain (000 eq. 7) | model |
 //! | `pid_kp` | V/um | PID proportional gain | model |
 //! | `pid_ki` | V/(um s) | PID integral gain | model |
+//! | `notch_hz` | Hz | notch on the measured position (0 = off, else 10 Hz to 0.45 of the sample rate) | model |
+//! | `notch_q` | 1 | notch quality factor (0.5 to 50) | model |
 //!
 //! The CBW (n = 1) is the one `piezo fit --model cbw` identifies; `gbw_b` tilts its loop
 //! (`set gbw_b` refuses `|B| >= cbw_beta + cbw_gamma`). A model or gain `set` is

@@ -36,7 +36,7 @@ const fn s(name: &'static str, unit: &'static str, about: &'static str, access: 
 }
 
 /// Every setting, in the order `help` lists them.
-pub const SETTINGS: [Setting; 18] = [
+pub const SETTINGS: [Setting; 20] = [
     s("u_min", "V", "lowest output voltage", Access::Limit),
     s(
         "u_max",
@@ -90,6 +90,18 @@ pub const SETTINGS: [Setting; 18] = [
     ),
     s("pid_kp", "V/um", "PID proportional gain", Access::Model),
     s("pid_ki", "V/(um s)", "PID integral gain", Access::Model),
+    s(
+        "notch_hz",
+        "Hz",
+        "notch on the measured position (0 = off, else 10 Hz to 0.45 of the sample rate)",
+        Access::Model,
+    ),
+    s(
+        "notch_q",
+        "1",
+        "notch quality factor (0.5 to 50)",
+        Access::Model,
+    ),
 ];
 
 /// The setting of `name`.
@@ -115,7 +127,7 @@ const fn names<const N: usize>(only: Option<Access>) -> [&'static str; N] {
 }
 
 /// Names of `get`/`set` (and `help`'s list).
-pub const PARAMS: [&str; 18] = names(None);
+pub const PARAMS: [&str; 20] = names(None);
 /// The settings only `get` reads.
 pub const READ_ONLY: [&str; 3] = names(Some(Access::ReadOnly));
 

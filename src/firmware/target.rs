@@ -51,5 +51,5 @@ pub const SAMPLE_HZ: u32 = 16_384;
 /// Safe state of every axis (V): where the output goes at start-up and on a fault.
 pub const SAFE_VOLTS: f64 = 0.0;
 
-/// Capacity of a command's reply line (`help` lists every parameter).
-pub const REPLY_LEN: usize = 256;
+/// Capacity of a command's reply line (`help` lists every parameter: 289 bytes with the notch).
+pub const REPLY_LEN: usize = 320;

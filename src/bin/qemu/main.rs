@@ -5,7 +5,8 @@
 //!
 //! * SysTick (25 MHz in QEMU's mps2 model) fires at the sample rate and runs the control
 //!   period at the highest priority. The stage is [`stage::SimStage`]: the CBW model of the
-//!   core plus a first-order lag. It sits behind the firmware's real converter drivers: the
+//!   core plus a first-order lag (and a mechanical resonance after the harness line
+//!   `resonance <hz> <zeta>`, none by default; `piezo serial bode`'s test finds it). It sits behind the firmware's real converter drivers: the
 //!   control task runs `Ad4000::start_conversion` + `Ad4000::read` and `Ad5791::set_code`
 //!   (the drivers of `piezo_core::drivers`, the ones hal-sim runs) over the no_std mock
 //!   chips of [`chips`] (an AD4020 whose CNV edge samples the stage, an AD5791 whose LDAC
@@ -61,7 +62,7 @@ use board::*;
 
 #[cfg(target_os = "none")]
 mod board {
-    use super::{bench, chips, io, uart};
+    use super::{bench, chips, io, stage, uart};
     use core::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, Ordering::Relaxed};
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
@@ -208,6 +209,32 @@ mod board {
         pub wait: Option<u32>,
     }
 
+    /// The harness line `resonance <hz> <zeta>`: the simulated stages get a mechanical
+    /// resonance (`resonance 0 0`: none again; see [`stage::RESONANCE_HZ`]). True when the
+    /// line is one (out-of-range values leave no resonance).
+    fn set_resonance(line: &[u8]) -> bool {
+        let Some(rest) = line.strip_prefix(b"resonance ") else {
+            return false;
+        };
+        let Ok(rest) = core::str::from_utf8(rest) else {
+            return false;
+        };
+        let mut words = rest.split(' ');
+        let (Some(hz), Some(zeta), None) = (words.next(), words.next(), words.next()) else {
+            return false;
+        };
+        let (Ok(hz), Ok(zeta)) = (
+            piezo_core::command::parse_f32(hz),
+            piezo_core::command::parse_f32(zeta),
+        ) else {
+            return false;
+        };
+        stage::RESONANCE_HZ.store(hz.to_bits(), Relaxed);
+        stage::RESONANCE_ZETA.store(zeta.to_bits(), Relaxed);
+        stage::RESONANCE_GEN.fetch_add(1, Relaxed);
+        true
+    }
+
     /// The periods of a `wait <n>` line (decimal, 1 ..= [`PERIODS_MAX`]).
     fn wait_periods(line: &[u8]) -> Option<u32> {
         let digits = line.strip_prefix(WAIT_PREFIX)?;
@@ -243,7 +270,7 @@ mod board {
                 FLOOD_STOP => self.flood = Some(false),
                 _ => match wait_periods(line) {
                     Some(n) => self.wait = Some(n),
-                    None => return false,
+                    None => return set_resonance(line),
                 },
             }
             true

@@ -212,7 +212,7 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
 /// new frame once triggered. Under an emulator that runs slower than real time the
 /// firmware's time runs slower too, so a busy host cannot fail a healthy capture;
 /// `--wall-cap-s` only ends a wait on a firmware whose loop stopped or a dead link.
-fn wait_for_capture(c: &mut Client, a: &RecordArgs, sample_hz: f64) -> Result<usize> {
+pub(crate) fn wait_for_capture(c: &mut Client, a: &RecordArgs, sample_hz: f64) -> Result<usize> {
     let budget = a.wait_s * sample_hz;
     let wall_deadline = Instant::now() + Duration::from_secs_f64(a.wall_cap_s);
     let mut last = c.stats()?.samples;
