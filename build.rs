@@ -57,6 +57,17 @@ SECTIONS
   /* cortex-m-rt places .text at _stext: after .itcm's load image, not over it. */
   _stext = LOADADDR(.itcm) + SIZEOF(.itcm);
 } INSERT AFTER .vector_table;
+
+/* The recorder's storage (src/bin/h743: `recorder_storage`): all of the AXI SRAM, not
+ * loaded and not zeroed at reset (the firmware zeroes it once in `init`). */
+SECTIONS
+{
+  .axisram (NOLOAD) : ALIGN(8)
+  {
+    *(.axisram .axisram.*);
+    . = ALIGN(8);
+  } > AXISRAM
+} INSERT AFTER .uninit;
 ";
 
 fn main() {

@@ -67,8 +67,37 @@ mod board {
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
     use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
-    use piezo_core::firmware::{RamNor, SettingsFlash, MAX_RECORD};
+    use piezo_core::firmware::{RamNor, RecStorage, SettingsFlash, MAX_RECORD, R, REC_CH};
     use {cortex_m_rt as _, defmt_semihosting as _};
+
+    /// Recorder frames: 3.5 MiB of the 4 MiB RAM (the rest holds the statics, about 30 KiB,
+    /// and the stack, whose bound is about 32 KiB): 229 376 frames, 2.3 s at 100 kHz.
+    pub const REC_FRAMES: usize = 7 * 32 * 1024;
+
+    /// The recorder's storage in RAM: [`REC_FRAMES`] frames of [`REC_CH`] values (3.5 MiB), in the
+    /// NOLOAD section `.uninit.recorder` (nothing copies or zeroes it at reset); zeroed here once.
+    /// `None` on a second call.
+    #[allow(unsafe_code)]
+    pub fn recorder_storage() -> Option<RecStorage> {
+        use core::mem::MaybeUninit;
+        use core::sync::atomic::{AtomicBool, Ordering};
+        use piezo_core::Real;
+        #[unsafe(link_section = ".uninit.recorder")]
+        static mut STORAGE: MaybeUninit<[[R; REC_CH]; REC_FRAMES]> = MaybeUninit::uninit();
+        static TAKEN: AtomicBool = AtomicBool::new(false);
+        if TAKEN.swap(true, Ordering::Relaxed) {
+            return None;
+        }
+        // SAFETY: `TAKEN` lets this run once, so the slice is the only reference to
+        // `STORAGE` ever made; every frame is written before the slice is formed.
+        unsafe {
+            let p = core::ptr::addr_of_mut!(STORAGE).cast::<[R; REC_CH]>();
+            for i in 0..REC_FRAMES {
+                p.add(i).write([R::ZERO; REC_CH]);
+            }
+            Some(core::slice::from_raw_parts_mut(p, REC_FRAMES))
+        }
+    }
 
     /// The control state over this board's converters (the SPI pair, on mock chips).
     pub type Ctl = firmware::Ctl<SpiPair>;
@@ -252,6 +281,9 @@ mod board {
         fn send(&mut self, line: &str) {
             uart::line(line);
         }
+        fn send_bytes(&mut self, bytes: &[u8]) {
+            uart::write_bytes(bytes);
+        }
         fn bench(&mut self) -> Result<usize, Error> {
             bench::print(&self.table, false);
             Ok(bench::ROWS)
@@ -379,8 +411,8 @@ mod board {
 mod app {
     use super::io::SimIo;
     use super::{
-        bench, chips, settings_flash, uart, Ctl, SysTickClock, Uart, ANSWERED, EXIT,
-        INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ, WAIT_UNTIL,
+        bench, chips, recorder_storage, settings_flash, uart, Ctl, SysTickClock, Uart, ANSWERED,
+        EXIT, INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ, WAIT_UNTIL,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
@@ -410,7 +442,7 @@ mod app {
         // voltage at the DAC's scale) before anything that can fail; the amplifier stays
         // off until the loop runs without a fault.
         chips::clock::start();
-        let ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        let ctl = Ctl::with_recorder(c(SAMPLE_HZ as f64), recorder_storage().unwrap_or(&mut []));
         let safe = ctl.lp.p.codes()[0] << <SpiPair as Converters>::DAC_SHIFT;
         SAFE_CODE.store(safe, Relaxed);
         uart::init();

@@ -385,6 +385,8 @@ fn record_args(a: &BodeArgs, signals: [&str; 2], out: &Path) -> RecordArgs {
         wait_s: a.wait_s,
         wall_cap_s: 600.0,
         no_arm: false,
+        frames: None,
+        text: false,
         out: out.to_path_buf(),
         svg: None,
     }
