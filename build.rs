@@ -59,7 +59,8 @@ SECTIONS
 } INSERT AFTER .vector_table;
 
 /* The recorder's storage (src/bin/h743: `recorder_storage`): all of the AXI SRAM, not
- * loaded and not zeroed at reset (the firmware zeroes it once in `init`). */
+ * loaded and not zeroed at reset (the firmware zeroes it once in `init`). After .bss, not
+ * after .uninit: cortex-m-rt takes the stack's end from the location after .uninit. */
 SECTIONS
 {
   .axisram (NOLOAD) : ALIGN(8)
@@ -67,7 +68,7 @@ SECTIONS
     *(.axisram .axisram.*);
     . = ALIGN(8);
   } > AXISRAM
-} INSERT AFTER .uninit;
+} INSERT AFTER .bss;
 ";
 
 fn main() {
