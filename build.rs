@@ -57,6 +57,18 @@ SECTIONS
   /* cortex-m-rt places .text at _stext: after .itcm's load image, not over it. */
   _stext = LOADADDR(.itcm) + SIZEOF(.itcm);
 } INSERT AFTER .vector_table;
+
+/* The recorder's storage (src/bin/h743: `recorder_storage`): all of the AXI SRAM, not
+ * loaded and not zeroed at reset (the firmware zeroes it once in `init`). After .bss, not
+ * after .uninit: cortex-m-rt takes the stack's end from the location after .uninit. */
+SECTIONS
+{
+  .axisram (NOLOAD) : ALIGN(8)
+  {
+    *(.axisram .axisram.*);
+    . = ALIGN(8);
+  } > AXISRAM
+} INSERT AFTER .bss;
 ";
 
 fn main() {

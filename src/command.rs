@@ -37,6 +37,8 @@
 //! | `rec div [<n>]` | record every `n`-th period, 1..=1000 (the buffer spans `n` times longer, e.g. a whole XY scan); without `n`: report it | `ok rec div <n>` |
 //! | `rec status` | `idle`, `armed`, `triggered` or `done` and the frames of the capture in place (all N when done) | `ok rec <state> <n>` |
 //! | `rec read <start> <count>` | frames as `<i> <v0> <v1> ...` lines | `ok rec read <n>` |
+//! | `rec len [<n>]` | frames per capture, 1 up to the recorder's storage (`err 8` beyond; `err 12` while capturing); drops a finished capture; without `n`: report it | `ok rec len <n> of <capacity>` |
+//! | `rec bin <start> <count>` | frames as binary packets ([`crate::bulk`]: COBS, a zero byte after each, 32 frames of f32 LE per packet, CRC-32 each) after the reply line; `err 12` when no finished capture holds them | `ok rec bin <n> <packets>`, then the packets |
 //! | `fault` | latched fault (`none`, `sensor-range`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
@@ -68,6 +70,8 @@
 //! | `lambda2` | 1/s | robust law gain (000 eq. 7) | model | 2000 | 0 .. 10000000 |
 //! | `pid_kp` | V/um | PID proportional gain | model | 0.5 | 0 .. 10000 |
 //! | `pid_ki` | V/(um s) | PID integral gain | model | 2000 | 0 .. 100000000 |
+//! | `notch_hz` | Hz | notch on the measured position (0 = off, else 10 Hz to 0.45 of the sample rate) | model | 0 | 0 .. 1000000 |
+//! | `notch_q` | 1 | notch quality factor (0.5 to 50) | model | 2 | 0.5 .. 50 |
 //!
 //! The CBW (n = 1) is the one `piezo fit --model cbw` identifies; `gbw_b` tilts its loop
 //! (`set gbw_b` refuses `|B| >= cbw_beta + cbw_gamma`). A model or gain `set` is

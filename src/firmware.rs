@@ -40,7 +40,7 @@ pub use converters::{
     DAC_CONFIG, SPI_CENTER_UM, SPI_SPAN_UM,
 };
 pub use ctl::{Ctl, PointTable};
-pub use execute::{push_real, push_stats, stream_frames, PARAMS, READ_ONLY};
+pub use execute::{push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;
@@ -48,6 +48,6 @@ pub use period::{control_period, Clock, Io};
 pub use settings::{setting, Access, Setting, SETTINGS};
 pub use storage::{decode, encode, stored, Boot, Record, SettingsFlash, MAX_RECORD, VERSION};
 pub use target::{
-    c, LoopPipeline, AXES, FIXED, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ,
+    c, LoopPipeline, RecStorage, AXES, FIXED, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ,
 };
 pub use timing::{CycleStats, Timing};

@@ -10,6 +10,7 @@
 // `!(x < y)` is how NaN is kept out of limits here; it is intended.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod bulk;
 pub mod command;
 pub mod drivers;
 pub mod feedback;

@@ -1,6 +1,8 @@
 //! Data recorder: fixed-size ring buffer of selected signals with a trigger.
 //!
-//! `CH` channels of `N` frames, no allocation, O(1) per sample, no panic. Each channel is
+//! `CH` channels over the frames of a storage the caller supplies (an array, or a board's
+//! RAM region), no allocation, O(1) per sample, no panic. A capture is `n` frames, any
+//! length up to the storage's (the firmware's `rec len`). Each channel is
 //! one [`Signal`] of the control loop. A capture is armed, waits for its [`Trigger`] while
 //! keeping the last `pre` frames (pre-trigger history), then records until the buffer holds
 //! `pre` frames before the trigger, the trigger frame and `N - pre - 1` frames after it.
@@ -142,6 +144,8 @@ pub enum ConfigError {
     Busy,
     /// The divider must be in 1..=[`MAX_DIVIDER`].
     BadDivider,
+    /// The capture length must be in 1..= the recorder's capacity.
+    BadLength,
 }
 
 impl ConfigError {
@@ -151,14 +155,20 @@ impl ConfigError {
             ConfigError::PreTooLong => "pre-trigger length must be below the buffer length",
             ConfigError::Busy => "recorder is capturing; stop it first",
             ConfigError::BadDivider => "divider must be in 1..=1000",
+            ConfigError::BadLength => "capture length must be in 1..=the capacity",
         }
     }
 }
 
-/// Ring buffer of `N` frames of `CH` channels.
+/// Ring buffer of `CH` channels over the frames of its storage `B` (an array
+/// [`ArrayRecorder`], or a `&'static mut` slice a board places in the RAM it has: the H743's
+/// AXI SRAM); a capture uses the first [`Recorder::capture_len`] of them (all by default,
+/// [`Recorder::set_capture_len`]).
 #[derive(Debug, Clone)]
-pub struct Recorder<T, const CH: usize, const N: usize> {
-    buf: [[T; CH]; N],
+pub struct Recorder<T, const CH: usize, B> {
+    buf: B,
+    /// Frames per capture (1 ..= the storage's frames; 0 only for an empty storage).
+    n: usize,
     /// Which signal each channel records.
     channels: [Signal; CH],
     trigger: Trigger<T>,
@@ -166,7 +176,7 @@ pub struct Recorder<T, const CH: usize, const N: usize> {
     state: State,
     /// Next slot to write.
     head: usize,
-    /// Frames written since arming (saturates at N).
+    /// Frames written since arming (saturates at n).
     filled: usize,
     /// Frames still to record after the trigger.
     post_left: usize,
@@ -178,27 +188,45 @@ pub struct Recorder<T, const CH: usize, const N: usize> {
     skip: u32,
 }
 
+/// A recorder over an array of `N` frames.
+pub type ArrayRecorder<T, const CH: usize, const N: usize> = Recorder<T, CH, [[T; CH]; N]>;
+
 impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Default
-    for Recorder<T, CH, N>
+    for ArrayRecorder<T, CH, N>
 {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T, CH, N> {
+impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> ArrayRecorder<T, CH, N> {
     const NONEMPTY: () = assert!(N > 0 && CH > 0, "recorder needs N > 0 and CH > 0");
 
-    /// Idle recorder; channels default to the first signals, trigger [`Trigger::Now`].
+    /// Idle recorder over an array; channels default to the first signals, trigger
+    /// [`Trigger::Now`].
     pub fn new() -> Self {
         #[allow(clippy::let_unit_value)]
         let _ = Self::NONEMPTY;
+        Self::with_storage([[T::default(); CH]; N])
+    }
+}
+
+impl<T, const CH: usize, B> Recorder<T, CH, B>
+where
+    T: Copy + Default + PartialOrd,
+    B: AsRef<[[T; CH]]> + AsMut<[[T; CH]]>,
+{
+    /// Idle recorder over `buf` (its frames are the capacity); channels default to the
+    /// first signals, trigger [`Trigger::Now`].
+    pub fn with_storage(buf: B) -> Self {
         let mut channels = [Signal::RefUm; CH];
         for (c, s) in channels.iter_mut().zip(Signal::ALL) {
             *c = s;
         }
+        let n = buf.as_ref().len();
         Self {
-            buf: [[T::default(); CH]; N],
+            buf,
+            n,
             channels,
             trigger: Trigger::Now,
             pre: 0,
@@ -210,6 +238,31 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
             div: 1,
             skip: 0,
         }
+    }
+
+    /// Frames the storage holds.
+    pub fn capacity(&self) -> usize {
+        self.buf.as_ref().len()
+    }
+
+    /// Frames per capture.
+    pub fn capture_len(&self) -> usize {
+        self.n
+    }
+
+    /// Frames per capture, 1 ..= [`Recorder::capacity`] (while idle or done; a finished
+    /// capture is dropped). The pre-trigger length must stay below it.
+    pub fn set_capture_len(&mut self, n: usize) -> Result<(), ConfigError> {
+        self.idle_or_done()?;
+        if n == 0 || n > self.capacity() {
+            return Err(ConfigError::BadLength);
+        }
+        if self.pre >= n {
+            return Err(ConfigError::PreTooLong);
+        }
+        self.n = n;
+        self.state = State::Idle;
+        Ok(())
     }
 
     /// Records every `div`-th period (1..=[`MAX_DIVIDER`]; 1: every period).
@@ -235,23 +288,23 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
         &self.channels
     }
 
-    /// Frames available to [`Recorder::frame`] (N when done, else 0).
+    /// Frames available to [`Recorder::frame`] (the capture length when done, else 0).
     pub fn len(&self) -> usize {
         if self.state == State::Done {
-            N
+            self.n
         } else {
             0
         }
     }
 
     /// Frames of the capture in place so far, for progress reports: those held while
-    /// armed (at most N), N less the frames still due once triggered, N when done.
+    /// armed (at most n), n less the frames still due once triggered, n when done.
     pub fn progress(&self) -> usize {
         match self.state {
             State::Idle => 0,
             State::Armed => self.filled,
-            State::Triggered => N - self.post_left.min(N),
-            State::Done => N,
+            State::Triggered => self.n - self.post_left.min(self.n),
+            State::Done => self.n,
         }
     }
 
@@ -288,7 +341,7 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
                 }
             }
         }
-        if pre >= N {
+        if pre >= self.n {
             return Err(ConfigError::PreTooLong);
         }
         self.trigger = trigger;
@@ -328,17 +381,18 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
         for (v, s) in frame.iter_mut().zip(self.channels.iter()) {
             *v = signals.get(s.index()).copied().unwrap_or_default();
         }
-        if let Some(slot) = self.buf.get_mut(self.head) {
+        let n = self.n;
+        if let Some(slot) = self.buf.as_mut().get_mut(self.head) {
             *slot = frame;
         }
-        self.head = if self.head + 1 >= N { 0 } else { self.head + 1 };
-        self.filled = (self.filled + 1).min(N);
+        self.head = if self.head + 1 >= n { 0 } else { self.head + 1 };
+        self.filled = (self.filled + 1).min(n);
         match self.state {
             State::Armed => {
                 // `fires` also tracks the previous value, so it runs on every frame.
                 let fired = self.fires(&frame) && self.filled > self.pre;
                 if fired {
-                    self.post_left = N - self.pre - 1;
+                    self.post_left = n.saturating_sub(self.pre + 1);
                     self.state = if self.post_left == 0 {
                         State::Done
                     } else {
@@ -381,11 +435,12 @@ impl<T: Copy + Default + PartialOrd, const CH: usize, const N: usize> Recorder<T
 
     /// Frame `i` of a finished capture, oldest first (the trigger is frame `pre`).
     pub fn frame(&self, i: usize) -> Option<&[T; CH]> {
-        if self.state != State::Done || i >= N {
+        let n = self.n;
+        if self.state != State::Done || i >= n {
             return None;
         }
         let k = self.head + i;
-        self.buf.get(if k >= N { k - N } else { k })
+        self.buf.as_ref().get(if k >= n { k - n } else { k })
     }
 
     /// Index of the trigger frame in a finished capture.
@@ -408,8 +463,8 @@ mod tests {
 
     /// Two channels (reference, position), rising trigger at 10 on the reference, 3
     /// frames before it.
-    fn rising_at_10_pre_3() -> Recorder<f32, 2, 8> {
-        let mut r = Recorder::<f32, 2, 8>::new();
+    fn rising_at_10_pre_3() -> ArrayRecorder<f32, 2, 8> {
+        let mut r = ArrayRecorder::<f32, 2, 8>::new();
         r.select(&[Signal::RefUm, Signal::YUm]).unwrap();
         r.set_trigger(
             Trigger::Rising {
@@ -463,7 +518,7 @@ mod tests {
     #[test]
     fn falling_and_level_triggers() {
         let wave = |k: usize| 5.0 - (k as f32);
-        let mut r = Recorder::<f32, 1, 4>::new();
+        let mut r = ArrayRecorder::<f32, 1, 4>::new();
         r.set_trigger(
             Trigger::Falling {
                 channel: 0,
@@ -512,7 +567,7 @@ mod tests {
 
     #[test]
     fn nan_never_triggers_and_config_is_checked() {
-        let mut r = Recorder::<f32, 1, 4>::new();
+        let mut r = ArrayRecorder::<f32, 1, 4>::new();
         r.set_trigger(
             Trigger::Level {
                 channel: 0,
@@ -543,7 +598,7 @@ mod tests {
 
     #[test]
     fn divider_keeps_every_nth_period() {
-        let mut r = Recorder::<f32, 1, 8>::new();
+        let mut r = ArrayRecorder::<f32, 1, 8>::new();
         assert_eq!(r.set_divider(0), Err(ConfigError::BadDivider));
         assert_eq!(r.set_divider(MAX_DIVIDER + 1), Err(ConfigError::BadDivider));
         r.set_divider(3).unwrap();
@@ -556,6 +611,39 @@ mod tests {
         let got: Vec<f32> = (0..8).map(|i| r.frame(i).unwrap()[0]).collect();
         assert_eq!(got, [0.0, 3.0, 6.0, 9.0, 12.0, 15.0, 18.0, 21.0]);
         assert_eq!(r.divider(), 3);
+    }
+
+    #[test]
+    fn capture_length_within_a_slice_storage() {
+        let mut store = [[0.0f32; 1]; 16];
+        let mut r = Recorder::<f32, 1, &mut [[f32; 1]]>::with_storage(&mut store[..]);
+        assert_eq!((r.capacity(), r.capture_len()), (16, 16));
+        assert_eq!(r.set_capture_len(0), Err(ConfigError::BadLength));
+        assert_eq!(r.set_capture_len(17), Err(ConfigError::BadLength));
+        r.set_capture_len(5).unwrap();
+        r.arm();
+        assert_eq!(r.set_capture_len(6), Err(ConfigError::Busy));
+        for k in 0..20 {
+            r.push(&[k as f32]);
+        }
+        assert_eq!((r.state(), r.len(), r.progress()), (State::Done, 5, 5));
+        let got: Vec<f32> = (0..5).map(|i| r.frame(i).unwrap()[0]).collect();
+        assert_eq!(got, [0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert!(r.frame(5).is_none());
+        assert_eq!(r.set_trigger(Trigger::Now, 5), Err(ConfigError::PreTooLong));
+        r.set_trigger(Trigger::Now, 4).unwrap();
+        assert_eq!(r.set_capture_len(4), Err(ConfigError::PreTooLong));
+        // A new length drops the finished capture.
+        r.set_capture_len(16).unwrap();
+        assert_eq!((r.state(), r.len()), (State::Idle, 0));
+        // An empty storage never panics and never finishes.
+        let mut e = Recorder::<f32, 1, &mut [[f32; 1]]>::with_storage(&mut []);
+        e.arm();
+        for k in 0..10 {
+            e.push(&[k as f32]);
+        }
+        assert_eq!((e.state(), e.len()), (State::Armed, 0));
+        assert!(e.frame(0).is_none());
     }
 
     #[test]
@@ -577,7 +665,7 @@ mod tests {
         /// before the trigger frame and the ones after it, in order.
         #[test]
         fn capture_is_a_contiguous_window(pre in 0usize..16, start in 0usize..50, len in 0usize..100) {
-            let mut r = Recorder::<f32, 1, 16>::new();
+            let mut r = ArrayRecorder::<f32, 1, 16>::new();
             r.set_trigger(Trigger::Rising { channel: 0, level: start as f32 }, pre).unwrap();
             r.arm();
             for k in 0..len {

@@ -13,6 +13,9 @@ impl Port for Lines {
     fn send(&mut self, line: &str) {
         self.0.push(line.to_string());
     }
+    fn send_bytes(&mut self, bytes: &[u8]) {
+        self.0.push(format!("{bytes:02x?}"));
+    }
 }
 
 fn direct(ctl: &mut Ctl<OnChip>, line: &str) -> String {

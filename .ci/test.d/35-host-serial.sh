@@ -24,6 +24,16 @@ grep -qx 'ok wave sine 5 100 10' "$work/last.txt" || fail "wave not started"
 run record --signals ref_um,y_um,u_volts,error_um --out "$work/rec.csv" --svg "$work/rec.svg"
 run record --signals ref_um,y_um,u_volts,dac_code --trigger rise:ref_um:10 --pre 100 \
   --out "$work/trig.csv"
+# A longer capture (`rec len`, issue 17 item 2) over the binary transfer, then the same
+# capture read again as text: the two CSVs must hold the same frames.
+run record --frames 20000 --signals ref_um,y_um,u_volts,error_um --out "$work/bin.csv"
+grep -q '^rec bin: 20000 frames in ' "$work/last.txt" || fail "no binary transfer of 20000 frames"
+run record --no-arm --text --signals ref_um,y_um,u_volts,error_um --out "$work/text.csv"
+[ "$(grep -c '^[0-9]' "$work/bin.csv")" = 20000 ] || fail "binary capture is not 20000 frames"
+cmp -s <(grep '^[0-9]' "$work/bin.csv") <(grep '^[0-9]' "$work/text.csv") ||
+  fail "the binary and the text transfer of one capture differ"
+run -- "rec len 1024"
+grep -qx 'ok rec len 1024 of 229376' "$work/last.txt" || fail "rec len"
 run stats --clock 25MHz
 grep -q '^samples [0-9]*  overruns [0-9]*$' "$work/last.txt" || fail "stats not read"
 run -- "get sample_hz" "rec status"

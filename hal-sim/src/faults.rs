@@ -12,7 +12,7 @@
 //!   task pushed must come back bit for bit from the finished capture.
 
 use anyhow::{anyhow, Result};
-use piezo_core::recorder::{Recorder, Signal, Trigger};
+use piezo_core::recorder::{ArrayRecorder, Signal, Trigger};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -295,7 +295,7 @@ pub fn run_case(
     };
 
     // Recorder: armed before the fault, y / u / DAC code of every control period.
-    let mut rec: Recorder<R, 3, 512> = Recorder::new();
+    let mut rec: ArrayRecorder<R, 3, 512> = ArrayRecorder::new();
     rec.select(&[Signal::YUm, Signal::UVolts, Signal::DacCode])
         .map_err(|e| anyhow!(e.message()))?;
     rec.set_trigger(Trigger::Now, 0)

@@ -42,6 +42,8 @@ pub struct Plot {
     pub xlabel: String,
     pub ylabel: String,
     pub series: Vec<Series>,
+    /// Logarithmic x axis (decade ticks; points at x <= 0 are left out).
+    pub log_x: bool,
 }
 
 impl Plot {
@@ -51,6 +53,24 @@ impl Plot {
             xlabel: xlabel.into(),
             ylabel: ylabel.into(),
             series: Vec::new(),
+            log_x: false,
+        }
+    }
+
+    /// A logarithmic x axis (a Bode plot's frequency): ticks at 1, 2 and 5 per decade.
+    pub fn log_x(mut self) -> Self {
+        self.log_x = true;
+        self
+    }
+
+    /// Where `x` sits on the x axis: itself, or its log10 on a log axis (NaN for x <= 0).
+    fn xpos(&self, x: f64) -> f64 {
+        if !self.log_x {
+            x
+        } else if x > 0.0 {
+            x.log10()
+        } else {
+            f64::NAN
         }
     }
 
@@ -89,11 +109,21 @@ impl Plot {
 
     /// Renders this plot into `out` with its top-left corner at `(ox, oy)`.
     fn render(&self, out: &mut String, ox: f64, oy: f64) {
-        let (x0, x1) = range(self.series.iter().flat_map(|s| s.x.iter().copied()));
+        let (x0, x1) = range(
+            self.series
+                .iter()
+                .flat_map(|s| s.x.iter().map(|&x| self.xpos(x)))
+                .filter(|x| x.is_finite()),
+        );
         let (y0, y1) = range(self.series.iter().flat_map(|s| s.y.iter().copied()));
         let pw = W - ML - MR;
         let ph = H - MT - MB;
-        let sx = |x: f64| ox + ML + (x - x0) / (x1 - x0) * pw;
+        let sx = |x: f64| ox + ML + (self.xpos(x) - x0) / (x1 - x0) * pw;
+        let xticks = if self.log_x {
+            log_ticks(x0, x1)
+        } else {
+            ticks(x0, x1)
+        };
         let sy = |y: f64| oy + MT + (1.0 - (y - y0) / (y1 - y0)) * ph;
         let _ = write!(
             out,
@@ -108,7 +138,7 @@ impl Plot {
             oy + 22.0,
             esc(&self.title)
         );
-        for t in ticks(x0, x1) {
+        for t in xticks {
             let x = sx(t);
             let _ = write!(
                 out,
@@ -150,7 +180,11 @@ impl Plot {
             match s.style {
                 Style::Line => {
                     let mut d = String::new();
-                    for (k, (x, y)) in s.x.iter().zip(&s.y).enumerate() {
+                    let on_axis =
+                        s.x.iter()
+                            .zip(&s.y)
+                            .filter(|(x, _)| self.xpos(**x).is_finite());
+                    for (k, (x, y)) in on_axis.enumerate() {
                         let _ = write!(
                             d,
                             "{}{:.2},{:.2}",
@@ -166,6 +200,9 @@ impl Plot {
                 }
                 Style::Points => {
                     for (x, y) in s.x.iter().zip(&s.y) {
+                        if !self.xpos(*x).is_finite() {
+                            continue;
+                        }
                         let _ = write!(
                             out,
                             r#"<circle cx="{:.2}" cy="{:.2}" r="1.6" fill="{c}"/>"#,
@@ -256,6 +293,28 @@ fn ticks(lo: f64, hi: f64) -> Vec<f64> {
     v
 }
 
+/// Ticks of a log axis spanning log10 values `lo..hi`: 1, 2 and 5 of every decade (only
+/// the decades when it spans more than three), as values (not logs).
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let mut v = Vec::new();
+    let steps: &[f64] = if hi - lo > 3.0 {
+        &[1.0]
+    } else {
+        &[1.0, 2.0, 5.0]
+    };
+    let mut d = lo.floor();
+    while d <= hi.ceil() && v.len() < 40 {
+        for m in steps {
+            let t = m * 10f64.powf(d);
+            if (lo - 1e-9..=hi + 1e-9).contains(&t.log10()) {
+                v.push(t);
+            }
+        }
+        d += 1.0;
+    }
+    v
+}
+
 fn fmt_tick(t: f64) -> String {
     let a = t.abs();
     if a != 0.0 && !(1e-3..1e5).contains(&a) {
@@ -285,6 +344,35 @@ mod tests {
         assert!(s.contains("a&lt;b"));
         assert!(s.contains(">one<") && s.contains(">two<"));
         assert!(s.starts_with("<svg") && s.trim_end().ends_with("</svg>"));
+    }
+
+    #[test]
+    fn log_axis_places_decades_evenly_and_drops_nonpositive_x() {
+        let p = Plot::new("bode", "f [Hz]", "|H| [dB]").log_x().line(
+            "h",
+            &[0.0, 10.0, 100.0, 1000.0],
+            &[1.0, 2.0, 3.0, 4.0],
+        );
+        let s = svg_grid(&[p], 1);
+        // Three points on the axis (x = 0 left out), equally spaced in x.
+        let d = s
+            .split("<path d=\"")
+            .nth(1)
+            .unwrap()
+            .split('"')
+            .next()
+            .unwrap();
+        let xs: Vec<f64> = d
+            .split(['M', 'L'])
+            .filter_map(|p| p.trim().split(',').next()?.parse().ok())
+            .collect();
+        assert_eq!(xs.len(), 3, "{d}");
+        assert!(((xs[1] - xs[0]) - (xs[2] - xs[1])).abs() < 0.05, "{xs:?}");
+        assert_eq!(
+            log_ticks(1.0, 3.0),
+            vec![10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0]
+        );
+        assert_eq!(log_ticks(0.0, 4.5), vec![1.0, 10.0, 100.0, 1000.0, 10000.0]);
     }
 
     #[test]

@@ -8,10 +8,13 @@
 //!   firmware cannot drift apart;
 //! * [`client`]: sync, send, receive and reply classification;
 //! * [`replies`]: typed replies (`get`, `stats`, `rec status`, `rec sel`, `rec read` frames);
-//! * [`error`]: why a command failed, with the firmware's numbered errors named.
+//! * [`error`]: why a command failed, with the firmware's numbered errors named;
+//! * [`bulk`]: the recorder's frames over the framed binary `rec bin` (COBS packets with a
+//!   CRC-32 each; damaged ones asked for again).
 //!
 //! The `piezo serial` subcommands ([`crate::cli::serial`]) and the tests use this module;
 //! it knows nothing of the command line.
+pub mod bulk;
 pub mod client;
 pub mod error;
 pub mod lines;

@@ -63,6 +63,13 @@ pub enum RecCmd<'a> {
     },
     /// Record every n-th period (`Some`), or report the divider (`None`).
     Divider(Option<usize>),
+    /// Frames per capture (`Some`), or report it and the capacity (`None`).
+    Length(Option<usize>),
+    /// Frames as COBS packets with a CRC-32 each ([`crate::bulk`]).
+    Bin {
+        start: usize,
+        count: usize,
+    },
 }
 
 /// The points of one `table add` line (1..=[`TABLE_ADD_MAX`]), without allocation.
@@ -622,6 +629,20 @@ fn parse_rec<'a>(w: &Words<'a>) -> Result<RecCmd<'a>, Error> {
                 start: w.index(2)?,
                 count: w.index(3)?,
             }
+        }
+        "bin" => {
+            w.at_most(4)?;
+            RecCmd::Bin {
+                start: w.index(2)?,
+                count: w.index(3)?,
+            }
+        }
+        "len" => {
+            w.at_most(3)?;
+            RecCmd::Length(match w.get(2) {
+                Some(_) => Some(w.index(2)?),
+                None => None,
+            })
         }
         _ => return Err(Error::BadKeyword),
     };

@@ -5,7 +5,7 @@ use super::budget::Budget;
 use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
-use super::execute::{push_stats, run, stream_frames};
+use super::execute::{push_stats, run, stream_bin, stream_frames};
 use super::storage::{decode, stored, Boot, SettingsFlash, MAX_RECORD};
 use super::target::{R, REPLY_LEN};
 use crate::command::{self, Command, Error, LineBuffer, RecCmd};
@@ -16,6 +16,8 @@ use rtic_core::Mutex;
 pub trait Port {
     /// Sends one line (the port adds its line end).
     fn send(&mut self, line: &str);
+    /// Sends bytes as they are (the packets of `rec bin`).
+    fn send_bytes(&mut self, bytes: &[u8]);
     /// `bench`: sends the board's table of instructions per step and returns its row
     /// count. Boards without one answer [`Error::Unsupported`].
     fn bench(&mut self) -> Result<usize, Error> {
@@ -175,6 +177,17 @@ impl<C: Converters> CommandLine<C> {
                     count,
                     |i| ctl.lock(|c| c.rec.frame(i).copied()),
                     |l| port.send(l),
+                );
+                return true;
+            }
+            Ok(Command::Rec(RecCmd::Bin { start, count })) => {
+                let available = ctl.lock(|c| c.rec.len());
+                stream_bin(
+                    start,
+                    count,
+                    available,
+                    |i| ctl.lock(|c| c.rec.frame(i).copied()),
+                    port,
                 );
                 return true;
             }

@@ -2,7 +2,7 @@
 
 use super::control_loop::Loop;
 use super::converters::Converters;
-use super::target::{c, AXES, R, REC_CH, REC_N};
+use super::target::{c, RecStorage, AXES, R, REC_CH};
 use super::timing::Timing;
 use crate::command::Error;
 use crate::pipeline::TABLE_LEN;
@@ -14,7 +14,7 @@ use crate::Real;
 /// (the control step never reads it).
 pub struct Ctl<C> {
     pub lp: Loop<C>,
-    pub rec: Recorder<R, REC_CH, REC_N>,
+    pub rec: Recorder<R, REC_CH, RecStorage>,
     pub timing: Timing,
     pub table: PointTable,
     /// The axis the 1-axis waves go to (`axis <n>`).
@@ -24,15 +24,29 @@ pub struct Ctl<C> {
 }
 
 impl<C: Converters> Ctl<C> {
-    pub fn new(sample_hz: R) -> Self {
+    /// With the recorder over `storage` (a board's RAM region), capturing
+    /// [`super::REC_N`] frames by default (fewer if the storage is smaller; `rec len`
+    /// changes it).
+    pub fn with_recorder(sample_hz: R, storage: RecStorage) -> Self {
+        let mut rec = Recorder::with_storage(storage);
+        let _ = rec.set_capture_len(super::REC_N.min(rec.capacity()));
         Self {
             lp: Loop::new(sample_hz),
-            rec: Recorder::new(),
+            rec,
             timing: Timing::new(),
             table: PointTable::new(),
             axis: 0,
             periods: 0,
         }
+    }
+
+    /// On the host (tests, tools): a recorder of 4 x [`super::REC_N`] frames, allocated
+    /// and never freed (a board supplies its RAM with [`Ctl::with_recorder`]).
+    #[cfg(not(target_os = "none"))]
+    pub fn new(sample_hz: R) -> Self {
+        extern crate std;
+        let frames = std::vec![[R::ZERO; REC_CH]; 4 * super::REC_N];
+        Self::with_recorder(sample_hz, std::boxed::Box::leak(frames.into_boxed_slice()))
     }
 
     /// Feeds the recorder (only while it captures: the signals cost a few instructions).

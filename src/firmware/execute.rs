@@ -4,7 +4,7 @@
 use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
-use super::target::{c, LoopPipeline, AXES, R, REC_CH, REC_N, REPLY_LEN};
+use super::target::{c, LoopPipeline, AXES, R, REC_CH, REPLY_LEN};
 use super::timing::Timing;
 use crate::command::{self, Command, Error, RecCmd, Shape, TriggerCmd};
 use crate::pipeline::{lissajous, raster, Parts, Wave};
@@ -395,6 +395,7 @@ impl<C: Converters> Ctl<C> {
             recorder::ConfigError::PreTooLong => Error::OutOfRange,
             recorder::ConfigError::Busy => Error::Busy,
             recorder::ConfigError::BadDivider => Error::OutOfRange,
+            recorder::ConfigError::BadLength => Error::OutOfRange,
         };
         match r {
             RecCmd::Select(names) => {
@@ -477,7 +478,16 @@ impl<C: Converters> Ctl<C> {
                 out.push_str("ok rec div ");
                 out.push_u32(self.rec.divider());
             }
-            RecCmd::Read { .. } => return Err(Error::Unsupported),
+            RecCmd::Length(n) => {
+                if let Some(n) = n {
+                    self.rec.set_capture_len(n).map_err(cfg)?;
+                }
+                out.push_str("ok rec len ");
+                out.push_usize(self.rec.capture_len());
+                out.push_str(" of ");
+                out.push_usize(self.rec.capacity());
+            }
+            RecCmd::Read { .. } | RecCmd::Bin { .. } => return Err(Error::Unsupported),
         }
         Ok(())
     }
@@ -501,8 +511,8 @@ pub fn push_stats<const N: usize>(out: &mut command::Reply<N>, t: &Timing) {
     out.push_u32(t.overruns);
 }
 
-/// Streams `rec read <start> <count>`: `frame(i)` fetches frame `i` (under a short lock),
-/// `line` sends one line. Bounded by the recorder length.
+/// Streams `rec read <start> <count>`: `frame(i)` fetches frame `i` (under a short lock;
+/// `None` past the capture ends the stream), `line` sends one line.
 pub fn stream_frames(
     start: usize,
     count: usize,
@@ -510,7 +520,7 @@ pub fn stream_frames(
     mut line: impl FnMut(&str),
 ) {
     let mut sent = 0;
-    for i in start..start.saturating_add(count).min(REC_N) {
+    for i in start..start.saturating_add(count) {
         let Some(f) = frame(i) else {
             break;
         };
@@ -531,6 +541,51 @@ pub fn stream_frames(
         r.push_usize(sent);
     }
     line(r.as_str());
+}
+
+/// Streams `rec bin <start> <count>` ([`crate::bulk`]): `available` is the capture's
+/// frames (0 unless finished); the reply line `ok rec bin <frames> <packets>` (err 12 when
+/// nothing is available), then the packets, each of up to
+/// [`crate::bulk::FRAMES_PER_PACKET`] frames fetched by `frame(i)` (one short lock each),
+/// all sent to `port`. Bounded by `count`; a frame gone meanwhile (the recorder re-armed)
+/// ends the stream early (the host finds the packets missing and asks again).
+pub fn stream_bin(
+    start: usize,
+    count: usize,
+    available: usize,
+    mut frame: impl FnMut(usize) -> Option<[R; REC_CH]>,
+    port: &mut impl super::Port,
+) {
+    use crate::bulk::{encode, FRAMES_PER_PACKET, MAX_FRAMED};
+    let n = count.min(available.saturating_sub(start));
+    let mut r = command::Reply::<48>::new();
+    if n == 0 && count > 0 {
+        r.push_error(Error::Busy);
+        port.send(r.as_str());
+        return;
+    }
+    let packets = n.div_ceil(FRAMES_PER_PACKET);
+    r.push_str("ok rec bin ");
+    r.push_usize(n);
+    r.push_str(" ");
+    r.push_usize(packets);
+    port.send(r.as_str());
+    let mut buf = [[0.0f32; REC_CH]; FRAMES_PER_PACKET];
+    let mut out = [0u8; MAX_FRAMED];
+    for p in 0..packets {
+        let first = start + p * FRAMES_PER_PACKET;
+        let k = FRAMES_PER_PACKET.min(start + n - first);
+        for (j, slot) in buf.iter_mut().take(k).enumerate() {
+            let Some(f) = frame(first + j) else {
+                return;
+            };
+            *slot = f.map(|v| v.to_f64() as f32);
+        }
+        let frames = buf.get(..k).unwrap_or(&[]);
+        if let Some(len) = encode(first as u32, frames, &mut out) {
+            port.send_bytes(out.get(..len).unwrap_or(&[]));
+        }
+    }
 }
 
 /// A command's number as a control-path value.

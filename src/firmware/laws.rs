@@ -69,6 +69,7 @@ pub fn validate(p: &Params, sample_hz: R) -> Result<(), Error> {
         && law_with("hgo-robust", p, sample_hz).is_some()
         && law_with("fts-gbw", p, sample_hz).is_some()
         && law_with("pid", p, sample_hz).is_some()
+        && p.notch(sample_hz).is_ok()
         && p.linear().is_valid();
     if ok {
         Ok(())
@@ -124,8 +125,19 @@ pub fn tuning(p: &Params) -> Tuning<R> {
     }
 }
 
-/// The feedback laws of [`LAWS`], by name, with the model and gains of `p`.
+/// The feedback laws of [`LAWS`], by name, with the model and gains of `p`, and the notch
+/// of `p` ([`Params::notch`]) on the law's measurement.
 pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
+    let notch = p.notch(sample_hz).ok()?;
+    let mut fb = law_unfiltered(name, p, sample_hz)?;
+    if notch.is_some() {
+        fb.set_measurement_filter(notch);
+    }
+    Some(fb)
+}
+
+/// [`law_with`] without the notch.
+fn law_unfiltered(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
     let law = *FIRMWARE_LAWS.iter().find(|l| l.name() == name)?;
     let model = match law.family {
         Family::Cbw => ObserverModel::Cbw(p.model()?),

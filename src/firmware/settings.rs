@@ -45,151 +45,58 @@ impl Setting {
     }
 }
 
-const fn limit(
+/// A board setting (read-only): no default or range of its own.
+const BOARD: [f64; 3] = [f64::NAN; 3];
+
+const fn row(
     name: &'static str,
     unit: &'static str,
     about: &'static str,
-    default: f64,
-    min: f64,
-    max: f64,
-) -> Setting {
-    Setting {
-        name,
-        unit,
-        about,
-        access: Access::Limit,
-        default,
-        min,
-        max,
-        field: None,
-    }
-}
-
-const fn board(name: &'static str, unit: &'static str, about: &'static str) -> Setting {
-    Setting {
-        name,
-        unit,
-        about,
-        access: Access::ReadOnly,
-        default: f64::NAN,
-        min: f64::NAN,
-        max: f64::NAN,
-        field: None,
-    }
-}
-
-const fn model(
-    name: &'static str,
-    unit: &'static str,
-    about: &'static str,
+    access: Access,
     [default, min, max]: [f64; 3],
-    field: fn(&mut Params) -> &mut R,
+    field: Option<fn(&mut Params) -> &mut R>,
 ) -> Setting {
     Setting {
         name,
         unit,
         about,
-        access: Access::Model,
+        access,
         default,
         min,
         max,
-        field: Some(field),
+        field,
     }
 }
 
-/// Every setting, in the order `help` lists them. Defaults: the QEMU board's simulated
-/// stage (CBW set 1 of the 000 backup slide) and gains tuned on it; ranges: what a piezo
-/// stage behind a 150 V amplifier can use, wide enough for any fitted model.
-pub const SETTINGS: [Setting; 18] = [
-    limit("u_min", "V", "lowest output voltage", 0.0, 0.0, 150.0),
-    limit(
-        "u_max",
-        "V",
-        "highest output voltage (at most 150)",
-        150.0,
-        0.0,
-        150.0,
-    ),
-    limit("slew", "V/s", "output slew-rate limit", 20_000.0, 1e-3, 1e9),
-    board("um_per_code", "um", "position per ADC code"),
-    board("volts_per_code", "V", "output voltage per DAC code"),
-    board("sample_hz", "Hz", "control rate"),
-    model(
-        "cbw_d",
-        "um/V",
-        "CBW piezo gain d (000 eq. 1)",
-        [0.16, 1e-6, 1e3],
-        |p| &mut p.cbw_d,
-    ),
-    model(
-        "cbw_alpha",
-        "um/V",
-        "CBW alpha (000 eq. 2)",
-        [0.07, -1e3, 1e3],
-        |p| &mut p.cbw_alpha,
-    ),
-    model("cbw_beta", "1/V", "CBW beta", [0.02, -1e3, 1e3], |p| {
-        &mut p.cbw_beta
-    }),
-    model("cbw_gamma", "1/V", "CBW gamma", [0.01, -1e3, 1e3], |p| {
-        &mut p.cbw_gamma
-    }),
-    model(
-        "gbw_b",
-        "1/V",
-        "GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3)",
-        [0.0, -1e3, 1e3],
-        |p| &mut p.gbw_b,
-    ),
-    model(
-        "um_per_volt",
-        "um/V",
-        "open-loop scaling",
-        [0.16, -1e3, 1e3],
-        |p| &mut p.um_per_volt,
-    ),
-    model(
-        "offset_um",
-        "um",
-        "open-loop offset",
-        [0.0, -1e4, 1e4],
-        |p| &mut p.offset_um,
-    ),
-    model(
-        "hgo_eps",
-        "s",
-        "HGO epsilon (000 eq. 6)",
-        [2e-4, 1e-7, 1.0],
-        |p| &mut p.hgo_eps_s,
-    ),
-    model(
-        "lambda1",
-        "1/s",
-        "robust law gain (000 eq. 7)",
-        [2_000.0, 0.0, 1e7],
-        |p| &mut p.lambda1,
-    ),
-    model(
-        "lambda2",
-        "1/s",
-        "robust law gain (000 eq. 7)",
-        [2_000.0, 0.0, 1e7],
-        |p| &mut p.lambda2,
-    ),
-    model(
-        "pid_kp",
-        "V/um",
-        "PID proportional gain",
-        [0.5, 0.0, 1e4],
-        |p| &mut p.pid_kp,
-    ),
-    model(
-        "pid_ki",
-        "V/(um s)",
-        "PID integral gain",
-        [2_000.0, 0.0, 1e8],
-        |p| &mut p.pid_ki,
-    ),
+use Access::{Limit, Model, ReadOnly};
+
+/// Every setting, in the order `help` lists them: name, unit, meaning, access,
+/// `[default, min, max]`, slot. Defaults: the QEMU board's simulated stage (CBW set 1 of the
+/// 000 backup slide) and gains tuned on it; ranges: what a piezo stage behind a 150 V
+/// amplifier can use, wide enough for any fitted model.
+#[rustfmt::skip]
+pub const SETTINGS: [Setting; 20] = [
+    row("u_min", "V", "lowest output voltage", Limit, [0.0, 0.0, 150.0], None),
+    row("u_max", "V", "highest output voltage (at most 150)", Limit, [150.0, 0.0, 150.0], None),
+    row("slew", "V/s", "output slew-rate limit", Limit, [20_000.0, 1e-3, 1e9], None),
+    row("um_per_code", "um", "position per ADC code", ReadOnly, BOARD, None),
+    row("volts_per_code", "V", "output voltage per DAC code", ReadOnly, BOARD, None),
+    row("sample_hz", "Hz", "control rate", ReadOnly, BOARD, None),
+    row("cbw_d", "um/V", "CBW piezo gain d (000 eq. 1)", Model, [0.16, 1e-6, 1e3], Some(|p| &mut p.cbw_d)),
+    row("cbw_alpha", "um/V", "CBW alpha (000 eq. 2)", Model, [0.07, -1e3, 1e3], Some(|p| &mut p.cbw_alpha)),
+    row("cbw_beta", "1/V", "CBW beta", Model, [0.02, -1e3, 1e3], Some(|p| &mut p.cbw_beta)),
+    row("cbw_gamma", "1/V", "CBW gamma", Model, [0.01, -1e3, 1e3], Some(|p| &mut p.cbw_gamma)),
+    row("gbw_b", "1/V", "GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3)", Model, [0.0, -1e3, 1e3], Some(|p| &mut p.gbw_b)),
+    row("um_per_volt", "um/V", "open-loop scaling", Model, [0.16, -1e3, 1e3], Some(|p| &mut p.um_per_volt)),
+    row("offset_um", "um", "open-loop offset", Model, [0.0, -1e4, 1e4], Some(|p| &mut p.offset_um)),
+    row("hgo_eps", "s", "HGO epsilon (000 eq. 6)", Model, [2e-4, 1e-7, 1.0], Some(|p| &mut p.hgo_eps_s)),
+    row("lambda1", "1/s", "robust law gain (000 eq. 7)", Model, [2_000.0, 0.0, 1e7], Some(|p| &mut p.lambda1)),
+    row("lambda2", "1/s", "robust law gain (000 eq. 7)", Model, [2_000.0, 0.0, 1e7], Some(|p| &mut p.lambda2)),
+    row("pid_kp", "V/um", "PID proportional gain", Model, [0.5, 0.0, 1e4], Some(|p| &mut p.pid_kp)),
+    row("pid_ki", "V/(um s)", "PID integral gain", Model, [2_000.0, 0.0, 1e8], Some(|p| &mut p.pid_ki)),
+    // The notch's own check ([`Params::notch`]) bounds it by the sample rate.
+    row("notch_hz", "Hz", "notch on the measured position (0 = off, else 10 Hz to 0.45 of the sample rate)", Model, [0.0, 0.0, 1e6], Some(|p| &mut p.notch_hz)),
+    row("notch_q", "1", "notch quality factor (0.5 to 50)", Model, [2.0, 0.5, 50.0], Some(|p| &mut p.notch_q)),
 ];
 
 /// The built-in value of the setting `name` (NaN for an unknown or read-only one).
@@ -220,7 +127,7 @@ const fn names<const N: usize>(only: Option<Access>) -> [&'static str; N] {
 }
 
 /// Names of `get`/`set` (and `help`'s list).
-pub const PARAMS: [&str; 18] = names(None);
+pub const PARAMS: [&str; 20] = names(None);
 /// The settings only `get` reads.
 pub const READ_ONLY: [&str; 3] = names(Some(Access::ReadOnly));
 
@@ -243,6 +150,8 @@ impl Default for Params {
             lambda2: zero,
             pid_kp: zero,
             pid_ki: zero,
+            notch_hz: zero,
+            notch_q: zero,
         };
         for s in SETTINGS.iter() {
             if let Some(f) = s.field {

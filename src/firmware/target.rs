@@ -37,9 +37,13 @@ pub fn c(x: f64) -> R {
     R::from_f64(x)
 }
 
-/// Recorder size: 4 channels x 1024 frames of R (16 KiB).
+/// Recorder channels; frames per capture by default (`rec len`: up to the board's storage:
+/// the H743's AXI SRAM, most of the QEMU board's RAM; [`Ctl::new`](super::Ctl::new) on the
+/// host: 4 x this default).
 pub const REC_CH: usize = 4;
 pub const REC_N: usize = 1024;
+/// The recorder's storage: frames of [`REC_CH`] values a board places in its RAM.
+pub type RecStorage = &'static mut [[R; REC_CH]];
 
 /// Sample rate of the control loop (Hz). Q16.16 holds values below 32768 only, so the
 /// fixed-point build runs at 16 384 Hz (sample period exactly 4 units of 2^-16 s).
@@ -51,5 +55,5 @@ pub const SAMPLE_HZ: u32 = 16_384;
 /// Safe state of every axis (V): where the output goes at start-up and on a fault.
 pub const SAFE_VOLTS: f64 = 0.0;
 
-/// Capacity of a command's reply line (`help` lists every parameter).
-pub const REPLY_LEN: usize = 256;
+/// Capacity of a command's reply line (`help` lists every parameter: 260 bytes with the notch).
+pub const REPLY_LEN: usize = 320;

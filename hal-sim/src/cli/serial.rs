@@ -25,6 +25,7 @@ use piezo_core::command::Command;
 use crate::serial::link::{connect_tcp, open_serial};
 use crate::serial::{Client, Link, SerialError};
 
+pub mod bode;
 pub mod load_fit;
 pub mod params;
 pub mod record;
@@ -146,6 +147,9 @@ pub enum Action {
     Record(RecordArgs),
     /// Instructions per control step for every mode (QEMU board).
     Bench,
+    /// Frequency response (open or closed loop) from the firmware's own excitation and
+    /// record: CSV, SVG Bode plot, the resonance and a suggested notch_hz / notch_q.
+    Bode(bode::BodeArgs),
 }
 
 /// Opens the link of `conn` and syncs (unless --no-sync).
@@ -258,6 +262,7 @@ pub fn execute(
         Action::Status => status::status(c, out)?,
         Action::Stats { reset, clock } => status::stats(c, reset, clock, out)?,
         Action::Record(a) => record::run(c, &a, out)?,
+        Action::Bode(a) => bode::run(c, &a, out)?,
     }
     Ok(())
 }

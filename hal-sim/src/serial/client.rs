@@ -151,7 +151,7 @@ impl Client {
         }
     }
 
-    fn send_line(&mut self, line: &str) -> Result<(), SerialError> {
+    pub(crate) fn send_line(&mut self, line: &str) -> Result<(), SerialError> {
         let mut bytes = Vec::with_capacity(line.len() + 1);
         bytes.extend_from_slice(line.as_bytes());
         bytes.push(b'\n');
@@ -162,21 +162,56 @@ impl Client {
 
     /// Next complete line (lossy UTF-8, `\r` removed); waits at most [`Client::timeout`]
     /// for it.
-    fn read_line(&mut self, command: &str) -> Result<String, SerialError> {
+    pub(crate) fn read_line(&mut self, command: &str) -> Result<String, SerialError> {
+        let bytes = self.read_until(command, b'\n', MAX_REPLY, "a newline (wrong baud rate?)")?;
+        let text = String::from_utf8_lossy(&bytes);
+        Ok(text.trim_end_matches('\r').to_string())
+    }
+
+    /// The next COBS packet of a binary transfer (`rec bin`): the bytes before its zero
+    /// delimiter; waits at most [`Client::timeout`]. Longer than any packet: `BadReply`.
+    pub fn read_packet(&mut self, command: &str) -> Result<Vec<u8>, SerialError> {
+        let most = piezo_core::bulk::MAX_FRAMED;
+        self.read_until(command, 0, most, "a packet delimiter")
+    }
+
+    /// Drops everything received until nothing has arrived for `quiet` (the rest of a
+    /// damaged transfer), at most [`Client::timeout`] in all.
+    pub fn discard_until_quiet(&mut self, quiet: Duration) {
+        self.pending.clear();
+        let deadline = Instant::now() + self.timeout;
+        let mut buf = [0u8; 1024];
+        while Instant::now() < deadline {
+            match self.link.recv(&mut buf, quiet) {
+                Ok(n) if n > 0 => continue,
+                _ => return,
+            }
+        }
+    }
+
+    /// The bytes before the next `end` byte (dropped with it), at most `most` of them;
+    /// waits at most [`Client::timeout`].
+    fn read_until(
+        &mut self,
+        command: &str,
+        end: u8,
+        most: usize,
+        what: &str,
+    ) -> Result<Vec<u8>, SerialError> {
         let deadline = Instant::now() + self.timeout;
         loop {
-            if let Some(pos) = self.pending.iter().position(|&b| b == b'\n') {
-                let line: Vec<u8> = self.pending.drain(..=pos).collect();
-                let text = String::from_utf8_lossy(&line[..pos]);
-                return Ok(text.trim_end_matches('\r').to_string());
+            if let Some(pos) = self.pending.iter().position(|&b| b == end) {
+                let mut line: Vec<u8> = self.pending.drain(..=pos).collect();
+                line.truncate(pos);
+                return Ok(line);
             }
-            if self.pending.len() > MAX_REPLY {
+            if self.pending.len() > most {
                 let head = String::from_utf8_lossy(&self.pending[..80]).into_owned();
                 self.pending.clear();
                 return Err(SerialError::BadReply {
                     command: command.into(),
                     line: format!("{}...", head.escape_debug()),
-                    why: format!("over {MAX_REPLY} bytes without a newline (wrong baud rate?)"),
+                    why: format!("over {most} bytes without {what}"),
                 });
             }
             let left = deadline.saturating_duration_since(Instant::now());

@@ -112,6 +112,9 @@ pub fn format_command(cmd: &Command<'_>) -> String {
             RecCmd::Read { start, count } => format!("rec read {start} {count}"),
             RecCmd::Divider(None) => "rec div".into(),
             RecCmd::Divider(Some(n)) => format!("rec div {n}"),
+            RecCmd::Length(None) => "rec len".into(),
+            RecCmd::Length(Some(n)) => format!("rec len {n}"),
+            RecCmd::Bin { start, count } => format!("rec bin {start} {count}"),
         },
         Command::Fault => "fault".into(),
         Command::FaultClear => "fault clear".into(),
@@ -309,7 +312,12 @@ mod tests {
                 14 => Command::Rec(RecCmd::Trigger(TriggerCmd::Rising { channel: i, level: a, pre: k })),
                 15 => Command::Rec(RecCmd::Trigger(TriggerCmd::Falling { channel: i, level: a, pre: k })),
                 16 => Command::Rec(RecCmd::Trigger(TriggerCmd::Level { channel: i, level: a, pre: k })),
-                17 => Command::Rec(RecCmd::Read { start: i, count: k }),
+                17 => Command::Rec([
+                    RecCmd::Read { start: i, count: k },
+                    RecCmd::Bin { start: i, count: k },
+                    RecCmd::Length(Some(k)),
+                    RecCmd::Length(None),
+                ][i % 4]),
                 18 => Command::Rec([RecCmd::Arm, RecCmd::Stop, RecCmd::Status][i % 3]),
                 19 => Command::WaveSteps {
                     low_um: a,

@@ -73,7 +73,8 @@ fn known_loop(n: u32) {
 /// A loop with `ff` and `law` (`open-loop` means the feedforward alone) on a 5 um,
 /// 100 Hz sine around 10 um.
 fn configured(law: &str, ff: &str) -> Option<Ctl> {
-    let mut ctl = Ctl::new(c(SAMPLE_HZ as f64));
+    // The bench steps the loop only: no recorder storage.
+    let mut ctl = Ctl::with_recorder(c(SAMPLE_HZ as f64), &mut []);
     ctl.lp.set_ff(ff).ok()?;
     let law = if law == "open-loop" {
         "feedforward"

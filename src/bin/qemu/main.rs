@@ -5,7 +5,8 @@
 //!
 //! * SysTick (25 MHz in QEMU's mps2 model) fires at the sample rate and runs the control
 //!   period at the highest priority. The stage is [`stage::SimStage`]: the CBW model of the
-//!   core plus a first-order lag. It sits behind the firmware's real converter drivers: the
+//!   core plus a first-order lag (and a mechanical resonance after the harness line
+//!   `resonance <hz> <zeta>`, none by default; `piezo serial bode`'s test finds it). It sits behind the firmware's real converter drivers: the
 //!   control task runs `Ad4000::start_conversion` + `Ad4000::read` and `Ad5791::set_code`
 //!   (the drivers of `piezo_core::drivers`, the ones hal-sim runs) over the no_std mock
 //!   chips of [`chips`] (an AD4020 whose CNV edge samples the stage, an AD5791 whose LDAC
@@ -61,13 +62,42 @@ use board::*;
 
 #[cfg(target_os = "none")]
 mod board {
-    use super::{bench, chips, io, uart};
+    use super::{bench, chips, io, stage, uart};
     use core::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, Ordering::Relaxed};
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
     use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
-    use piezo_core::firmware::{RamNor, SettingsFlash, MAX_RECORD};
+    use piezo_core::firmware::{RamNor, RecStorage, SettingsFlash, MAX_RECORD, R, REC_CH};
     use {cortex_m_rt as _, defmt_semihosting as _};
+
+    /// Recorder frames: 3.5 MiB of the 4 MiB RAM (the rest holds the statics, about 30 KiB,
+    /// and the stack, whose bound is about 32 KiB): 229 376 frames, 2.3 s at 100 kHz.
+    pub const REC_FRAMES: usize = 7 * 32 * 1024;
+
+    /// The recorder's storage in RAM: [`REC_FRAMES`] frames of [`REC_CH`] values (3.5 MiB), in the
+    /// NOLOAD section `.uninit.recorder` (nothing copies or zeroes it at reset); zeroed here once.
+    /// `None` on a second call.
+    #[allow(unsafe_code)]
+    pub fn recorder_storage() -> Option<RecStorage> {
+        use core::mem::MaybeUninit;
+        use core::sync::atomic::{AtomicBool, Ordering};
+        use piezo_core::Real;
+        #[unsafe(link_section = ".uninit.recorder")]
+        static mut STORAGE: MaybeUninit<[[R; REC_CH]; REC_FRAMES]> = MaybeUninit::uninit();
+        static TAKEN: AtomicBool = AtomicBool::new(false);
+        if TAKEN.swap(true, Ordering::Relaxed) {
+            return None;
+        }
+        // SAFETY: `TAKEN` lets this run once, so the slice is the only reference to
+        // `STORAGE` ever made; every frame is written before the slice is formed.
+        unsafe {
+            let p = core::ptr::addr_of_mut!(STORAGE).cast::<[R; REC_CH]>();
+            for i in 0..REC_FRAMES {
+                p.add(i).write([R::ZERO; REC_CH]);
+            }
+            Some(core::slice::from_raw_parts_mut(p, REC_FRAMES))
+        }
+    }
 
     /// The control state over this board's converters (the SPI pair, on mock chips).
     pub type Ctl = firmware::Ctl<SpiPair>;
@@ -208,6 +238,32 @@ mod board {
         pub wait: Option<u32>,
     }
 
+    /// The harness line `resonance <hz> <zeta>`: the simulated stages get a mechanical
+    /// resonance (`resonance 0 0`: none again; see [`stage::RESONANCE_HZ`]). True when the
+    /// line is one (out-of-range values leave no resonance).
+    fn set_resonance(line: &[u8]) -> bool {
+        let Some(rest) = line.strip_prefix(b"resonance ") else {
+            return false;
+        };
+        let Ok(rest) = core::str::from_utf8(rest) else {
+            return false;
+        };
+        let mut words = rest.split(' ');
+        let (Some(hz), Some(zeta), None) = (words.next(), words.next(), words.next()) else {
+            return false;
+        };
+        let (Ok(hz), Ok(zeta)) = (
+            piezo_core::command::parse_f32(hz),
+            piezo_core::command::parse_f32(zeta),
+        ) else {
+            return false;
+        };
+        stage::RESONANCE_HZ.store(hz.to_bits(), Relaxed);
+        stage::RESONANCE_ZETA.store(zeta.to_bits(), Relaxed);
+        stage::RESONANCE_GEN.fetch_add(1, Relaxed);
+        true
+    }
+
     /// The periods of a `wait <n>` line (decimal, 1 ..= [`PERIODS_MAX`]).
     fn wait_periods(line: &[u8]) -> Option<u32> {
         let digits = line.strip_prefix(WAIT_PREFIX)?;
@@ -224,6 +280,9 @@ mod board {
     impl Port for Uart {
         fn send(&mut self, line: &str) {
             uart::line(line);
+        }
+        fn send_bytes(&mut self, bytes: &[u8]) {
+            uart::write_bytes(bytes);
         }
         fn bench(&mut self) -> Result<usize, Error> {
             bench::print(&self.table, false);
@@ -243,7 +302,7 @@ mod board {
                 FLOOD_STOP => self.flood = Some(false),
                 _ => match wait_periods(line) {
                     Some(n) => self.wait = Some(n),
-                    None => return false,
+                    None => return set_resonance(line),
                 },
             }
             true
@@ -352,8 +411,8 @@ mod board {
 mod app {
     use super::io::SimIo;
     use super::{
-        bench, chips, settings_flash, uart, Ctl, SysTickClock, Uart, ANSWERED, EXIT,
-        INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ, WAIT_UNTIL,
+        bench, chips, recorder_storage, settings_flash, uart, Ctl, SysTickClock, Uart, ANSWERED,
+        EXIT, INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ, WAIT_UNTIL,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
@@ -383,7 +442,7 @@ mod app {
         // voltage at the DAC's scale) before anything that can fail; the amplifier stays
         // off until the loop runs without a fault.
         chips::clock::start();
-        let ctl = Ctl::new(c(SAMPLE_HZ as f64));
+        let ctl = Ctl::with_recorder(c(SAMPLE_HZ as f64), recorder_storage().unwrap_or(&mut []));
         let safe = ctl.lp.p.codes()[0] << <SpiPair as Converters>::DAC_SHIFT;
         SAFE_CODE.store(safe, Relaxed);
         uart::init();

@@ -8,6 +8,7 @@ use anyhow::{anyhow, bail, Result};
 use piezo_core::command::{self, Command, RecCmd, TriggerCmd};
 use piezo_core::recorder::Signal;
 
+use crate::serial::bulk::{read_bin, BulkStats};
 use crate::serial::lines::checked_line;
 use crate::serial::replies::parse_frame;
 use crate::serial::{Client, SerialError};
@@ -56,6 +57,13 @@ pub struct RecordArgs {
     /// columns, in the order the capture was selected).
     #[arg(long)]
     pub no_arm: bool,
+    /// Frames per capture (`rec len`: up to the recorder's storage, 32 768 on the H743,
+    /// 229 376 on QEMU); without it the firmware's current length (1024 at power-up).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Read with the text `rec read` lines instead of the binary `rec bin` packets.
+    #[arg(long)]
+    pub text: bool,
     /// CSV file: `i,t_s,<signal>...`, `#` lines say what and the units.
     #[arg(long)]
     pub out: PathBuf,
@@ -111,6 +119,11 @@ pub fn parse_trigger(spec: &str, channels: &[String], pre: usize) -> Result<Trig
 
 /// Selects, triggers, arms, waits for the capture and reads it.
 pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
+    record_with_stats(c, a).map(|(r, _)| r)
+}
+
+/// [`record`], with what the binary transfer took (`None`: read as text).
+pub fn record_with_stats(c: &mut Client, a: &RecordArgs) -> Result<(Recording, Option<BulkStats>)> {
     if !(a.wait_s.is_finite() && a.wait_s > 0.0) {
         bail!("--wait-s must be positive, got {}", a.wait_s);
     }
@@ -150,6 +163,9 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
         let trig = parse_trigger(&a.trigger, &channels, a.pre)?;
         c.send(&Command::Rec(RecCmd::Trigger(trig)))?;
         c.send(&Command::Rec(RecCmd::Divider(Some(a.every as usize))))?;
+        if let Some(n) = a.frames {
+            c.send(&Command::Rec(RecCmd::Length(Some(n))))?;
+        }
         c.send(&Command::Rec(RecCmd::Arm))?;
         (channels, a.trigger.clone(), a.pre)
     };
@@ -157,6 +173,17 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
     let div = c.rec_divider()?;
     let n = wait_for_capture(c, a, sample_hz)?;
     let sample_hz = sample_hz / div as f64;
+    if !a.text && !a.no_arm {
+        let (frames, st) = read_bin(c, 0, n, channels.len())?;
+        let rec = Recording {
+            channels,
+            sample_hz,
+            pre,
+            trigger,
+            frames,
+        };
+        return Ok((rec, Some(st)));
+    }
     let mut frames = Vec::with_capacity(n);
     // Values per frame: the selected channels, or what the first frame has (--no-arm).
     let mut width = (!a.no_arm).then_some(channels.len());
@@ -197,13 +224,16 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
             channels.push(format!("ch{}", channels.len()));
         }
     }
-    Ok(Recording {
-        channels,
-        sample_hz,
-        pre,
-        trigger,
-        frames,
-    })
+    Ok((
+        Recording {
+            channels,
+            sample_hz,
+            pre,
+            trigger,
+            frames,
+        },
+        None,
+    ))
 }
 
 /// Waits until the recorder is done; returns its frame count. The wait is bounded by the
@@ -212,7 +242,7 @@ pub fn record(c: &mut Client, a: &RecordArgs) -> Result<Recording> {
 /// new frame once triggered. Under an emulator that runs slower than real time the
 /// firmware's time runs slower too, so a busy host cannot fail a healthy capture;
 /// `--wall-cap-s` only ends a wait on a firmware whose loop stopped or a dead link.
-fn wait_for_capture(c: &mut Client, a: &RecordArgs, sample_hz: f64) -> Result<usize> {
+pub(crate) fn wait_for_capture(c: &mut Client, a: &RecordArgs, sample_hz: f64) -> Result<usize> {
     let budget = a.wait_s * sample_hz;
     let wall_deadline = Instant::now() + Duration::from_secs_f64(a.wall_cap_s);
     let mut last = c.stats()?.samples;
@@ -259,7 +289,21 @@ fn wait_for_capture(c: &mut Client, a: &RecordArgs, sample_hz: f64) -> Result<us
 
 /// `record`: capture, write the CSV (and SVG), print the summary.
 pub fn run(c: &mut Client, a: &RecordArgs, out: &mut impl Write) -> Result<()> {
-    let rec = record(c, a)?;
+    let (rec, st) = record_with_stats(c, a)?;
+    if let Some(st) = st {
+        writeln!(
+            out,
+            "rec bin: {} frames in {:.3} s ({:.0} frames/s, {:.1} kB/s), {} packets, {} damaged \
+             and asked for again, {} requests",
+            st.frames,
+            st.seconds,
+            st.frames_per_s(),
+            st.bytes as f64 / st.seconds.max(1e-9) / 1e3,
+            st.packets,
+            st.damaged,
+            st.requests
+        )?;
+    }
     rec.write_csv(&a.out)?;
     if let Some(svg) = &a.svg {
         rec.write_svg(svg)?;
