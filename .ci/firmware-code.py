@@ -15,18 +15,8 @@ import re
 import subprocess
 import sys
 
-
-def thunk_target(name):
-    """A linker range-extension thunk (`__Thumbv7ABSLongThunk_<f>`: a call between the H743's
-    ITCM at 0 and its flash at 0x0800_0000) stands for a call of `f`."""
-    m = re.match(r"^__\w*LongThunk_(.+)$", name)
-    return m.group(1) if m else name
-
-
-def tool(name):
-    sysroot = subprocess.check_output(["rustc", "--print", "sysroot"], text=True).strip()
-    host = next(l.split(": ")[1] for l in subprocess.check_output(["rustc", "-vV"], text=True).splitlines() if l.startswith("host"))
-    return os.path.join(sysroot, "lib", "rustlib", host, "bin", name)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from elf_tools import thunk_target, tool  # noqa: E402
 
 
 LEGACY = {"$LT$": "<", "$GT$": ">", "$C$": ",", "$u20$": " ", "$RF$": "&", "$BP$": "*",

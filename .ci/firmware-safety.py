@@ -33,6 +33,9 @@ import re
 import struct
 import subprocess
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from elf_tools import thunk_target, tool  # noqa: E402
 import tomllib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -52,19 +55,6 @@ INDIRECT = re.compile(r"\t(blx\s+r\d+|bx\s+r\d+|mov\s+pc,|ldr(\.w)?\s+pc,)")
 EXC_FRAME = 104
 # Priorities of the RTIC tasks bound to interrupts (src/bin/h743/main.rs), for the system bound.
 PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1}
-
-
-def thunk_target(name):
-    """A linker range-extension thunk (`__Thumbv7ABSLongThunk_<f>`: a call between the H743's
-    ITCM at 0 and its flash at 0x0800_0000) stands for a call of `f`."""
-    m = re.match(r"^__\w*LongThunk_(.+)$", name)
-    return m.group(1) if m else name
-
-
-def tool(name):
-    sysroot = subprocess.check_output(["rustc", "--print", "sysroot"], text=True).strip()
-    host = next(l.split(": ")[1] for l in subprocess.check_output(["rustc", "-vV"], text=True).splitlines() if l.startswith("host"))
-    return os.path.join(sysroot, "lib", "rustlib", host, "bin", name)
 
 
 def build(features):

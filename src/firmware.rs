@@ -40,7 +40,9 @@ pub use converters::{
     DAC_CONFIG, SPI_CENTER_UM, SPI_SPAN_UM,
 };
 pub use ctl::{Ctl, PointTable};
-pub use execute::{push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY};
+pub use execute::{
+    push_dac_readback, push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY,
+};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;
@@ -51,3 +53,37 @@ pub use target::{
     c, LoopPipeline, RecStorage, AXES, FIXED, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ,
 };
 pub use timing::{CycleStats, Timing};
+
+/// Defines a board's `recorder_storage() -> Option<RecStorage>`: `$frames` frames of
+/// [`REC_CH`] values in the NOLOAD linker section `$section` (nothing copies or zeroes it
+/// at reset), zeroed on the one call that gets it (`None` on a second call). A macro because
+/// the section and size are the board's (its linker script) and the static must live in the
+/// board's binary.
+#[macro_export]
+macro_rules! recorder_storage {
+    ($section:literal, $frames:expr) => {
+        /// The recorder's storage (see [`piezo_core::recorder_storage`]).
+        #[allow(unsafe_code)]
+        pub fn recorder_storage() -> Option<$crate::firmware::RecStorage> {
+            use core::mem::MaybeUninit;
+            use core::sync::atomic::{AtomicBool, Ordering};
+            use $crate::firmware::{R, REC_CH};
+            use $crate::Real;
+            #[unsafe(link_section = $section)]
+            static mut STORAGE: MaybeUninit<[[R; REC_CH]; $frames]> = MaybeUninit::uninit();
+            static TAKEN: AtomicBool = AtomicBool::new(false);
+            if TAKEN.swap(true, Ordering::Relaxed) {
+                return None;
+            }
+            // SAFETY: `TAKEN` lets this run once, so the slice is the only reference to
+            // `STORAGE` ever made; every frame is written before the slice is formed.
+            unsafe {
+                let p = core::ptr::addr_of_mut!(STORAGE).cast::<[R; REC_CH]>();
+                for i in 0..$frames {
+                    p.add(i).write([R::ZERO; REC_CH]);
+                }
+                Some(core::slice::from_raw_parts_mut(p, $frames))
+            }
+        }
+    };
+}

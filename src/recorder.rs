@@ -519,49 +519,32 @@ mod tests {
     fn falling_and_level_triggers() {
         let wave = |k: usize| 5.0 - (k as f32);
         let mut r = ArrayRecorder::<f32, 1, 4>::new();
-        r.set_trigger(
-            Trigger::Falling {
-                channel: 0,
-                level: 0.0,
-            },
-            1,
-        )
-        .unwrap();
-        r.arm();
-        for k in 0..20 {
-            r.push(&signals(wave(k)));
-        }
+        // Arms with `trigger` (`pre` frames before it) and records the ramp.
+        let run = |r: &mut ArrayRecorder<f32, 1, 4>, trigger, pre| {
+            r.set_trigger(trigger, pre).unwrap();
+            r.arm();
+            for k in 0..20 {
+                r.push(&signals(wave(k)));
+            }
+        };
+        let level = 0.0;
+        run(&mut r, Trigger::Falling { channel: 0, level }, 1);
         assert_eq!(r.frame(1).unwrap()[0], 0.0);
         assert_eq!(r.frame(0).unwrap()[0], 1.0);
 
         // A rising trigger never fires on a falling ramp.
-        r.set_trigger(
-            Trigger::Rising {
-                channel: 0,
-                level: 0.0,
-            },
-            1,
-        )
-        .unwrap();
-        r.arm();
-        for k in 0..20 {
-            r.push(&signals(wave(k)));
-        }
+        run(&mut r, Trigger::Rising { channel: 0, level }, 1);
         assert_eq!(r.state(), State::Armed);
         assert!(r.frame(0).is_none());
         r.stop();
-        r.set_trigger(
+        run(
+            &mut r,
             Trigger::Level {
                 channel: 0,
                 level: 0.5,
             },
             0,
-        )
-        .unwrap();
-        r.arm();
-        for k in 0..20 {
-            r.push(&signals(wave(k)));
-        }
+        );
         assert_eq!(r.frame(0).unwrap()[0], 0.0);
     }
 

@@ -24,18 +24,18 @@ fn json_and_predict_agree() {
     let (train, valid) = (plant.record(5, 0), plant.record(5, 1));
     write(&dir.join("a.csv"), &train);
     write(&dir.join("b.csv"), &valid);
-    let out = Command::new(env!("CARGO_BIN_EXE_piezo"))
-        .args(["diagnose", "--json", "--train"])
-        .arg(dir.join("a.csv"))
-        .arg("--valid")
-        .arg(dir.join("b.csv"))
-        .arg("--predict")
-        .arg(dir.join("p.csv"))
-        .arg("--out")
-        .arg(dir.join("plots"))
-        .output()
-        .unwrap();
-    cli_support::ok(&out);
+    let out = cli_support::piezo(&[
+        &"diagnose",
+        &"--json",
+        &"--train",
+        &dir.join("a.csv"),
+        &"--valid",
+        &dir.join("b.csv"),
+        &"--predict",
+        &dir.join("p.csv"),
+        &"--out",
+        &dir.join("plots"),
+    ]);
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["cause"], "delay");
     assert_eq!(j["causes"][0], "delay");
@@ -71,21 +71,20 @@ fn several_records_json_and_predict_agree() {
     for (k, r) in recs.iter().enumerate() {
         write(&dir.join(format!("r{k}.csv")), r);
     }
-    let out = Command::new(env!("CARGO_BIN_EXE_piezo"))
-        .args(["diagnose", "--json"])
-        .arg("--train")
-        .arg(dir.join("r0.csv"))
-        .arg("--train")
-        .arg(dir.join("r2.csv"))
-        .arg("--valid")
-        .arg(dir.join("r1.csv"))
-        .arg("--valid")
-        .arg(dir.join("r3.csv"))
-        .arg("--predict")
-        .arg(dir.join("p.csv"))
-        .output()
-        .unwrap();
-    cli_support::ok(&out);
+    let out = cli_support::piezo(&[
+        &"diagnose",
+        &"--json",
+        &"--train",
+        &dir.join("r0.csv"),
+        &"--train",
+        &dir.join("r2.csv"),
+        &"--valid",
+        &dir.join("r1.csv"),
+        &"--valid",
+        &dir.join("r3.csv"),
+        &"--predict",
+        &dir.join("p.csv"),
+    ]);
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(j["cause"], "delay", "{j:#}");
     assert_eq!(j["records"]["train"], 2);

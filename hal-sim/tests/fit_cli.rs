@@ -4,7 +4,6 @@
 mod cli_support;
 use hal_sim::record::Record;
 use piezo_core::hysteresis::{Cbw, Hysteresis};
-use std::process::Command;
 
 /// Four periods of a 1 Hz sine through CBW; the valid record is the last period only (its
 /// start is not at rest).
@@ -33,25 +32,23 @@ fn periodic_validation_reports_steady_state_and_from_rest() {
     let dir = std::env::temp_dir().join(format!("fit_cli_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     records(&dir);
-    let out = Command::new(env!("CARGO_BIN_EXE_piezo"))
-        .args([
-            "fit",
-            "--model",
-            "cbw",
-            "--json",
-            "--quiet",
-            "--generations",
-            "40",
-        ])
-        .args(["--valid-periodic", "2", "--train"])
-        .arg(dir.join("train.csv"))
-        .arg("--valid")
-        .arg(dir.join("valid.csv"))
-        .arg("--predict")
-        .arg(dir.join("p.csv"))
-        .output()
-        .unwrap();
-    cli_support::ok(&out);
+    let out = cli_support::piezo(&[
+        &"fit",
+        &"--model",
+        &"cbw",
+        &"--json",
+        &"--quiet",
+        &"--generations",
+        &"40",
+        &"--valid-periodic",
+        &"2",
+        &"--train",
+        &dir.join("train.csv"),
+        &"--valid",
+        &dir.join("valid.csv"),
+        &"--predict",
+        &dir.join("p.csv"),
+    ]);
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let steady = j["valid_metrics"][0]["metrics"]["rmse"].as_f64().unwrap();
     let rest = j["valid_from_rest_metrics"][0]["metrics"]["rmse"]

@@ -223,22 +223,21 @@ fn cli_prints_and_saves_the_matrices() {
     std::fs::create_dir_all(&dir).unwrap();
     training().write(dir.join("train.csv")).unwrap();
     validation().write(dir.join("valid.csv")).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_piezo"))
-        .args(["fit", "--model", "cbw", "--quiet", "--generations", "40"])
-        .arg("--train")
-        .arg(dir.join("train.csv"))
-        .arg("--valid")
-        .arg(dir.join("valid.csv"))
-        .arg("--out")
-        .arg(&dir)
-        .output()
-        .unwrap();
+    let out = cli_support::piezo(&[
+        &"fit",
+        &"--model",
+        &"cbw",
+        &"--quiet",
+        &"--generations",
+        &"40",
+        &"--train",
+        &dir.join("train.csv"),
+        &"--valid",
+        &dir.join("valid.csv"),
+        &"--out",
+        &dir,
+    ]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text} {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     assert!(
         text.contains("multivariable Bouc-Wen (003 eq. 4-7)"),
         "{text}"
@@ -261,16 +260,15 @@ fn cli_prints_and_saves_the_matrices() {
         csv += &format!("{},{},{}\n", valid.t[k], valid.u[0][k], valid.u[1][k]);
     }
     std::fs::write(dir.join("u.csv"), csv).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_piezo"))
-        .args(["predict", "--model"])
-        .arg(dir.join("fit.json"))
-        .arg("--input")
-        .arg(dir.join("u.csv"))
-        .arg("--out")
-        .arg(dir.join("y.csv"))
-        .output()
-        .unwrap();
-    cli_support::ok(&out);
+    cli_support::piezo(&[
+        &"predict",
+        &"--model",
+        &dir.join("fit.json"),
+        &"--input",
+        &dir.join("u.csv"),
+        &"--out",
+        &dir.join("y.csv"),
+    ]);
     // `t,y1,y2` after `#` comments and the header.
     let text = std::fs::read_to_string(dir.join("y.csv")).unwrap();
     let rows: Vec<Vec<f64>> = text

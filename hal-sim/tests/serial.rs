@@ -312,15 +312,9 @@ fn the_recorder_comes_back_as_csv_with_units() {
             signals: vec!["ref_um".into(), "y_um".into(), "u_volts".into()],
             trigger: "rise:ref_um:10".into(),
             pre: 64,
-            wait_s: 10.0,
-            wall_cap_s: 600.0,
-            no_arm: false,
-            frames: None,
-            text: true,
-            xy: false,
-            every: 1,
             out: csv.clone(),
             svg: Some(svg.clone()),
+            ..ref_capture("unused.csv", 1)
         }),
     )
     .unwrap();

@@ -135,36 +135,16 @@ mod board {
     #[cfg(feature = "spi-converters")]
     pub type Conv = firmware::SpiPair;
     pub type Ctl = firmware::Ctl<Conv>;
-    use piezo_core::firmware::{RecStorage, R, REC_CH};
+    use piezo_core::firmware::REC_CH;
 
     /// Recorder frames: all 512 KiB of the AXI SRAM (build.rs's `.axisram`), 32 768 frames,
     /// 328 ms at 100 kHz.
     pub const REC_FRAMES: usize = 512 * 1024 / (REC_CH * 4);
 
-    /// The recorder's storage in the AXI SRAM: [`REC_FRAMES`] frames of [`REC_CH`] values (512 KiB), in the
-    /// NOLOAD section `.axisram` (nothing copies or zeroes it at reset); zeroed here once.
-    /// `None` on a second call.
-    #[allow(unsafe_code)]
-    pub fn recorder_storage() -> Option<RecStorage> {
-        use core::mem::MaybeUninit;
-        use core::sync::atomic::{AtomicBool, Ordering};
-        use piezo_core::Real;
-        #[unsafe(link_section = ".axisram")]
-        static mut STORAGE: MaybeUninit<[[R; REC_CH]; REC_FRAMES]> = MaybeUninit::uninit();
-        static TAKEN: AtomicBool = AtomicBool::new(false);
-        if TAKEN.swap(true, Ordering::Relaxed) {
-            return None;
-        }
-        // SAFETY: `TAKEN` lets this run once, so the slice is the only reference to
-        // `STORAGE` ever made; every frame is written before the slice is formed.
-        unsafe {
-            let p = core::ptr::addr_of_mut!(STORAGE).cast::<[R; REC_CH]>();
-            for i in 0..REC_FRAMES {
-                p.add(i).write([R::ZERO; REC_CH]);
-            }
-            Some(core::slice::from_raw_parts_mut(p, REC_FRAMES))
-        }
-    }
+    // The recorder's storage in the AXI SRAM: [`REC_FRAMES`] frames of [`REC_CH`] values (512 KiB), in the
+    // NOLOAD section `.axisram` (nothing copies or zeroes it at reset); zeroed here once.
+    // `None` on a second call.
+    piezo_core::recorder_storage!(".axisram", REC_FRAMES);
 
     /// What the control task owns besides the control state.
     pub struct Hw {

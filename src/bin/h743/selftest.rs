@@ -6,7 +6,7 @@
 use crate::safe::{amp, reset_cause, RESET_FLAGS};
 use core::sync::atomic::{AtomicI32, AtomicU8, Ordering::Relaxed};
 use piezo_core::command::Reply;
-use piezo_core::firmware::{Converters, REPLY_LEN};
+use piezo_core::firmware::{push_dac_readback, Converters, REPLY_LEN};
 
 pub const IDLE: u8 = 0;
 pub const REQUESTED: u8 = 1;
@@ -33,15 +33,7 @@ pub fn run<C: Converters>(r: &mut Reply<REPLY_LEN>) {
     r.push_str(" reset ");
     r.push_str(reset_cause(RESET_FLAGS.load(Relaxed)));
     r.push_str(" dac ");
-    if done {
-        let (read, wrote) = (READ.load(Relaxed), WROTE.load(Relaxed));
-        r.push_i32(read);
-        r.push_str("/");
-        r.push_i32(wrote);
-        r.push_str(if read == wrote { " ok" } else { " BAD" });
-    } else {
-        r.push_str("no-period BAD");
-    }
+    push_dac_readback(r, done.then(|| (READ.load(Relaxed), WROTE.load(Relaxed))));
     let adc = ADC.load(Relaxed);
     let s = C::sensor();
     r.push_str(" adc ");

@@ -67,37 +67,17 @@ mod board {
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
     use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
-    use piezo_core::firmware::{RamNor, RecStorage, SettingsFlash, MAX_RECORD, R, REC_CH};
+    use piezo_core::firmware::{RamNor, SettingsFlash, MAX_RECORD};
     use {cortex_m_rt as _, defmt_semihosting as _};
 
     /// Recorder frames: 3.5 MiB of the 4 MiB RAM (the rest holds the statics, about 30 KiB,
     /// and the stack, whose bound is about 32 KiB): 229 376 frames, 2.3 s at 100 kHz.
     pub const REC_FRAMES: usize = 7 * 32 * 1024;
 
-    /// The recorder's storage in RAM: [`REC_FRAMES`] frames of [`REC_CH`] values (3.5 MiB), in the
-    /// NOLOAD section `.uninit.recorder` (nothing copies or zeroes it at reset); zeroed here once.
-    /// `None` on a second call.
-    #[allow(unsafe_code)]
-    pub fn recorder_storage() -> Option<RecStorage> {
-        use core::mem::MaybeUninit;
-        use core::sync::atomic::{AtomicBool, Ordering};
-        use piezo_core::Real;
-        #[unsafe(link_section = ".uninit.recorder")]
-        static mut STORAGE: MaybeUninit<[[R; REC_CH]; REC_FRAMES]> = MaybeUninit::uninit();
-        static TAKEN: AtomicBool = AtomicBool::new(false);
-        if TAKEN.swap(true, Ordering::Relaxed) {
-            return None;
-        }
-        // SAFETY: `TAKEN` lets this run once, so the slice is the only reference to
-        // `STORAGE` ever made; every frame is written before the slice is formed.
-        unsafe {
-            let p = core::ptr::addr_of_mut!(STORAGE).cast::<[R; REC_CH]>();
-            for i in 0..REC_FRAMES {
-                p.add(i).write([R::ZERO; REC_CH]);
-            }
-            Some(core::slice::from_raw_parts_mut(p, REC_FRAMES))
-        }
-    }
+    // The recorder's storage in RAM: [`REC_FRAMES`] frames of [`REC_CH`] values (3.5 MiB), in the
+    // NOLOAD section `.uninit.recorder` (nothing copies or zeroes it at reset); zeroed here once.
+    // `None` on a second call.
+    piezo_core::recorder_storage!(".uninit.recorder", REC_FRAMES);
 
     /// The control state over this board's converters (the SPI pair, on mock chips).
     pub type Ctl = firmware::Ctl<SpiPair>;
@@ -313,6 +293,7 @@ mod board {
         /// period is bounded (idle runs below it, so it comes within one period).
         fn selftest(&mut self, r: &mut Reply<REPLY_LEN>) -> Result<(), Error> {
             use io::selftest::{DONE, IDLE, READ, REQUESTED, STATE, WROTE};
+            use piezo_core::firmware::push_dac_readback;
             STATE.store(REQUESTED, Relaxed);
             let mut done = false;
             for _ in 0..10 * SYSTICK_HZ / SAMPLE_HZ * 40 {
@@ -323,15 +304,7 @@ mod board {
             }
             STATE.store(IDLE, Relaxed);
             r.push_str(" reset n/a dac ");
-            if done {
-                let (read, wrote) = (READ.load(Relaxed), WROTE.load(Relaxed));
-                r.push_i32(read);
-                r.push_str("/");
-                r.push_i32(wrote);
-                r.push_str(if read == wrote { " ok" } else { " BAD" });
-            } else {
-                r.push_str("no-period BAD");
-            }
+            push_dac_readback(r, done.then(|| (READ.load(Relaxed), WROTE.load(Relaxed))));
             let adc = io::selftest::ADC.load(Relaxed);
             let s = <SpiPair as Converters>::sensor();
             let seen = adc >> <SpiPair as Converters>::ADC_SHIFT;
