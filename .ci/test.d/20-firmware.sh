@@ -47,8 +47,10 @@ grep -q 'feature `xy` (two axes) needs the on-chip converters' "$work/xy-spi.log
 echo "firmware (H743, xy + spi-converters): refused at compile time, as intended"
 # Ad4000Config::frame_bytes: only `read` and `decode` call it; with target-cpu=cortex-m7
 # the debug info names no other instruction of them (all merged into their callees).
+# Likewise Ad5791::write_code is one call of write_register (the DAC register); since the
+# AXI-SRAM recorder build, its instructions all merge into write_register.
 python3 .ci/firmware-code.py "$work/on-chip.elf" ADC1_2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}"
 python3 .ci/firmware-code.py "$work/xy.elf" ADC1_2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}"
 python3 .ci/firmware-code.py "$work/spi-converters.elf" TIM2 "piezo_core::pipeline::Pipeline::step|piezo_core::pipeline::Pipeline::step::{{closure}}" \
   "piezo_core::drivers::ad4000::Ad4000::read|piezo_core::drivers::ad4000::decode|piezo_core::drivers::ad4000::Ad4000Config::frame_bytes" \
-  "piezo_core::drivers::ad5791::Ad5791::write_code|piezo_core::drivers::ad5791::Ad5791::set_code"
+  "piezo_core::drivers::ad5791::Ad5791::write_code|piezo_core::drivers::ad5791::Ad5791::set_code|piezo_core::drivers::ad5791::Ad5791::write_register"
