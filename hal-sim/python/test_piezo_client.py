@@ -12,7 +12,9 @@ import piezo_client as pc
 
 def errors_match_the_firmware():
     src = pathlib.Path(__file__).resolve().parents[2] / "src" / "command" / "error.rs"
-    codes = dict((int(c), n) for n, c in re.findall(r"Error::(\w+) => (\d+),", src.read_text()))
+    # The rows of the `errors!` table: `Variant = code => "message",`.
+    rows = re.findall(r"^\s+(\w+) = (\d+) => \"", src.read_text(), re.M)
+    codes = dict((int(c), n) for n, c in rows)
     assert codes == pc.ERRORS, f"client {pc.ERRORS} vs firmware {codes}"
 
 
