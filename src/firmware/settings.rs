@@ -20,6 +20,49 @@ pub enum Access {
     Model,
 }
 
+/// A model setting's slot in [`Params`]: an enum and a `match`, not a function pointer,
+/// so that the command handler makes no indirect call (the firmware safety check bounds its
+/// stack and proves it free of panic paths).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Field {
+    CbwD,
+    CbwAlpha,
+    CbwBeta,
+    CbwGamma,
+    GbwB,
+    UmPerVolt,
+    OffsetUm,
+    HgoEpsS,
+    Lambda1,
+    Lambda2,
+    PidKp,
+    PidKi,
+    NotchHz,
+    NotchQ,
+}
+
+impl Params {
+    /// The slot of `f`.
+    pub fn field(&mut self, f: Field) -> &mut R {
+        match f {
+            Field::CbwD => &mut self.cbw_d,
+            Field::CbwAlpha => &mut self.cbw_alpha,
+            Field::CbwBeta => &mut self.cbw_beta,
+            Field::CbwGamma => &mut self.cbw_gamma,
+            Field::GbwB => &mut self.gbw_b,
+            Field::UmPerVolt => &mut self.um_per_volt,
+            Field::OffsetUm => &mut self.offset_um,
+            Field::HgoEpsS => &mut self.hgo_eps_s,
+            Field::Lambda1 => &mut self.lambda1,
+            Field::Lambda2 => &mut self.lambda2,
+            Field::PidKp => &mut self.pid_kp,
+            Field::PidKi => &mut self.pid_ki,
+            Field::NotchHz => &mut self.notch_hz,
+            Field::NotchQ => &mut self.notch_q,
+        }
+    }
+}
+
 /// One setting: its name, unit and meaning, who changes it, its built-in value and the
 /// range `set` accepts (a value outside it is `err 8` before any other check), and, for a
 /// model setting, where it lives in [`Params`].
@@ -35,7 +78,7 @@ pub struct Setting {
     pub min: f64,
     pub max: f64,
     /// The model setting's slot in [`Params`].
-    pub field: Option<fn(&mut Params) -> &mut R>,
+    pub field: Option<Field>,
 }
 
 impl Setting {
@@ -54,7 +97,7 @@ const fn row(
     about: &'static str,
     access: Access,
     [default, min, max]: [f64; 3],
-    field: Option<fn(&mut Params) -> &mut R>,
+    field: Option<Field>,
 ) -> Setting {
     Setting {
         name,
@@ -82,21 +125,21 @@ pub const SETTINGS: [Setting; 20] = [
     row("um_per_code", "um", "position per ADC code", ReadOnly, BOARD, None),
     row("volts_per_code", "V", "output voltage per DAC code", ReadOnly, BOARD, None),
     row("sample_hz", "Hz", "control rate", ReadOnly, BOARD, None),
-    row("cbw_d", "um/V", "CBW piezo gain d (000 eq. 1)", Model, [0.16, 1e-6, 1e3], Some(|p| &mut p.cbw_d)),
-    row("cbw_alpha", "um/V", "CBW alpha (000 eq. 2)", Model, [0.07, -1e3, 1e3], Some(|p| &mut p.cbw_alpha)),
-    row("cbw_beta", "1/V", "CBW beta", Model, [0.02, -1e3, 1e3], Some(|p| &mut p.cbw_beta)),
-    row("cbw_gamma", "1/V", "CBW gamma", Model, [0.01, -1e3, 1e3], Some(|p| &mut p.cbw_gamma)),
-    row("gbw_b", "1/V", "GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3)", Model, [0.0, -1e3, 1e3], Some(|p| &mut p.gbw_b)),
-    row("um_per_volt", "um/V", "open-loop scaling", Model, [0.16, -1e3, 1e3], Some(|p| &mut p.um_per_volt)),
-    row("offset_um", "um", "open-loop offset", Model, [0.0, -1e4, 1e4], Some(|p| &mut p.offset_um)),
-    row("hgo_eps", "s", "HGO epsilon (000 eq. 6)", Model, [2e-4, 1e-7, 1.0], Some(|p| &mut p.hgo_eps_s)),
-    row("lambda1", "1/s", "robust law gain (000 eq. 7)", Model, [2_000.0, 0.0, 1e7], Some(|p| &mut p.lambda1)),
-    row("lambda2", "1/s", "robust law gain (000 eq. 7)", Model, [2_000.0, 0.0, 1e7], Some(|p| &mut p.lambda2)),
-    row("pid_kp", "V/um", "PID proportional gain", Model, [0.5, 0.0, 1e4], Some(|p| &mut p.pid_kp)),
-    row("pid_ki", "V/(um s)", "PID integral gain", Model, [2_000.0, 0.0, 1e8], Some(|p| &mut p.pid_ki)),
+    row("cbw_d", "um/V", "CBW piezo gain d (000 eq. 1)", Model, [0.16, 1e-6, 1e3], Some(Field::CbwD)),
+    row("cbw_alpha", "um/V", "CBW alpha (000 eq. 2)", Model, [0.07, -1e3, 1e3], Some(Field::CbwAlpha)),
+    row("cbw_beta", "1/V", "CBW beta", Model, [0.02, -1e3, 1e3], Some(Field::CbwBeta)),
+    row("cbw_gamma", "1/V", "CBW gamma", Model, [0.01, -1e3, 1e3], Some(Field::CbwGamma)),
+    row("gbw_b", "1/V", "GBW asymmetry B of fts-gbw and nmpc-gbw (000 eq. 3)", Model, [0.0, -1e3, 1e3], Some(Field::GbwB)),
+    row("um_per_volt", "um/V", "open-loop scaling", Model, [0.16, -1e3, 1e3], Some(Field::UmPerVolt)),
+    row("offset_um", "um", "open-loop offset", Model, [0.0, -1e4, 1e4], Some(Field::OffsetUm)),
+    row("hgo_eps", "s", "HGO epsilon (000 eq. 6)", Model, [2e-4, 1e-7, 1.0], Some(Field::HgoEpsS)),
+    row("lambda1", "1/s", "robust law gain (000 eq. 7)", Model, [2_000.0, 0.0, 1e7], Some(Field::Lambda1)),
+    row("lambda2", "1/s", "robust law gain (000 eq. 7)", Model, [2_000.0, 0.0, 1e7], Some(Field::Lambda2)),
+    row("pid_kp", "V/um", "PID proportional gain", Model, [0.5, 0.0, 1e4], Some(Field::PidKp)),
+    row("pid_ki", "V/(um s)", "PID integral gain", Model, [2_000.0, 0.0, 1e8], Some(Field::PidKi)),
     // The notch's own check ([`Params::notch`]) bounds it by the sample rate.
-    row("notch_hz", "Hz", "notch on the measured position (0 = off, else 10 Hz to 0.45 of the sample rate)", Model, [0.0, 0.0, 1e6], Some(|p| &mut p.notch_hz)),
-    row("notch_q", "1", "notch quality factor (0.5 to 50)", Model, [2.0, 0.5, 50.0], Some(|p| &mut p.notch_q)),
+    row("notch_hz", "Hz", "notch on the measured position (0 = off, else 10 Hz to 0.45 of the sample rate)", Model, [0.0, 0.0, 1e6], Some(Field::NotchHz)),
+    row("notch_q", "1", "notch quality factor (0.5 to 50)", Model, [2.0, 0.5, 50.0], Some(Field::NotchQ)),
 ];
 
 /// The built-in value of the setting `name` (NaN for an unknown or read-only one).
@@ -155,7 +198,7 @@ impl Default for Params {
         };
         for s in SETTINGS.iter() {
             if let Some(f) = s.field {
-                *f(&mut p) = c(s.default);
+                *p.field(f) = c(s.default);
             }
         }
         p
@@ -166,7 +209,7 @@ impl Params {
     /// The slot of a model setting, by its `get`/`set` name ([`super::SETTINGS`]).
     pub(super) fn slot(&mut self, name: &str) -> Option<&mut R> {
         let f = SETTINGS.iter().find(|s| s.name == name)?.field?;
-        Some(f(self))
+        Some(self.field(f))
     }
 }
 
@@ -197,7 +240,7 @@ mod tests {
             };
             assert!(s.accepts(s.default), "{} default outside its range", s.name);
             assert_eq!(*p.slot(s.name).unwrap(), c(s.default), "{}", s.name);
-            *f(&mut p) = c(1e-3 * i as f64 + 0.5);
+            *p.field(f) = c(1e-3 * i as f64 + 0.5);
         }
         for (i, s) in SETTINGS
             .iter()
