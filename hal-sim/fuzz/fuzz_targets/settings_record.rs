@@ -8,8 +8,19 @@ use piezo_core::firmware::{
     c, decode, encode, stored, Ctl, OnChip, Record, MAX_RECORD, SAMPLE_HZ,
 };
 
+std::thread_local! {
+    // One controller for every run: the host `Ctl::new` leaks its recorder storage (the
+    // firmware's is 'static), so a new one per run would grow without bound.
+    static CTL: std::cell::RefCell<Ctl<OnChip>> =
+        std::cell::RefCell::new(Ctl::<OnChip>::new(c(SAMPLE_HZ as f64)));
+}
+
 fn all_or_nothing(rec: &Record) {
-    let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
+    CTL.with(|ctl| check(&mut ctl.borrow_mut(), rec));
+}
+
+fn check(ctl: &mut Ctl<OnChip>, rec: &Record) {
+    ctl.lp.default_settings().unwrap();
     let mut before = [0u8; MAX_RECORD];
     let n = ctl.lp.settings_record(&mut before).unwrap();
     if ctl.lp.apply_settings(rec).is_err() {
