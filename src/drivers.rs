@@ -8,6 +8,7 @@
 
 pub mod ad4000;
 pub mod ad5791;
+pub mod wire;
 
 pub use ad4000::{Ad4000, Ad4000Config, CodeFormat};
 pub use ad5791::{Ad5791, Ad5791Config, DacCoding};

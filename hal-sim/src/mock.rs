@@ -139,22 +139,3 @@ impl BusClock {
         self.hz
     }
 }
-
-/// The MOSI level a transaction leaves behind (SDI idles at the last bit sent). A `Read`
-/// sends words embedded-hal leaves to the bus (the H743 adapter sends zeros), and a
-/// `Transfer` pads a short write the same way: both count as low.
-fn last_mosi_high(ops: &[spi::Operation<'_, u8>], before: bool) -> bool {
-    let mut high = before;
-    for op in ops {
-        high = match op {
-            spi::Operation::Write(w) => w.last().map_or(high, |b| b & 1 != 0),
-            spi::Operation::Transfer(r, w) if r.len() > w.len() => false,
-            spi::Operation::Transfer(_, w) => w.last().map_or(high, |b| b & 1 != 0),
-            spi::Operation::TransferInPlace(b) => b.last().map_or(high, |b| b & 1 != 0),
-            spi::Operation::Read([]) => high,
-            spi::Operation::Read(_) => false,
-            spi::Operation::DelayNs(_) => high,
-        };
-    }
-    high
-}

@@ -11,12 +11,12 @@
 //!   the part ignores it, so the mock refuses it;
 //! * SCK period `t_SCK` >= 9.8 ns (Table 3, VIO above 2.7 V).
 
-use super::{last_mosi_high, BusClock, MockClock, MockPinError, MockSpiError, Violations};
+use super::{BusClock, MockClock, MockPinError, MockSpiError, Violations};
 use crate::numeric::Rng;
 use embedded_hal::digital::{ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 use piezo_core::drivers::ad4000::{self, Ad4000Config, CodeFormat};
-use piezo_core::drivers::SpiClock;
+use piezo_core::drivers::{wire, SpiClock};
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -204,30 +204,13 @@ impl AdcChip {
         }
         if self.frame == Frame::Chain {
             // Refused, but the bus still drives MOSI.
-            self.sdi_high = last_mosi_high(ops, self.sdi_high);
+            self.sdi_high = wire::last_mosi_high(ops, self.sdi_high);
             return Err(self.violate(
                 "frame in daisy-chain mode: SDI was low at the CNV rising edge",
                 0,
             ));
         }
-        // The first two MOSI bytes (SDI idles at the previous level before the first).
-        let mut mosi = [0xFFu8; 2];
-        let mut n = 0;
-        for op in ops.iter() {
-            let bytes: &[u8] = match op {
-                Operation::Write(w) => w,
-                Operation::Transfer(_, w) => w,
-                Operation::TransferInPlace(b) => b,
-                Operation::Read(r) if !r.is_empty() => &[0],
-                _ => &[],
-            };
-            for b in bytes {
-                if n < 2 {
-                    mosi[n] = *b;
-                    n += 1;
-                }
-            }
-        }
+        let (mosi, n) = wire::mosi_head::<2>(ops);
         let start = self.frame == Frame::Cs && self.clocked == 0;
         let command = matches!(mosi[0], ad4000::CMD_WRITE | ad4000::CMD_READ) && n > 0;
         if command && !start {
@@ -249,20 +232,9 @@ impl AdcChip {
             _ if self.frame == Frame::PowerUp => self.result_frame,
             _ => [0; 3],
         };
-        self.sdi_high = last_mosi_high(ops, self.sdi_high);
-        let mut k = 0;
-        for op in ops.iter_mut() {
-            match op {
-                Operation::Read(r) | Operation::Transfer(r, _) | Operation::TransferInPlace(r) => {
-                    for b in r.iter_mut() {
-                        *b = out.get(k).copied().unwrap_or(0);
-                        k += 1;
-                    }
-                }
-                Operation::Write(w) => k += w.len(),
-                Operation::DelayNs(ns) => self.clock.advance_ns(*ns as u64),
-            }
-        }
+        self.sdi_high = wire::last_mosi_high(ops, self.sdi_high);
+        let clock = &mut self.clock;
+        let k = wire::clock_miso(ops, &out, |ns| clock.advance_ns(ns as u64));
         self.clocked = self.clocked.saturating_add(k.max(1) as u32);
         Ok(())
     }

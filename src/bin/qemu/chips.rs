@@ -23,7 +23,7 @@ use core::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, AtomicU8, Ordering::R
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{self, ErrorType as PinErrorType, OutputPin};
 use embedded_hal::spi::{self, ErrorType, Operation, SpiDevice};
-use piezo_core::drivers::{ad4000, ad5791, SpiClock};
+use piezo_core::drivers::{ad4000, ad5791, wire, SpiClock};
 use piezo_core::firmware::{ActuatorDac, PositionAdc, ADC_CONFIG, DAC_CONFIG};
 
 /// Axes of mock chips (the xy build uses both).
@@ -252,24 +252,6 @@ fn output_changed(a: usize) -> Result<(), Violation> {
     }
 }
 
-/// The last MOSI level a transaction leaves (a `Read`, or a `Transfer` longer than its
-/// write words, sends words the bus chooses: counted low).
-fn last_mosi_high(ops: &[Operation<'_, u8>], before: bool) -> bool {
-    let mut high = before;
-    for op in ops {
-        high = match op {
-            Operation::Write(w) => w.last().map_or(high, |b| b & 1 != 0),
-            Operation::Transfer(r, w) if r.len() > w.len() => false,
-            Operation::Transfer(_, w) => w.last().map_or(high, |b| b & 1 != 0),
-            Operation::TransferInPlace(b) => b.last().map_or(high, |b| b & 1 != 0),
-            Operation::Read([]) => high,
-            Operation::Read(_) => false,
-            Operation::DelayNs(_) => high,
-        };
-    }
-    high
-}
-
 fn set_rate(bus: Option<&AtomicU32>, max_hz: u32) -> u32 {
     let hz = max_hz.min(BUS_MAX_HZ);
     if let Some(b) = bus {
@@ -390,29 +372,12 @@ impl<const A: usize> SpiDevice for AdcSpi<A> {
             return Err(violate(1));
         }
         let period = period.load(Relaxed);
-        let mosi_high = last_mosi_high(ops, sdi.load(Relaxed));
+        let mosi_high = wire::last_mosi_high(ops, sdi.load(Relaxed));
         if period == CHAIN {
             sdi.store(mosi_high, Relaxed);
             return Err(violate(2));
         }
-        // The first two MOSI bytes.
-        let mut mosi = [0xFFu8; 2];
-        let mut n = 0;
-        for op in ops.iter() {
-            let bytes: &[u8] = match op {
-                Operation::Write(w) => w,
-                Operation::Transfer(_, w) => w,
-                Operation::TransferInPlace(b) => b,
-                Operation::Read(r) if !r.is_empty() => &[0],
-                _ => &[],
-            };
-            for b in bytes {
-                if let Some(m) = mosi.get_mut(n) {
-                    *m = *b;
-                    n += 1;
-                }
-            }
-        }
+        let (mosi, n) = wire::mosi_head::<2>(ops);
         let start = period == CS && !clocked.load(Relaxed);
         let command = n > 0 && matches!(mosi[0], ad4000::CMD_WRITE | ad4000::CMD_READ);
         if command && !start {
@@ -429,19 +394,7 @@ impl<const A: usize> SpiDevice for AdcSpi<A> {
         };
         sdi.store(mosi_high, Relaxed);
         clocked.store(true, Relaxed);
-        let mut k = 0;
-        for op in ops.iter_mut() {
-            match op {
-                Operation::Read(r) | Operation::Transfer(r, _) | Operation::TransferInPlace(r) => {
-                    for b in r.iter_mut() {
-                        *b = out.get(k).copied().unwrap_or(0);
-                        k += 1;
-                    }
-                }
-                Operation::Write(w) => k += w.len(),
-                Operation::DelayNs(ns) => TimerDelay.delay_ns(*ns),
-            }
-        }
+        wire::clock_miso(ops, &out, |ns| TimerDelay.delay_ns(ns));
         Ok(())
     }
 }
