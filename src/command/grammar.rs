@@ -48,6 +48,33 @@ pub enum TriggerCmd {
     },
 }
 
+impl TriggerCmd {
+    /// The edge triggers' keywords (`rec trigger <kind> ...`).
+    pub const EDGES: [&'static str; 3] = ["rise", "fall", "level"];
+
+    /// The edge trigger named `kind` (one of [`Self::EDGES`]).
+    pub fn edge(kind: &str, channel: usize, level: f32, pre: usize) -> Option<Self> {
+        Some(match kind {
+            "rise" => Self::Rising {
+                channel,
+                level,
+                pre,
+            },
+            "fall" => Self::Falling {
+                channel,
+                level,
+                pre,
+            },
+            "level" => Self::Level {
+                channel,
+                level,
+                pre,
+            },
+            _ => return None,
+        })
+    }
+}
+
 /// Recorder sub-commands.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RecCmd<'a> {
@@ -585,24 +612,7 @@ fn parse_rec<'a>(w: &Words<'a>) -> Result<RecCmd<'a>, Error> {
             let channel = w.index(3)?;
             let level = w.num(4)?;
             let pre = if w.len() > 5 { w.index(5)? } else { 0 };
-            RecCmd::Trigger(match kind {
-                "rise" => TriggerCmd::Rising {
-                    channel,
-                    level,
-                    pre,
-                },
-                "fall" => TriggerCmd::Falling {
-                    channel,
-                    level,
-                    pre,
-                },
-                "level" => TriggerCmd::Level {
-                    channel,
-                    level,
-                    pre,
-                },
-                _ => return Err(Error::BadKeyword),
-            })
+            RecCmd::Trigger(TriggerCmd::edge(kind, channel, level, pre).ok_or(Error::BadKeyword)?)
         }
         "arm" => {
             w.at_most(2)?;

@@ -97,23 +97,11 @@ pub fn parse_trigger(spec: &str, channels: &[String], pre: usize) -> Result<Trig
     };
     let level: f32 = command::parse_f32(level)
         .map_err(|_| anyhow!("--trigger `{spec}`: level `{level}` is not a finite number"))?;
-    Ok(match *kind {
-        "rise" => TriggerCmd::Rising {
-            channel,
-            level,
-            pre,
-        },
-        "fall" => TriggerCmd::Falling {
-            channel,
-            level,
-            pre,
-        },
-        "level" => TriggerCmd::Level {
-            channel,
-            level,
-            pre,
-        },
-        _ => bail!("--trigger `{spec}`: `{kind}` is not rise, fall or level"),
+    TriggerCmd::edge(kind, channel, level, pre).ok_or_else(|| {
+        anyhow!(
+            "--trigger `{spec}`: `{kind}` is not one of {}",
+            TriggerCmd::EDGES.join(", ")
+        )
     })
 }
 
