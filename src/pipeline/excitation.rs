@@ -100,33 +100,53 @@ pub fn chirp_coeffs(f0_hz: f64, f1_hz: f64, duration_s: f64) -> (i64, i64) {
     )
 }
 
-/// The chirp's setpoint at sweep fraction `x` (2^-32 units), phase from the fixed-point
-/// coefficients `(a_fx, b_fx)`; the instantaneous frequency `f0 + (f1 - f0) x` gives the
-/// derivatives.
-#[inline]
-#[allow(clippy::too_many_arguments)]
-pub fn chirp_at<T: Real>(
-    x: u32,
-    offset_um: T,
-    amplitude_um: T,
-    f0_hz: T,
-    f1_hz: T,
-    duration_s: T,
-    a_fx: i64,
-    b_fx: i64,
-) -> Setpoint<T> {
-    let (s, c) = sin_cos_turns(T::from_turns(chirp_phase(x, a_fx, b_fx)));
-    let tau = T::from_turns(x);
-    let w = T::TWO * T::PI * (f0_hz + (f1_hz - f0_hz) * tau);
-    let dw = if duration_s > T::ZERO {
-        T::TWO * T::PI * (f1_hz - f0_hz) / duration_s
-    } else {
-        T::ZERO
-    };
-    Setpoint {
-        y_um: offset_um + amplitude_um * s,
-        dy: amplitude_um * w * c,
-        ddy: amplitude_um * (dw * c - w * w * s),
+/// A linear chirp `f0_hz` -> `f1_hz` over `duration_s` around `offset_um`, with its phase
+/// coefficients in 32.32 fixed point ([`chirp_coeffs`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Chirp<T> {
+    pub offset_um: T,
+    pub amplitude_um: T,
+    pub f0_hz: T,
+    pub f1_hz: T,
+    pub duration_s: T,
+    pub a_fx: i64,
+    pub b_fx: i64,
+}
+
+impl<T: Real> Chirp<T> {
+    /// The chirp and its coefficients (construction, not per sample; no range check).
+    pub fn new(offset_um: T, amplitude_um: T, f0_hz: T, f1_hz: T, duration_s: T) -> Self {
+        let (a_fx, b_fx) = chirp_coeffs(f0_hz.to_f64(), f1_hz.to_f64(), duration_s.to_f64());
+        Self {
+            offset_um,
+            amplitude_um,
+            f0_hz,
+            f1_hz,
+            duration_s,
+            a_fx,
+            b_fx,
+        }
+    }
+
+    /// The setpoint at sweep fraction `x` (2^-32 units); the instantaneous frequency
+    /// `f0 + (f1 - f0) x` gives the derivatives.
+    #[inline]
+    pub fn at(&self, x: u32) -> Setpoint<T> {
+        let (s, c) = sin_cos_turns(T::from_turns(chirp_phase(x, self.a_fx, self.b_fx)));
+        let tau = T::from_turns(x);
+        let df = self.f1_hz - self.f0_hz;
+        let w = T::TWO * T::PI * (self.f0_hz + df * tau);
+        let dw = if self.duration_s > T::ZERO {
+            T::TWO * T::PI * df / self.duration_s
+        } else {
+            T::ZERO
+        };
+        let a = self.amplitude_um;
+        Setpoint {
+            y_um: self.offset_um + a * s,
+            dy: a * w * c,
+            ddy: a * (dw * c - w * w * s),
+        }
     }
 }
 

@@ -3,7 +3,7 @@
 //! The phase is a 32-bit accumulator (as in a DDS): it wraps exactly once per period and
 //! never loses precision, so an `f32` generator runs for days without drifting.
 
-use super::excitation::{self, sin_cos_turns};
+use super::excitation::{self, sin_cos_turns, Chirp};
 use super::ConfigError;
 use crate::real::Real;
 use crate::signals::Setpoint;
@@ -65,15 +65,7 @@ pub enum Wave<T> {
     /// Linear sweep `f0_hz` -> `f1_hz` over `duration_s`, repeated: `offset + amplitude
     /// sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T)))`. Build it with [`Wave::chirp`] (the phase
     /// coefficients in fixed point, `a_fx`, `b_fx`).
-    Chirp {
-        offset_um: T,
-        amplitude_um: T,
-        f0_hz: T,
-        f1_hz: T,
-        duration_s: T,
-        a_fx: i64,
-        b_fx: i64,
-    },
+    Chirp(Chirp<T>),
     /// Multisine: harmonics 1..=`harmonics` of `f0_hz` (one period is `1 / f0_hz`), equal
     /// amplitudes, phases from a seed (Schroeder's for seed 0), scaled so the peak deviation
     /// from `offset_um` is the requested amplitude. Build it with [`Wave::multisine`].
@@ -128,17 +120,13 @@ impl<T: Real> Wave<T> {
                 "reference.chirp: duration_s must be in (0, 3600]",
             ));
         }
-        let (a_fx, b_fx) =
-            excitation::chirp_coeffs(f0_hz.to_f64(), f1_hz.to_f64(), duration_s.to_f64());
-        Ok(Wave::Chirp {
+        Ok(Wave::Chirp(Chirp::new(
             offset_um,
             amplitude_um,
             f0_hz,
             f1_hz,
             duration_s,
-            a_fx,
-            b_fx,
-        })
+        )))
     }
 
     /// A multisine of `harmonics` (1..=[`excitation::MULTISINE_MAX`]) equal harmonics of
@@ -182,7 +170,7 @@ impl<T: Real> Wave<T> {
             | Wave::Steps { freq_hz, .. }
             | Wave::Table { freq_hz, .. } => freq_hz,
             Wave::Prbs { bit_hz, .. } => bit_hz,
-            Wave::Chirp { duration_s, .. } => {
+            Wave::Chirp(Chirp { duration_s, .. }) => {
                 if duration_s > T::ZERO {
                     T::ONE / duration_s
                 } else {
@@ -196,7 +184,7 @@ impl<T: Real> Wave<T> {
     /// The highest frequency in the wave (Hz): what must stay below Nyquist.
     fn top_hz(&self) -> T {
         match *self {
-            Wave::Chirp { f0_hz, f1_hz, .. } => f0_hz.max(f1_hz),
+            Wave::Chirp(Chirp { f0_hz, f1_hz, .. }) => f0_hz.max(f1_hz),
             Wave::Multisine {
                 f0_hz, harmonics, ..
             } => f0_hz * T::from_usize(harmonics as usize),
@@ -216,25 +204,8 @@ impl<T: Real> Wave<T> {
     /// A chirp's setpoint at sweep fraction `phase` (2^-32 units); other waves: none.
     #[inline]
     fn chirp_at(&self, phase: u32) -> Setpoint<T> {
-        match *self {
-            Wave::Chirp {
-                offset_um,
-                amplitude_um,
-                f0_hz,
-                f1_hz,
-                duration_s,
-                a_fx,
-                b_fx,
-            } => excitation::chirp_at(
-                phase,
-                offset_um,
-                amplitude_um,
-                f0_hz,
-                f1_hz,
-                duration_s,
-                a_fx,
-                b_fx,
-            ),
+        match self {
+            Wave::Chirp(c) => c.at(phase),
             _ => Setpoint::default(),
         }
     }
@@ -291,12 +262,12 @@ impl<T: Real> Wave<T> {
             Wave::Prbs {
                 low_um, high_um, ..
             } => low_um.is_finite() && high_um.is_finite(),
-            Wave::Chirp {
+            Wave::Chirp(Chirp {
                 offset_um,
                 amplitude_um,
                 duration_s,
                 ..
-            } => {
+            }) => {
                 if !(duration_s > T::ZERO) {
                     return Err(ConfigError::new(
                         "reference.chirp: duration_s must be positive",
@@ -387,7 +358,7 @@ impl<T: Real> Wave<T> {
             } => catmull_rom(points, len, x, freq_hz),
             Wave::Prbs { low_um, .. } => Setpoint::hold(low_um),
             // The sweep fraction back in 2^-32 units (exact for the generator's phase).
-            Wave::Chirp { .. } => self.chirp_at((x.to_f64() * TURN) as u32),
+            Wave::Chirp(_) => self.chirp_at((x.to_f64() * TURN) as u32),
             Wave::Multisine {
                 offset_um,
                 per_harmonic_um,
@@ -560,7 +531,7 @@ impl<T: Real> WaveGen<T> {
                 order,
                 ..
             } => excitation::prbs_level(self.lfsr, order, low_um, high_um),
-            Wave::Chirp { .. } => self.wave.chirp_at(phase),
+            Wave::Chirp(_) => self.wave.chirp_at(phase),
             _ => self.wave.at(T::from_turns(phase)),
         }
     }
