@@ -4,6 +4,8 @@
 #   qemu_boot <elf> <machine> <cpu>    boots with the UART on a free TCP port ($port, $qemu;
 #                                      defmt to <elf>.defmt) and waits for `ok pong`
 #   s <args>                           one `piezo serial` call against it
+#   refused <line> <message>           the raw line must fail (exit status 1) naming it and
+#                                      <message> (the firmware's numbered error)
 #   qemu_stop                          fails if the firmware exited early, then stops it
 #   qemu_session <step>                the f32 build (mps2-an386) built and booted: sets
 #                                      $work (removed with QEMU at exit) and fail()
@@ -24,6 +26,14 @@ piezo_cli() {
 # wall-clock caps for a dead link only, generous for a busy machine where QEMU runs far
 # slower than real time.
 s() { timeout 900 "$piezo" serial --tcp "127.0.0.1:$port" --timeout-s 60 "$@"; }
+
+refused() {
+  local line=$1 message=$2
+  echo "\$ piezo serial -- \"$line\""
+  if s -- "$line" >"$work/bad.txt" 2>&1; then fail "\`$line\` accepted"; fi
+  cat "$work/bad.txt"
+  grep -qF "\`$line\`: $message" "$work/bad.txt" || fail "\`$line\` not refused with: $message"
+}
 
 qemu_boot() {
   local elf=$1 machine=$2 cpu=$3

@@ -17,6 +17,27 @@ trap 'rm -rf "$work"' EXIT
 cargo build -q --release --manifest-path .ci/defmt-log/Cargo.toml
 defmt_log=.ci/defmt-log/target/release/defmt-log
 
+# pipe_run <dir> <elf> <machine> <cpu> <defmt out> <lines>: QEMU with its UART on the FIFOs
+# in <dir> (what it sends kept in <dir>/uart.txt), <lines> (a printf format) written to it; returns
+# QEMU's exit status. The firmware ends the run itself (`exit`, `panic`): the wall-clock
+# cap only catches a hung emulator and is generous for a busy machine.
+pipe_run() {
+  local dir=$1 elf=$2 machine=$3 cpu=$4 defmt=$5 lines=$6 reader qemu status
+  mkfifo "$dir/uart.in" "$dir/uart.out"
+  cat "$dir/uart.out" >"$dir/uart.txt" &
+  reader=$!
+  timeout 1800 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
+    -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
+    -semihosting-config enable=on,target=native -kernel "$elf" >"$defmt" &
+  qemu=$!
+  # shellcheck disable=SC2059 # the lines are a printf format (\n escapes)
+  printf "$lines" >"$dir/uart.in"
+  status=0
+  wait $qemu || status=$?
+  wait $reader || true
+  return $status
+}
+
 # run <name> <target> <qemu machine> <qemu cpu> <SysTick ticks per control period>
 run() {
   local name=$1 target=$2 machine=$3 cpu=$4 period_ticks=$5 status periods
@@ -25,22 +46,10 @@ run() {
   mkdir -p "$dir"
   elf="$dir/firmware.elf"
   cp "target/$target/release/qemu" "$elf"
-  mkfifo "$dir/uart.in" "$dir/uart.out"
-  cat "$dir/uart.out" >"$dir/uart.txt" &
-  local reader=$!
-  set +e
-  # The firmware exits on the harness line `exit` (after >= 10 000 periods); the wall-clock
-  # cap only catches a hung emulator and is generous for a busy machine.
-  timeout 1800 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
-    -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
-    -semihosting-config enable=on,target=native -kernel "$elf" >"$dir/defmt.bin" &
-  local qemu=$!
-  printf 'ping\nbench\nget u_max\nset slew 0\nset pid_kp 0.75\nsave\nset pid_kp 0.25\nload\nget pid_kp\ndefaults\nget pid_kp\nmode nmpc\nmode ff+hgo-robust\nwave sine 5 100 10\nsave\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nwave prbs 9 11 10 5000\nwait 500\nwave chirp 1 10 2000 0.05 10\nwait 500\nwave multisine 1 100 32 10 3\nwait 500\nfault\nexit\n' \
-    >"$dir/uart.in"
-  wait $qemu
-  status=$?
-  set -e
-  wait $reader || true
+  status=0
+  pipe_run "$dir" "$elf" "$machine" "$cpu" "$dir/defmt.bin" \
+    'ping\nbench\nget u_max\nset slew 0\nset pid_kp 0.75\nsave\nset pid_kp 0.25\nload\nget pid_kp\ndefaults\nget pid_kp\nmode nmpc\nmode ff+hgo-robust\nwave sine 5 100 10\nsave\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nwave prbs 9 11 10 5000\nwait 500\nwave chirp 1 10 2000 0.05 10\nwait 500\nwave multisine 1 100 32 10 3\nwait 500\nfault\nexit\n' ||
+    status=$?
   echo "=== $name: serial port"
   cat "$dir/uart.txt"
   [ "$status" -eq 0 ] || { echo "$name: QEMU run failed with status $status"; exit 1; }
@@ -103,19 +112,8 @@ panic_run() {
   local name=$1 target=$2 machine=$3 cpu=$4 status line before after safe
   local dir="$work/$name-panic" elf="$work/$name/firmware.elf"
   mkdir -p "$dir"
-  mkfifo "$dir/uart.in" "$dir/uart.out"
-  cat "$dir/uart.out" >"$dir/uart.txt" &
-  local reader=$!
-  set +e
-  timeout 1800 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
-    -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
-    -semihosting-config enable=on,target=native -kernel "$elf" >/dev/null &
-  local qemu=$!
-  printf 'ping\nwave sine 5 100 30\npanic\n' >"$dir/uart.in"
-  wait $qemu
-  status=$?
-  set -e
-  wait $reader || true
+  status=0
+  pipe_run "$dir" "$elf" "$machine" "$cpu" /dev/null 'ping\nwave sine 5 100 30\npanic\n' || status=$?
   echo "=== $name: forced panic"
   grep -E '^(panic|ok|chips)' "$dir/uart.txt" || true
   [ "$status" -eq 101 ] || { echo "$name: forced panic ended with status $status, not 101"; exit 1; }

@@ -40,11 +40,7 @@ run -- "get sample_hz" "rec status"
 grep -qx 'ok sample_hz 100000' "$work/last.txt" || fail "raw get failed"
 
 # A refused command: exit status 1, the command and the firmware's numbered error named.
-echo "\$ piezo serial -- \"mode warp-drive\""
-if s -- "mode warp-drive" >"$work/bad.txt" 2>&1; then fail "unknown mode accepted"; fi
-cat "$work/bad.txt"
-grep -q '`mode warp-drive`: firmware error 9: unknown mode name (UnknownMode)' "$work/bad.txt" ||
-  fail "error does not name the command and code"
+refused "mode warp-drive" "firmware error 9: unknown mode name (UnknownMode)"
 
 # The free-running capture: 1024 frames at 100 kHz of a 5 um, 100 Hz sine around 10 um.
 head -3 "$work/rec.csv"
