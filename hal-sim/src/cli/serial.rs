@@ -115,8 +115,17 @@ pub enum Action {
     /// Select the axis the 1-axis waves (sine, triangle, square, steps, table, hold) go to
     /// (`axis 1`: y of an XY build); with no number, print it.
     Axis { axis: Option<usize> },
+    /// Set parameters by name, values in the settings table's units or with a unit of the
+    /// same quantity (`slew=20V/ms`, `notch_hz=2.5kHz`); all are checked against the table
+    /// (name, range) before any is sent. Prints the values the firmware took.
+    #[command(after_long_help = params::table_help())]
+    Set {
+        #[arg(required = true, value_name = "NAME=VALUE")]
+        assignments: Vec<String>,
+    },
     /// Every parameter of the firmware (names from its `help`) with its value; `--save`
     /// also writes the settable ones to a file, `--restore` sets them from one.
+    #[command(after_long_help = params::table_help())]
     Params {
         /// Write `name,value,unit` of every settable parameter to FILE (CSV).
         #[arg(long, value_name = "FILE", conflicts_with = "restore")]
@@ -249,6 +258,7 @@ pub fn execute(
             let r = c.send(&Command::Axis(axis))?;
             writeln!(out, "{}", r.reply_line())?;
         }
+        Action::Set { assignments } => params::set(c, &assignments, out)?,
         Action::Params { save, restore } => {
             if let Some(f) = restore {
                 params::restore(c, &f, out)?;

@@ -5,11 +5,11 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use piezo_core::command::Command;
-use piezo_core::firmware::{setting, Access, SETTINGS};
+use piezo_core::firmware::{setting, Access, Setting, SETTINGS};
 
 use crate::serial::Client;
 
-use super::units::f32_of;
+use super::units::{f32_of, parse_hz, parse_seconds, parse_um, parse_volts, parse_volts_per_s};
 
 /// Every parameter with its value and unit; the list comes from the firmware (`help` ends
 /// with `params: <names>`), the units from the core's settings table.
@@ -83,7 +83,7 @@ const HEADER: &str = "name,value,unit";
 pub fn save(c: &mut Client, path: &Path, out: &mut impl Write) -> Result<()> {
     let mut text = format!("# piezo serial params --save\n{HEADER}\n");
     let mut n = 0;
-    for s in SETTINGS.iter().filter(|s| s.access != Access::ReadOnly) {
+    for s in settable() {
         let v = c.get(s.name)?;
         text += &format!("{},{v},{}\n", s.name, s.unit);
         n += 1;
@@ -119,29 +119,10 @@ pub fn read_settings(path: &Path) -> Result<Vec<(&'static str, f64)>> {
             [n, v] => (n, v, None),
             _ => bail!("{}: expected `name,value,unit`, found {line:?}", at()),
         };
-        let s = setting(name).with_context(|| format!("{}: unknown setting {name:?}", at()))?;
-        if s.access == Access::ReadOnly {
-            bail!("{}: {name} is read-only (the board decides it)", at());
-        }
-        if let Some(u) = unit.filter(|u| *u != s.unit) {
-            bail!(
-                "{}: {name} in {u}, the firmware takes {} (convert the value, not the unit)",
-                at(),
-                s.unit
-            );
-        }
         let x: f64 = value
             .parse()
             .map_err(|_| anyhow::anyhow!("{}: {name} = {value:?} is not a number", at()))?;
-        if !s.accepts(x) {
-            bail!(
-                "{}: {name} = {x} {} outside {} .. {}",
-                at(),
-                s.unit,
-                s.min,
-                s.max
-            );
-        }
+        let s = check(name, x, unit).map_err(|e| anyhow::anyhow!("{}: {e}", at()))?;
         if v.iter().any(|(n, _)| *n == s.name) {
             bail!("{}: {name} twice", at());
         }
@@ -158,6 +139,19 @@ pub fn read_settings(path: &Path) -> Result<Vec<(&'static str, f64)>> {
 /// line, and the rest one `set` at a time.
 pub fn restore(c: &mut Client, path: &Path, out: &mut impl Write) -> Result<()> {
     let all = read_settings(path)?;
+    apply(c, &all).with_context(|| path.display().to_string())?;
+    writeln!(
+        out,
+        "restored {} settings from {}",
+        all.len(),
+        path.display()
+    )?;
+    Ok(())
+}
+
+/// Sends checked settings: the limits first (widening first), the CBW model as one `cbw`
+/// line when all four are there, the rest one `set` at a time.
+fn apply(c: &mut Client, all: &[(&'static str, f64)]) -> Result<()> {
     let get = |n: &str| all.iter().find(|(k, _)| *k == n).map(|(_, v)| *v);
     limits(
         c,
@@ -167,27 +161,134 @@ pub fn restore(c: &mut Client, path: &Path, out: &mut impl Write) -> Result<()> 
         &mut std::io::sink(),
     )?;
     let cbw = ["cbw_d", "cbw_alpha", "cbw_beta", "cbw_gamma"];
+    let whole_cbw = cbw.iter().all(|k| get(k).is_some());
     if let [Some(d), Some(a), Some(b), Some(g)] = cbw.map(get) {
         c.send(&Command::Cbw([d, a, b, g].map(f32_of)))
-            .with_context(|| format!("{}: the CBW model", path.display()))?;
+            .context("the CBW model")?;
     }
-    let mut n = 0;
-    for (name, v) in &all {
-        let done = ["u_min", "u_max", "slew"].contains(name)
-            || (cbw.contains(name) && cbw.iter().all(|k| get(k).is_some()));
-        if !done {
+    for (name, v) in all {
+        if !(["u_min", "u_max", "slew"].contains(name) || (whole_cbw && cbw.contains(name))) {
             c.send(&Command::Set(name, f32_of(*v)))
-                .with_context(|| format!("{}: set {name} {v}", path.display()))?;
+                .with_context(|| format!("set {name} {v}"))?;
         }
-        n += 1;
     }
-    writeln!(out, "restored {n} settings from {}", path.display())?;
     Ok(())
+}
+
+/// The settings table's check of one value: a known, settable name, the table's unit (if
+/// one is given), a finite value inside the table's range.
+fn check(name: &str, x: f64, unit: Option<&str>) -> Result<&'static Setting, String> {
+    let s = setting(name).ok_or_else(|| {
+        format!(
+            "unknown setting {name:?} (settable: {})",
+            settable().map(|s| s.name).collect::<Vec<_>>().join(", ")
+        )
+    })?;
+    if s.access == Access::ReadOnly {
+        return Err(format!("{name} is read-only (the board decides it)"));
+    }
+    if let Some(u) = unit.filter(|u| *u != s.unit) {
+        return Err(format!(
+            "{name} in {u}, the firmware takes {} (convert the value, not the unit)",
+            s.unit
+        ));
+    }
+    if !s.accepts(x) {
+        return Err(format!(
+            "{name} = {x} {} outside {} .. {} ({})",
+            s.unit, s.min, s.max, s.about
+        ));
+    }
+    Ok(s)
+}
+
+/// The settable rows of the table (limits and model settings).
+fn settable() -> impl Iterator<Item = &'static Setting> {
+    SETTINGS.iter().filter(|s| s.access != Access::ReadOnly)
+}
+
+/// `NAME=VALUE` from the command line: the value a number in the setting's unit, or with a
+/// unit of the same quantity (`slew=20V/ms`, `notch_hz=2.5kHz`, `hgo_eps=200us`).
+pub fn parse_assignment(arg: &str) -> Result<(&'static str, f64)> {
+    let (name, value) = arg
+        .split_once('=')
+        .with_context(|| format!("`{arg}`: use NAME=VALUE (e.g. slew=20V/ms)"))?;
+    let (name, value) = (name.trim(), value.trim());
+    let unit = setting(name).map_or("", |s| s.unit);
+    let x = match unit {
+        "V" => parse_volts(value),
+        "V/s" => parse_volts_per_s(value),
+        "Hz" => parse_hz(value),
+        "um" => parse_um(value),
+        "s" => parse_seconds(value),
+        u => {
+            let num = value
+                .strip_suffix(u)
+                .filter(|_| !u.is_empty())
+                .unwrap_or(value);
+            num.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("`{value}`: not a number in {u}"))
+        }
+    }
+    .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+    let s = check(name, x, None).map_err(anyhow::Error::msg)?;
+    Ok((s.name, x))
+}
+
+/// `piezo serial set`: every assignment checked against the settings table before any is
+/// sent, then sent in [`apply`]'s order; prints the settings' values after.
+pub fn set(c: &mut Client, args: &[String], out: &mut impl Write) -> Result<()> {
+    let mut all: Vec<(&'static str, f64)> = Vec::new();
+    for a in args {
+        let (name, x) = parse_assignment(a)?;
+        if all.iter().any(|(n, _)| *n == name) {
+            bail!("{name} given twice");
+        }
+        all.push((name, x));
+    }
+    apply(c, &all)?;
+    for (name, _) in &all {
+        let unit = setting(name).map_or("", |s| s.unit);
+        writeln!(out, "{name:<15} {} {unit}", c.get(name)?)?;
+    }
+    Ok(())
+}
+
+/// The settings table as help text: name, unit, default, range, meaning.
+pub fn table_help() -> String {
+    let mut t = String::from("Settings (NAME [unit] default, range: meaning):\n");
+    for s in settable() {
+        t += &format!(
+            "  {:<12} [{}] {}, {} .. {}: {}\n",
+            s.name, s.unit, s.default, s.min, s.max, s.about
+        );
+    }
+    t
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn assignments_take_the_tables_units_and_ranges() {
+        let ok = |a: &str| parse_assignment(a).unwrap();
+        assert_eq!(ok("slew=20V/ms"), ("slew", 20_000.0));
+        assert_eq!(ok("slew=20000"), ("slew", 20_000.0));
+        assert_eq!(ok("notch_hz=2.5kHz"), ("notch_hz", 2_500.0));
+        assert!((ok("hgo_eps=200us").1 - 2e-4).abs() < 1e-12);
+        assert_eq!(ok("u_max = 120V"), ("u_max", 120.0));
+        assert_eq!(ok("pid_ki=3000V/(um s)"), ("pid_ki", 3000.0));
+        let err = |a: &str| parse_assignment(a).unwrap_err().to_string();
+        assert!(err("u_max=200V").contains("outside 0 .. 150"), "{}", err("u_max=200V"));
+        assert!(err("warp=1").contains("unknown setting") && err("warp=1").contains("pid_kp"));
+        assert!(err("sample_hz=1").contains("read-only"));
+        assert!(err("slew=20V").contains("unknown unit `V`"), "{}", err("slew=20V"));
+        assert!(err("slew").contains("NAME=VALUE"));
+        assert!(err("notch_q=nan").contains("outside"), "{}", err("notch_q=nan"));
+        assert!(table_help().contains("notch_hz") && !table_help().contains("sample_hz"));
+    }
 
     /// A settings file with `text` in the temporary directory (one per call).
     fn file(text: &str) -> std::path::PathBuf {
