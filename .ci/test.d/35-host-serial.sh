@@ -42,6 +42,15 @@ grep -qx 'ok sample_hz 100000' "$work/last.txt" || fail "raw get failed"
 # A refused command: exit status 1, the command and the firmware's numbered error named.
 refused "mode warp-drive" "firmware error 9: unknown mode name (UnknownMode)"
 
+# Settings by name in their units, checked against the settings table on the host: a bad
+# value sends nothing (slew keeps the value set here).
+run set slew=20V/ms notch_q=3
+grep -qx 'slew            20000 V/s' "$work/last.txt" || fail "set slew=20V/ms"
+if s set slew=10V/ms u_max=200V >"$work/bad.txt" 2>&1; then fail "u_max=200V accepted"; fi
+grep -q 'u_max = 200 V outside 0 .. 150' "$work/bad.txt" || { cat "$work/bad.txt"; fail "u_max=200V not refused"; }
+run -- "get slew"
+grep -qx 'ok slew 20000' "$work/last.txt" || fail "a refused set list changed slew"
+
 # The free-running capture: 1024 frames at 100 kHz of a 5 um, 100 Hz sine around 10 um.
 head -3 "$work/rec.csv"
 [ "$(sed -n 3p "$work/rec.csv")" = "i,t_s,ref_um,y_um,u_volts,error_um" ] || fail "CSV header"

@@ -16,8 +16,6 @@ if ! command -v cargo-fuzz >/dev/null 2>&1; then
 fi
 cd hal-sim
 for t in command_parser csv_record settings_record rec_packet; do
-  # -detect_leaks=0: the host Ctl::new leaks its recorder storage on purpose (the firmware
-  # gives it a 'static buffer), so every run would end as a "leak".
-  cargo +nightly fuzz run -O "$t" -- -max_total_time="$secs" -rss_limit_mb=4096 -detect_leaks=0 2>&1 | tail -n 3
+  cargo +nightly fuzz run -O "$t" -- -max_total_time="$secs" -rss_limit_mb=4096 2>&1 | tail -n 3
   echo "fuzz $t: ${secs} s, no crash"
 done

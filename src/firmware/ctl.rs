@@ -40,13 +40,13 @@ impl<C: Converters> Ctl<C> {
         }
     }
 
-    /// On the host (tests, tools): a recorder of 4 x [`super::REC_N`] frames, allocated
-    /// and never freed (a board supplies its RAM with [`Ctl::with_recorder`]).
+    /// On the host (tests, tools): a recorder of 4 x [`super::REC_N`] frames on the heap
+    /// (a board supplies its RAM with [`Ctl::with_recorder`]).
     #[cfg(not(target_os = "none"))]
     pub fn new(sample_hz: R) -> Self {
         extern crate std;
         let frames = std::vec![[R::ZERO; REC_CH]; 4 * super::REC_N];
-        Self::with_recorder(sample_hz, std::boxed::Box::leak(frames.into_boxed_slice()))
+        Self::with_recorder(sample_hz, frames.into_boxed_slice())
     }
 
     /// Feeds the recorder (only while it captures: the signals cost a few instructions).

@@ -43,7 +43,14 @@ pub fn c(x: f64) -> R {
 pub const REC_CH: usize = 4;
 pub const REC_N: usize = 1024;
 /// The recorder's storage: frames of [`REC_CH`] values a board places in its RAM.
+#[cfg(target_os = "none")]
 pub type RecStorage = &'static mut [[R; REC_CH]];
+/// The recorder's storage on the host: owned, freed with the controller (tests and fuzz
+/// targets make many).
+#[cfg(not(target_os = "none"))]
+pub type RecStorage = std::boxed::Box<[[R; REC_CH]]>;
+#[cfg(not(target_os = "none"))]
+extern crate std;
 
 /// Sample rate of the control loop (Hz). Q16.16 holds values below 32768 only, so the
 /// fixed-point build runs at 16 384 Hz (sample period exactly 4 units of 2^-16 s).

@@ -9,8 +9,8 @@ use piezo_core::firmware::{
 };
 
 std::thread_local! {
-    // One controller for every run: the host `Ctl::new` leaks its recorder storage (the
-    // firmware's is 'static), so a new one per run would grow without bound.
+    // One controller for every run, reset to the defaults by each: building one (a
+    // 4096-frame recorder) costs more than the check itself.
     static CTL: std::cell::RefCell<Ctl<OnChip>> =
         std::cell::RefCell::new(Ctl::<OnChip>::new(c(SAMPLE_HZ as f64)));
 }
