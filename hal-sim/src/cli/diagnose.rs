@@ -7,7 +7,7 @@
 //! ```
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use super::fit_args::Columns;
 use crate::ident::diagnose::{self, Diagnosis, Options, Signals};
@@ -42,13 +42,13 @@ pub struct Args {
     pub columns: Columns,
 }
 
-fn read(path: &PathBuf, columns: &Columns) -> Result<Signals> {
+fn read(path: &Path, columns: &Columns) -> Result<Signals> {
     let r = columns.read(path, false)?;
     Signals::new(r.t, r.u, r.y).with_context(|| format!("record {}", path.display()))
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let load = |p| read(p, &args.columns);
+    let load = |p: &PathBuf| read(p, &args.columns);
     let records = args.train.iter().map(load).collect::<Result<Vec<_>>>()?;
     let (train, valid, split_note) = if args.valid.is_empty() {
         let f = args.split.unwrap_or(0.5);

@@ -96,14 +96,14 @@ fn check_units(v: &Value, path: &str) -> Result<()> {
         let unit = unit
             .as_str()
             .with_context(|| format!("{path}: `{key}` is not a unit name"))?;
-        match q.factor(unit.trim()) {
-            Ok(f) if f == 1.0 => {}
-            Ok(_) => anyhow::bail!(
-                "{path}: `{key}` is {unit}; models are simulated in {} (refit on a record whose header names its units, which `piezo fit` converts)",
-                q.internal()
-            ),
-            Err(e) => anyhow::bail!("{path}: `{key}`: {e}"),
-        }
+        let f = q
+            .factor(unit.trim())
+            .map_err(|e| anyhow::anyhow!("{path}: `{key}`: {e}"))?;
+        anyhow::ensure!(
+            f == 1.0,
+            "{path}: `{key}` is {unit}; models are simulated in {} (refit on a record whose header names its units, which `piezo fit` converts)",
+            q.internal()
+        );
     }
     Ok(())
 }
