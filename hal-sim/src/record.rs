@@ -1,11 +1,40 @@
-//! Measured and simulated records: CSV with `#` comments, header `t,u|u1..uk,y|y1..yn`.
+//! Measured and simulated records: one CSV convention for every tool that reads or writes
+//! one (`piezo sim --out`, `piezo serial record`, `piezo fit`, `diagnose`, `predict`).
 //!
 //! ```text
 //! # any number of comment lines (kept, written back)
-//! t,u,y,r          <- header: `t`, `u` or `u1..uk`, `y` or `y1..yn`, other columns by name
+//! t_s,u_V,y_um,r   <- header: time, input(s), output(s), other columns by name
 //! 0.000,1.8,-123.0,0
 //! ```
-//! Samples must be uniformly spaced in `t` (a jitter of up to [`JITTER`] of the is
+//!
+//! **Units are in the header names**: a column is `<name>_<unit>` (also read: `<name> [unit]`
+//! and `<name> (unit)`, as spreadsheets write them). The roles come from the name: `t` is
+//! the time, `u` or `u1..uk` the inputs, `y` or `y1..yn` the outputs (multi-channel:
+//! `u1_V,u2_V,y1_um,y2_um`); every other column is kept by its full header name (`r`,
+//! `ref_um`, `y_meas`), its values as they are. Accepted units, converted on reading to the
+//! internal s, V and um:
+//!
+//! | quantity | units (factor to the internal unit) |
+//! |---|---|
+//! | time `t` | `s`, `ms` (1e-3), `us` / `µs` (1e-6) |
+//! | input `u` | `V`, `volts` (the firmware's signal names), `mV` (1e-3) |
+//! | output `y` | `um` / `µm`, `nm` (1e-3), `mm` (1e3), `m` (1e6) |
+//!
+//! A `_suffix` that is no known unit is part of the name (`y_meas` is an extra column, not
+//! `y` in "meas"); a bracketed unit is always a unit, and an unknown one on a time, input or
+//! output column is refused (`y [ft]`: "unknown length unit"), as is a unit of the wrong
+//! quantity (`u_um`). Files without units (`t,u,y`, the measured records in `shared/data`)
+//! are read in the default units s, V and um with their values as they are, and the reader
+//! says so in [`Record::unit_note`] (the tools print it). A record written back keeps
+//! that: units in the header only when every time, input and output column stated one.
+//!
+//! `piezo serial record` writes `i,t_s,ref_um,y_um,u_volts,...`: the firmware's signal
+//! names already end in their unit, so `t_s`, `u_volts` and `y_um` are the time, input and
+//! output of this convention and the other signals are extras. Columns of foreign files
+//! (or both axes of an XY capture, `u_volts,u1_volts`) are chosen with a [`Layout`]
+//! (`--t-col`, `--u-col`, `--y-col`); errors name the missing column and list those present.
+//!
+//! Samples must be uniformly spaced in `t` (a jitter of up to [`JITTER`] of the
 //! median step is accepted, e.g. time stamps printed with few digits). Every value must be finite.
 //! Channels are stored column-major: `u[k][i]` is input `k` at sample `i`.
 
@@ -31,6 +60,138 @@ pub struct Record {
     pub y: Vec<Vec<f64>>,
     /// Other columns by header name, in file order.
     pub extra: Vec<(String, Vec<f64>)>,
+    /// `Some` when a time, input or output column stated no unit: which ones, and the
+    /// units they were read in (the tools print it). `None`: every unit was stated (and
+    /// the values converted to s, V, um).
+    pub unit_note: Option<String>,
+}
+
+/// What a time, input or output column measures, with its accepted units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Quantity {
+    Time,
+    Voltage,
+    Length,
+}
+
+impl Quantity {
+    /// Accepted unit names and the factor from each to the internal unit (s, V, um).
+    pub fn units(self) -> &'static [(&'static str, f64)] {
+        match self {
+            Self::Time => &[("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("µs", 1e-6)],
+            Self::Voltage => &[("V", 1.0), ("volts", 1.0), ("mV", 1e-3)],
+            Self::Length => &[
+                ("um", 1.0),
+                ("µm", 1.0),
+                ("μm", 1.0),
+                ("nm", 1e-3),
+                ("mm", 1e3),
+                ("m", 1e6),
+            ],
+        }
+    }
+
+    /// The unit the tools compute in: s, V, um.
+    pub fn internal(self) -> &'static str {
+        self.units()[0].0
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Time => "time",
+            Self::Voltage => "voltage",
+            Self::Length => "length",
+        }
+    }
+
+    /// Factor from `unit` to the internal unit; the error names the accepted units (and
+    /// the quantity `unit` belongs to, when it is another one's).
+    pub fn factor(self, unit: &str) -> Result<f64, String> {
+        if let Some(&(_, f)) = self.units().iter().find(|(n, _)| *n == unit) {
+            return Ok(f);
+        }
+        let accepted = self
+            .units()
+            .iter()
+            .map(|(n, _)| *n)
+            .collect::<Vec<_>>()
+            .join(", ");
+        Err(match quantity_of(unit) {
+            Some(q) => format!(
+                "`{unit}` is a {} unit, not a {} unit ({accepted})",
+                q.name(),
+                self.name()
+            ),
+            None => format!(
+                "unknown {} unit `{}` (accepted: {accepted})",
+                self.name(),
+                clip(unit)
+            ),
+        })
+    }
+}
+
+/// The quantity whose accepted units include `unit`.
+fn quantity_of(unit: &str) -> Option<Quantity> {
+    [Quantity::Time, Quantity::Voltage, Quantity::Length]
+        .into_iter()
+        .find(|q| q.units().iter().any(|(n, _)| *n == unit))
+}
+
+/// A header name as `(name, unit)`: `name [unit]` and `name (unit)` always carry a unit,
+/// `name_unit` only when `unit` is an accepted one (else `_` is part of the name).
+pub fn split_unit(header: &str) -> (&str, Option<&str>) {
+    let h = header.trim();
+    for (open, close) in [('[', ']'), ('(', ')')] {
+        if let Some(inner) = h.strip_suffix(close) {
+            if let Some(i) = inner.rfind(open) {
+                let (name, unit) = (inner[..i].trim(), inner[i + 1..].trim());
+                if !name.is_empty() {
+                    return (name, Some(unit));
+                }
+            }
+        }
+    }
+    if let Some(i) = h.rfind('_') {
+        let (name, unit) = (&h[..i], &h[i + 1..]);
+        if !name.is_empty() && quantity_of(unit).is_some() {
+            return (name, Some(unit));
+        }
+    }
+    (h, None)
+}
+
+/// Where a record keeps its time, inputs and outputs, and the units of those columns
+/// that state none. The default finds `t`, `u`/`u1..uk`, `y`/`y1..yn` by name (each with
+/// or without a unit) and reads unitless columns in s, V and um.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layout {
+    /// Time column by its full header name (`None`: `t` or `t_<unit>`).
+    pub t: Option<String>,
+    /// Input columns by full header name, in channel order (empty: by name).
+    pub u: Vec<String>,
+    /// Output columns by full header name, in channel order (empty: by name).
+    pub y: Vec<String>,
+    /// Unit of input columns that name none (a voltage unit).
+    pub u_unit: String,
+    /// Unit of output columns that name none (a length unit).
+    pub y_unit: String,
+    /// A record without output columns is accepted (`y` is then empty): input records of
+    /// `piezo predict`.
+    pub outputs_optional: bool,
+}
+
+impl Default for Layout {
+    fn default() -> Self {
+        Self {
+            t: None,
+            u: Vec::new(),
+            y: Vec::new(),
+            u_unit: Quantity::Voltage.internal().into(),
+            y_unit: Quantity::Length.internal().into(),
+            outputs_optional: false,
+        }
+    }
 }
 
 /// Why a record could not be read; `line` is 1-based (0 when no line applies).
@@ -80,31 +241,106 @@ fn channel(name: &str, base: char) -> Option<usize> {
     }
 }
 
-/// Maps channel names to positions: either exactly `base` or exactly `base1..basek`.
-fn channel_slots(idx: &[(usize, usize)], base: char, line: usize) -> Result<usize, RecordError> {
-    // idx: (header position, channel number), number 0 = plain `base`.
+/// Channel columns of `base` found by name: `base` alone or `base1..basek` (with or without
+/// a unit), as header positions in channel order. `optional`: none is no error.
+fn auto_channels(
+    names: &[&str],
+    parts: &[(&str, Option<&str>)],
+    base: char,
+    optional: bool,
+    line: usize,
+) -> Result<Vec<usize>, RecordError> {
+    // (header position, channel number), number 0 = plain `base`.
+    let idx: Vec<(usize, usize)> = parts
+        .iter()
+        .enumerate()
+        .filter_map(|(j, (n, _))| channel(n, base).map(|k| (j, k)))
+        .collect();
     if idx.is_empty() {
+        if optional {
+            return Ok(Vec::new());
+        }
+        // `y_ft`: looks like an output with a unit this reader does not know.
+        let hints: Vec<String> = names
+            .iter()
+            .filter_map(|n| {
+                let (name, unit) = n.rsplit_once('_')?;
+                channel(name, base).map(|_| format!("`{}`: unknown unit `{}`", clip(n), clip(unit)))
+            })
+            .collect();
+        let hint = if hints.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", hints.join(", "))
+        };
         return err(
             line,
-            format!("header has no `{base}` column (need `{base}` or `{base}1`, `{base}2`, ...)"),
+            format!(
+                "header has no `{base}` column (need `{base}` or `{base}1`, `{base}2`, ..., optionally with a unit as in `{base}_{}`; or choose columns with --{base}-col){hint}; the columns are {}",
+                match base {
+                    'u' => Quantity::Voltage.internal(),
+                    _ => Quantity::Length.internal(),
+                },
+                listing(names)
+            ),
         );
     }
-    if idx.iter().any(|&(_, n)| n == 0) {
+    let plain = idx.iter().filter(|&&(_, n)| n == 0).count();
+    if plain > 1 {
+        let cols: Vec<String> = idx
+            .iter()
+            .map(|&(j, _)| format!("`{}`", names[j]))
+            .collect();
+        return err(
+            line,
+            format!(
+                "header has {plain} `{base}` columns ({}); choose with --{base}-col",
+                cols.join(", ")
+            ),
+        );
+    }
+    if plain == 1 {
         if idx.len() > 1 {
             return err(
                 line,
-                format!("header mixes `{base}` with numbered `{base}1..` columns"),
+                format!("header mixes `{base}` with numbered `{base}1..` columns; choose with --{base}-col"),
             );
         }
-        return Ok(1);
+        return Ok(vec![idx[0].0]);
     }
     let k = idx.len();
+    let mut out = Vec::with_capacity(k);
     for want in 1..=k {
-        if !idx.iter().any(|&(_, n)| n == want) {
-            return err(line, format!("header has {k} `{base}` columns but no `{base}{want}` (numbering must be 1..{k})"));
+        match idx.iter().find(|&&(_, n)| n == want) {
+            Some(&(j, _)) => out.push(j),
+            None => {
+                return err(
+                    line,
+                    format!("header has {k} `{base}` columns but no `{base}{want}` (numbering must be 1..{k})"),
+                )
+            }
         }
     }
-    Ok(k)
+    Ok(out)
+}
+
+/// The header names as a list for errors.
+fn listing(names: &[&str]) -> String {
+    names
+        .iter()
+        .map(|n| format!("`{}`", clip(n)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A parsed header: where each column goes and the factor to its internal unit.
+struct Header {
+    map: Vec<Col>,
+    nu: usize,
+    ny: usize,
+    extras: Vec<String>,
+    scale: Vec<f64>,
+    unit_note: Option<String>,
 }
 
 impl Record {
@@ -116,13 +352,20 @@ impl Record {
             u,
             y,
             extra: Vec::new(),
+            unit_note: None,
         };
         r.check()?;
         Ok(r)
     }
 
-    /// Reads a CSV record from a file.
+    /// Reads a CSV record from a file, columns and units found by name
+    /// ([`Layout::default`]).
     pub fn read(path: impl AsRef<Path>) -> anyhow::Result<Self> {
+        Self::read_with(path, &Layout::default())
+    }
+
+    /// Reads a CSV record from a file with the columns and default units of `layout`.
+    pub fn read_with(path: impl AsRef<Path>, layout: &Layout) -> anyhow::Result<Self> {
         let path = path.as_ref();
         let text = std::fs::read(path)
             .map_err(|e| anyhow::anyhow!("cannot read record {}: {e}", path.display()))?;
@@ -133,13 +376,20 @@ impl Record {
                 e.utf8_error().valid_up_to()
             )
         })?;
-        Self::parse(&text).map_err(|e| anyhow::anyhow!("record {}: {e}", path.display()))
+        Self::parse_with(&text, layout)
+            .map_err(|e| anyhow::anyhow!("record {}: {e}", path.display()))
     }
 
-    /// Parses CSV text.
+    /// Parses CSV text ([`Layout::default`]).
     pub fn parse(text: &str) -> Result<Self, RecordError> {
+        Self::parse_with(text, &Layout::default())
+    }
+
+    /// Parses CSV text with the columns and default units of `layout`; time, inputs and
+    /// outputs are converted to s, V and um.
+    pub fn parse_with(text: &str, layout: &Layout) -> Result<Self, RecordError> {
         let mut comments = Vec::new();
-        let mut cols: Option<(Vec<Col>, usize)> = None;
+        let mut head: Option<(Header, usize)> = None;
         let mut t = Vec::new();
         let mut u: Vec<Vec<f64>> = Vec::new();
         let mut y: Vec<Vec<f64>> = Vec::new();
@@ -156,26 +406,26 @@ impl Record {
             if s.is_empty() {
                 continue;
             }
-            let Some((map, header_line)) = &cols else {
-                let (map, nu, ny, names) = Self::header(s, line)?;
-                u = vec![Vec::new(); nu];
-                y = vec![Vec::new(); ny];
-                extra = names.into_iter().map(|n| (n, Vec::new())).collect();
-                cols = Some((map, line));
+            let Some((h, header_line)) = &head else {
+                let h = Self::header(s, line, layout)?;
+                u = vec![Vec::new(); h.nu];
+                y = vec![Vec::new(); h.ny];
+                extra = h.extras.iter().map(|n| (n.clone(), Vec::new())).collect();
+                head = Some((h, line));
                 continue;
             };
             let fields: Vec<&str> = s.split(',').collect();
-            if fields.len() != map.len() {
+            if fields.len() != h.map.len() {
                 return err(
                     line,
                     format!(
                         "{} columns, but the header (line {header_line}) has {}",
                         fields.len(),
-                        map.len()
+                        h.map.len()
                     ),
                 );
             }
-            for (j, (f, c)) in fields.iter().zip(map).enumerate() {
+            for (j, (f, c)) in fields.iter().zip(&h.map).enumerate() {
                 let f = f.trim();
                 let v: f64 = match f.parse() {
                     Ok(v) => v,
@@ -186,6 +436,8 @@ impl Record {
                         )
                     }
                 };
+                // A unit conversion can overflow a finite value.
+                let v = v * h.scale[j];
                 if !v.is_finite() {
                     return err(
                         line,
@@ -202,23 +454,24 @@ impl Record {
             }
             row_lines.push(line);
         }
-        if cols.is_none() {
-            return err(0, "no header line (expected e.g. `t,u,y`)");
-        }
+        let Some((h, _)) = head else {
+            return err(0, "no header line (expected e.g. `t_s,u_V,y_um`)");
+        };
         let r = Self {
             comments,
             t,
             u,
             y,
             extra,
+            unit_note: h.unit_note,
         };
         r.check_time(|i| row_lines.get(i).copied().unwrap_or(0))?;
         Ok(r)
     }
 
-    /// Parses the header: column map, number of inputs and outputs, extra names.
-    #[allow(clippy::type_complexity)]
-    fn header(s: &str, line: usize) -> Result<(Vec<Col>, usize, usize, Vec<String>), RecordError> {
+    /// Parses the header: the column of time, each input and output (by `layout` or by
+    /// name), the extras, and each column's unit factor.
+    fn header(s: &str, line: usize, layout: &Layout) -> Result<Header, RecordError> {
         let names: Vec<&str> = s.split(',').map(str::trim).collect();
         for (j, n) in names.iter().enumerate() {
             if n.is_empty() {
@@ -228,7 +481,7 @@ impl Record {
                 return err(
                     line,
                     format!(
-                        "expected a header line (e.g. `t,u,y`), found numbers (`{}`)",
+                        "expected a header line (e.g. `t_s,u_V,y_um`), found numbers (`{}`)",
                         clip(n)
                     ),
                 );
@@ -237,42 +490,130 @@ impl Record {
                 return err(line, format!("header names column `{}` twice", clip(n)));
             }
         }
-        let mut ts = 0;
-        let mut us = Vec::new();
-        let mut ys = Vec::new();
+        let parts: Vec<(&str, Option<&str>)> = names.iter().map(|n| split_unit(n)).collect();
+        let find = |want: &str, role: &str| -> Result<usize, RecordError> {
+            names.iter().position(|n| *n == want.trim()).map_or_else(
+                || {
+                    err(
+                        line,
+                        format!(
+                            "no {role} column `{}` in the header; the columns are {}",
+                            clip(want),
+                            listing(&names)
+                        ),
+                    )
+                },
+                Ok,
+            )
+        };
+        let t_col = match &layout.t {
+            Some(want) => find(want, "time")?,
+            None => {
+                let ts: Vec<usize> = (0..names.len()).filter(|&j| parts[j].0 == "t").collect();
+                match ts.as_slice() {
+                    [j] => *j,
+                    [] => {
+                        return err(
+                            line,
+                            format!(
+                                "header has no `t` column (time: `t` in seconds, or with a unit as in `t_s`, `t_ms`; or choose it with --t-col); the columns are {}",
+                                listing(&names)
+                            ),
+                        )
+                    }
+                    more => {
+                        let cols: Vec<&str> = more.iter().map(|&j| names[j]).collect();
+                        return err(
+                            line,
+                            format!(
+                                "header has {} time columns ({}); choose one with --t-col",
+                                more.len(),
+                                listing(&cols)
+                            ),
+                        );
+                    }
+                }
+            }
+        };
+        let pick = |wanted: &[String], base: char, role: &str, optional: bool| {
+            if wanted.is_empty() {
+                auto_channels(&names, &parts, base, optional, line)
+            } else {
+                wanted.iter().map(|w| find(w, role)).collect()
+            }
+        };
+        let us = pick(&layout.u, 'u', "input", false)?;
+        let ys = pick(&layout.y, 'y', "output", layout.outputs_optional)?;
+        let roles: Vec<(usize, Quantity, &str)> = std::iter::once((t_col, Quantity::Time, "s"))
+            .chain(
+                us.iter()
+                    .map(|&j| (j, Quantity::Voltage, layout.u_unit.as_str())),
+            )
+            .chain(
+                ys.iter()
+                    .map(|&j| (j, Quantity::Length, layout.y_unit.as_str())),
+            )
+            .collect();
+        let mut map = vec![Col::Extra(0); names.len()];
+        let mut seen = vec![false; names.len()];
+        let mut scale = vec![1.0; names.len()];
+        let mut unitless = Vec::new();
+        for (k, &(j, q, default)) in roles.iter().enumerate() {
+            if seen[j] {
+                return err(
+                    line,
+                    format!(
+                        "column `{}` is chosen twice (time, input and output columns must differ)",
+                        clip(names[j])
+                    ),
+                );
+            }
+            seen[j] = true;
+            map[j] = match k {
+                0 => Col::T,
+                k if k <= us.len() => Col::U(k - 1),
+                k => Col::Y(k - 1 - us.len()),
+            };
+            scale[j] = match parts[j].1 {
+                Some(unit) => q
+                    .factor(unit)
+                    .or_else(|m| err(line, format!("column `{}`: {m}", clip(names[j]))))?,
+                None => {
+                    unitless.push(format!("`{}` ({default})", clip(names[j])));
+                    q.factor(default).or_else(|m| {
+                        err(
+                            line,
+                            format!(
+                                "column `{}` states no unit, and the default {} unit: {m}",
+                                clip(names[j]),
+                                q.name()
+                            ),
+                        )
+                    })?
+                }
+            };
+        }
         let mut extras = Vec::new();
         for (j, n) in names.iter().enumerate() {
-            if *n == "t" {
-                ts += 1;
-            } else if let Some(k) = channel(n, 'u') {
-                us.push((j, k));
-            } else if let Some(k) = channel(n, 'y') {
-                ys.push((j, k));
-            } else {
+            if !seen[j] {
+                map[j] = Col::Extra(extras.len());
                 extras.push(n.to_string());
             }
         }
-        if ts == 0 {
-            return err(line, "header has no `t` column (time in seconds)");
-        }
-        let nu = channel_slots(&us, 'u', line)?;
-        let ny = channel_slots(&ys, 'y', line)?;
-        let mut map = Vec::with_capacity(names.len());
-        let mut e = 0;
-        for (j, n) in names.iter().enumerate() {
-            let slot = |v: &[(usize, usize)]| v.iter().find(|p| p.0 == j).map(|p| p.1.max(1) - 1);
-            map.push(if *n == "t" {
-                Col::T
-            } else if let Some(k) = slot(&us) {
-                Col::U(k)
-            } else if let Some(k) = slot(&ys) {
-                Col::Y(k)
-            } else {
-                e += 1;
-                Col::Extra(e - 1)
-            });
-        }
-        Ok((map, nu, ny, extras))
+        let unit_note = (!unitless.is_empty()).then(|| {
+            format!(
+                "no unit in the header for {}: read in the units in parentheses (a header such as `t_s,u_V,y_um` states them)",
+                unitless.join(", ")
+            )
+        });
+        Ok(Header {
+            map,
+            nu: us.len(),
+            ny: ys.len(),
+            extras,
+            scale,
+            unit_note,
+        })
     }
 
     /// Structure and time checks for records built in code.
@@ -407,25 +748,43 @@ impl Record {
                 .iter()
                 .map(|(n, c)| (n.clone(), cut(c)))
                 .collect(),
+            unit_note: self.unit_note.clone(),
         }
     }
 
-    /// CSV text: comments, header, rows (shortest round-trip number format).
+    /// The header names of time, inputs and outputs as [`Record::to_csv`] writes them:
+    /// `t_s`, `u_V` or `u1_V..`, `y_um` or `y1_um..`; without units (`t`, `u`, `y`) when
+    /// the record was read with a unit assumed ([`Record::unit_note`]).
+    pub fn header_names(&self) -> (String, Vec<String>, Vec<String>) {
+        let unit = |q: Quantity| match self.unit_note {
+            None => format!("_{}", q.internal()),
+            Some(_) => String::new(),
+        };
+        let names = |base: char, k: usize, q: Quantity| -> Vec<String> {
+            if k == 1 {
+                vec![format!("{base}{}", unit(q))]
+            } else {
+                (1..=k).map(|i| format!("{base}{i}{}", unit(q))).collect()
+            }
+        };
+        (
+            format!("t{}", unit(Quantity::Time)),
+            names('u', self.u.len(), Quantity::Voltage),
+            names('y', self.y.len(), Quantity::Length),
+        )
+    }
+
+    /// CSV text: comments, header (units as in [`Record::header_names`]), rows (shortest
+    /// round-trip number format).
     pub fn to_csv(&self) -> String {
         let mut s = String::new();
         for c in &self.comments {
             let _ = writeln!(s, "#{c}");
         }
-        let names = |base: char, k: usize| -> Vec<String> {
-            if k == 1 {
-                vec![base.to_string()]
-            } else {
-                (1..=k).map(|i| format!("{base}{i}")).collect()
-            }
-        };
-        let mut header = vec!["t".to_string()];
-        header.extend(names('u', self.u.len()));
-        header.extend(names('y', self.y.len()));
+        let (t, u, y) = self.header_names();
+        let mut header = vec![t];
+        header.extend(u);
+        header.extend(y);
         header.extend(self.extra.iter().map(|(n, _)| n.clone()));
         s.push_str(&header.join(","));
         s.push('\n');
@@ -533,6 +892,172 @@ mod tests {
         assert!(msg("").contains("no header"));
     }
 
+    fn layout(t: Option<&str>, u: &[&str], y: &[&str]) -> Layout {
+        let own = |v: &[&str]| v.iter().map(|s| s.to_string()).collect();
+        Layout {
+            t: t.map(Into::into),
+            u: own(u),
+            y: own(y),
+            ..Layout::default()
+        }
+    }
+
+    fn msg_with(text: &str, l: &Layout) -> String {
+        Record::parse_with(text, l).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn units_in_the_header_are_converted_to_s_volts_um() {
+        let r = Record::parse("t_ms,u_mV,y_nm,r_nm\n0,1500,2500,7\n2,-500,-1000,8\n").unwrap();
+        assert_eq!(r.t, vec![0.0, 2e-3]);
+        assert_eq!(r.u, vec![vec![1.5, -0.5]]);
+        assert_eq!(r.y, vec![vec![2.5, -1.0]]);
+        // Other columns are kept by name, as they are.
+        assert_eq!(r.extra, vec![("r_nm".to_string(), vec![7.0, 8.0])]);
+        assert_eq!(r.unit_note, None);
+        // Spreadsheet forms, metres, micro signs, and the firmware's `volts`.
+        let r = Record::parse("t [s],u1 (V),u2_volts,y1 [m],y2_µm\n0,1,2,1e-6,4\n1,1,2,2e-6,5\n")
+            .unwrap();
+        assert_eq!(r.u, vec![vec![1.0, 1.0], vec![2.0, 2.0]]);
+        assert_eq!(r.y[0], vec![1.0, 2.0]);
+        assert_eq!(r.y[1], vec![4.0, 5.0]);
+        assert_eq!(r.unit_note, None);
+        // Written back in the internal units, named in the header.
+        let back = Record::parse(&r.to_csv()).unwrap();
+        assert!(
+            r.to_csv().starts_with("t_s,u1_V,u2_V,y1_um,y2_um\n"),
+            "{}",
+            r.to_csv()
+        );
+        assert_eq!(back, r);
+    }
+
+    #[test]
+    fn unitless_files_read_in_the_default_units_with_a_note() {
+        let text = "t,u,y\n0,1.5,-123.25\n0.5,2,-124\n";
+        let r = Record::parse(text).unwrap();
+        // Values as they are (no conversion), and the tools are told.
+        assert_eq!((r.u[0][0], r.y[0][0]), (1.5, -123.25));
+        let note = r.unit_note.clone().unwrap();
+        assert!(note.contains("`t` (s), `u` (V), `y` (um)"), "{note}");
+        // Written back without units: the file never claimed any.
+        assert!(r.to_csv().starts_with("t,u,y\n"), "{}", r.to_csv());
+        // Another default for unitless outputs: converted from it, still noted.
+        let l = Layout {
+            y_unit: "nm".into(),
+            ..Layout::default()
+        };
+        let r = Record::parse_with(text, &l).unwrap();
+        assert_eq!(r.y[0][0], -0.12325);
+        assert!(r.unit_note.unwrap().contains("`y` (nm)"));
+        // A stated unit wins over the default.
+        let r = Record::parse_with("t_s,u_V,y_um\n0,1,2\n1,1,2\n", &l).unwrap();
+        assert_eq!((r.y[0][0], r.unit_note), (2.0, None));
+    }
+
+    #[test]
+    fn records_built_in_code_are_written_with_units() {
+        let r = Record::new(vec![0.0, 1e-3], vec![vec![1.0, 2.0]], vec![vec![3.0, 4.0]]).unwrap();
+        assert_eq!(r.to_csv(), "t_s,u_V,y_um\n0,1,3\n0.001,2,4\n");
+    }
+
+    #[test]
+    fn unknown_and_misplaced_units_are_refused() {
+        assert_eq!(
+            msg("t_s,u_V,y [ft]\n0,1,2\n1,1,2\n"),
+            "line 1: column `y [ft]`: unknown length unit `ft` (accepted: um, µm, μm, nm, mm, m)"
+        );
+        assert!(msg("t [fortnight],u,y\n0,1,2\n1,1,2\n").contains("unknown time unit `fortnight`"));
+        assert_eq!(
+            msg("t_s,u_um,y_um\n0,1,2\n1,1,2\n"),
+            "line 1: column `u_um`: `um` is a length unit, not a voltage unit (V, volts, mV)"
+        );
+        // `_ft` is no unit this reader knows, so `y_ft` is not taken for an output.
+        let e = msg("t_s,u_V,y_ft\n0,1,2\n1,1,2\n");
+        assert!(
+            e.contains("no `y` column") && e.contains("`y_ft`: unknown unit `ft`"),
+            "{e}"
+        );
+        // A default unit for unitless columns is checked the same way.
+        let l = Layout {
+            u_unit: "N".into(),
+            ..Layout::default()
+        };
+        let e = msg_with("t,u,y\n0,1,2\n1,1,2\n", &l);
+        assert!(
+            e.contains("column `u` states no unit") && e.contains("unknown voltage unit `N`"),
+            "{e}"
+        );
+        // Two time columns, or the same column twice: which one is meant is not guessed.
+        assert!(msg("t,t_s,u,y\n0,0,1,2\n1,1,1,2\n").contains("2 time columns"));
+        assert!(msg("t,u_V,u_mV,y\n0,0,1,2\n1,1,1,2\n").contains("2 `u` columns"));
+        let e = msg_with("t,a,b\n0,1,2\n1,1,2\n", &layout(None, &["a"], &["a"]));
+        assert!(e.contains("`a` is chosen twice"), "{e}");
+    }
+
+    #[test]
+    fn foreign_columns_are_chosen_by_name() {
+        let text =
+            "# logger export\ntime [ms],drive_mV,pos (nm),temp\n0,100,2000,21\n10,200,4000,21\n";
+        let l = layout(Some("time [ms]"), &["drive_mV"], &["pos (nm)"]);
+        let r = Record::parse_with(text, &l).unwrap();
+        assert_eq!(r.t, vec![0.0, 0.01]);
+        assert_eq!(r.u, vec![vec![0.1, 0.2]]);
+        assert_eq!(r.y, vec![vec![2.0, 4.0]]);
+        assert_eq!(r.extra, vec![("temp".to_string(), vec![21.0, 21.0])]);
+        assert_eq!(r.unit_note, None);
+        // Without the choice: the missing role is named with the columns present.
+        assert_eq!(
+            msg(text),
+            "line 2: header has no `t` column (time: `t` in seconds, or with a unit as in `t_s`, \
+             `t_ms`; or choose it with --t-col); the columns are `time [ms]`, `drive_mV`, \
+             `pos (nm)`, `temp`"
+        );
+        let e = msg_with(
+            text,
+            &layout(Some("time [ms]"), &["drive_mV"], &["Position"]),
+        );
+        assert_eq!(
+            e,
+            "line 2: no output column `Position` in the header; the columns are `time [ms]`, \
+             `drive_mV`, `pos (nm)`, `temp`"
+        );
+        // Unitless chosen columns take the default units and say so.
+        let r =
+            Record::parse_with(text, &layout(Some("time [ms]"), &["drive_mV"], &["temp"])).unwrap();
+        assert!(r.unit_note.unwrap().contains("`temp` (um)"));
+    }
+
+    #[test]
+    fn serial_record_csv_reads_as_written() {
+        // `piezo serial record`'s header: the firmware's names end in their unit.
+        let text = "# piezo serial record\ni,t_s,ref_um,y_um,u_volts,error_um\n0,-1e-5,1,2,3,4\n1,0e0,1,2,3,4\n2,1e-5,1,2,3,4\n";
+        let r = Record::parse(text).unwrap();
+        assert_eq!(r.t, vec![-1e-5, 0.0, 1e-5]);
+        assert_eq!((r.u, r.y), (vec![vec![3.0; 3]], vec![vec![2.0; 3]]));
+        let names: Vec<&str> = r.extra.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["i", "ref_um", "error_um"]);
+        assert_eq!(r.unit_note, None);
+        // Both axes of an XY build (`u_volts`, `u1_volts`): chosen, not guessed.
+        let xy = "t_s,u_volts,u1_volts,y_um,y1_um\n0,1,2,3,4\n1,1,2,3,4\n";
+        assert!(msg(xy).contains("mixes `u` with numbered"));
+        let l = layout(None, &["u_volts", "u1_volts"], &["y_um", "y1_um"]);
+        let r = Record::parse_with(xy, &l).unwrap();
+        assert_eq!((r.u.len(), r.y.len(), r.y[1][0]), (2, 2, 4.0));
+    }
+
+    #[test]
+    fn input_records_may_lack_outputs_when_allowed() {
+        let text = "t_s,u1_V,u2_V\n0,1,2\n1,1,2\n";
+        assert!(msg(text).contains("no `y` column"));
+        let l = Layout {
+            outputs_optional: true,
+            ..Layout::default()
+        };
+        let r = Record::parse_with(text, &l).unwrap();
+        assert_eq!((r.u.len(), r.y.len()), (2, 0));
+    }
+
     #[test]
     fn accepts_rounded_time_stamps() {
         let r =
@@ -563,6 +1088,8 @@ mod tests {
                     let axes = if sub.ends_with("fsm-benchmark") { 3 } else { 1 };
                     assert_eq!((r.u.len(), r.y.len()), (axes, axes), "{}", f.display());
                     assert!(!r.comments.is_empty());
+                    // Written before units were named: read as they are, with a note.
+                    assert!(r.unit_note.is_some(), "{}", f.display());
                     n += 1;
                 }
             }

@@ -66,3 +66,245 @@ fn periodic_validation_reports_steady_state_and_from_rest() {
     assert_eq!(y_rest.len(), p.t.len());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `piezo fit --model cbw --json` on `train`: the report.
+fn fit_json(train: &std::path::Path, more: &[&str]) -> serde_json::Value {
+    let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
+        &"fit",
+        &"--model",
+        &"cbw",
+        &"--json",
+        &"--quiet",
+        &"--generations",
+        &"40",
+        &"--train",
+        &train,
+    ];
+    for a in more {
+        args.push(a);
+    }
+    serde_json::from_slice(&cli_support::piezo(&args).stdout).unwrap()
+}
+
+/// The fitted CBW parameters of a report.
+fn params(j: &serde_json::Value) -> Vec<f64> {
+    j["parts"][0]["fit"]["params"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p[1].as_f64().unwrap())
+        .collect()
+}
+
+/// `a` and `b` agree to `tol` relative.
+fn same(a: &[f64], b: &[f64], tol: f64) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).abs() <= tol * x.abs().max(y.abs()))
+}
+
+/// The record of [`records`] with other units and column names: `header`, and each row's
+/// `t`, `u`, `y` scaled by `scale`.
+fn rewrite(from: &std::path::Path, to: &std::path::Path, header: &str, scale: [f64; 3]) {
+    let r = Record::read(from).unwrap();
+    let mut s = format!("# the same record, other units\n{header}\n");
+    for i in 0..r.len() {
+        s += &format!(
+            "{},{},{},21.5\n",
+            r.t[i] * scale[0],
+            r.u[0][i] * scale[1],
+            r.y[0][i] * scale[2]
+        );
+    }
+    std::fs::write(to, s).unwrap();
+}
+
+#[test]
+fn a_record_in_nm_fits_the_same_model_as_in_um() {
+    let dir = std::env::temp_dir().join(format!("fit_cli_units_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    records(&dir);
+    let train = dir.join("train.csv");
+    assert!(std::fs::read_to_string(&train)
+        .unwrap()
+        .starts_with("t_s,u_V,y_um\n"));
+    let um = fit_json(&train, &[]);
+    assert_eq!(
+        (um["input_unit"].as_str(), um["output_unit"].as_str()),
+        (Some("V"), Some("um"))
+    );
+    // The same samples in ms, mV and nm: converted on reading, the same model in um and V.
+    let nm = dir.join("nm.csv");
+    rewrite(&train, &nm, "t_ms,u_mV,y_nm,temp_C", [1e3, 1e3, 1e3]);
+    let j = fit_json(&nm, &[]);
+    assert!(
+        same(&params(&j), &params(&um), 1e-6),
+        "{:?} vs {:?}",
+        params(&j),
+        params(&um)
+    );
+    assert_eq!(j["output_unit"].as_str(), Some("um"));
+    let rmse = |j: &serde_json::Value| j["train_metrics"][0]["metrics"]["rmse"].as_f64().unwrap();
+    // In um, like the fit on the um record (the loop spans about 16 um).
+    assert!(
+        rmse(&j) < 1e-3 && (rmse(&j) - rmse(&um)).abs() < 1e-7,
+        "{} vs {}",
+        rmse(&j),
+        rmse(&um)
+    );
+    // A foreign export: columns chosen by name, units in brackets.
+    let foreign = dir.join("foreign.csv");
+    rewrite(
+        &train,
+        &foreign,
+        "Time [s],Drive (V),Sensor [m],Temp",
+        [1.0, 1.0, 1e-6],
+    );
+    let j = fit_json(
+        &foreign,
+        &[
+            "--t-col",
+            "Time [s]",
+            "--u-col",
+            "Drive (V)",
+            "--y-col",
+            "Sensor [m]",
+        ],
+    );
+    assert!(
+        same(&params(&j), &params(&um), 1e-6),
+        "{:?} vs {:?}",
+        params(&j),
+        params(&um)
+    );
+    // Unitless outputs in nm, said with --output-unit.
+    let bare = dir.join("bare.csv");
+    rewrite(&train, &bare, "t,u,y,temp", [1.0, 1.0, 1e3]);
+    let j = fit_json(&bare, &["--output-unit", "nm"]);
+    assert!(
+        same(&params(&j), &params(&um), 1e-6),
+        "{:?} vs {:?}",
+        params(&j),
+        params(&um)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Runs `piezo` expecting failure; its stderr.
+fn refused(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_piezo"))
+        .args(args.iter().map(|a| a.as_ref()))
+        .output()
+        .unwrap();
+    let shown: Vec<_> = args.iter().map(|a| a.as_ref().to_string_lossy()).collect();
+    assert!(!out.status.success(), "{shown:?} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn missing_columns_and_unknown_units_are_named() {
+    let dir = std::env::temp_dir().join(format!("fit_cli_refused_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    records(&dir);
+    let train = dir.join("train.csv");
+    let foreign = dir.join("foreign.csv");
+    rewrite(
+        &train,
+        &foreign,
+        "Time [s],Drive (V),Sensor [ft],Temp",
+        [1.0, 1.0, 1.0],
+    );
+    let fit = [
+        &"fit" as &dyn AsRef<std::ffi::OsStr>,
+        &"--model",
+        &"cbw",
+        &"--quiet",
+        &"--train",
+        &foreign,
+    ];
+    let e = refused(&fit);
+    assert!(
+        e.contains("no `t` column")
+            && e.contains("the columns are `Time [s]`, `Drive (V)`, `Sensor [ft]`, `Temp`"),
+        "{e}"
+    );
+    let mut chosen = fit.to_vec();
+    chosen.extend([
+        &"--t-col" as &dyn AsRef<std::ffi::OsStr>,
+        &"Time [s]",
+        &"--u-col",
+        &"Drive (V)",
+        &"--y-col",
+        &"Position",
+    ]);
+    let e = refused(&chosen);
+    assert!(
+        e.contains("no output column `Position` in the header"),
+        "{e}"
+    );
+    chosen.pop();
+    chosen.push(&"Sensor [ft]");
+    let e = refused(&chosen);
+    assert!(
+        e.contains("column `Sensor [ft]`: unknown length unit `ft`"),
+        "{e}"
+    );
+    // diagnose and predict take the same options and the same reader.
+    let e = refused(&[
+        &"diagnose",
+        &"--train",
+        &foreign,
+        &"--t-col",
+        &"Time [s]",
+        &"--u-col",
+        &"Drive (V)",
+        &"--y-col",
+        &"Sensor [ft]",
+    ]);
+    assert!(e.contains("unknown length unit `ft`"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_sim_out_record_is_read_by_fit() {
+    let dir = std::env::temp_dir().join(format!("fit_cli_sim_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    cli_support::piezo(&[
+        &"sim",
+        &"--scenario",
+        &"sine-10hz",
+        &"--controller",
+        &"open-loop",
+        &"--out",
+        &dir,
+    ]);
+    let rec = dir.join("sine-10hz_open-loop_record.csv");
+    let text = std::fs::read_to_string(&rec).unwrap();
+    assert!(text.starts_with("t_s,u_V,y_um\n"), "{:.100}", text);
+    let r = Record::read(&rec).unwrap();
+    assert_eq!(r.unit_note, None);
+    let out = cli_support::piezo(&[
+        &"fit",
+        &"--model",
+        &"cbw",
+        &"--json",
+        &"--quiet",
+        &"--generations",
+        &"20",
+        &"--lm-iterations",
+        &"10",
+        &"--train",
+        &rec,
+    ]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // The simulated stage's open-loop response is a hysteresis loop CBW describes well:
+    // the fit reads the record's volts and um (a wrong column would not fit).
+    assert_eq!(
+        j["train_metrics"][0]["metrics"]["samples"].as_u64(),
+        Some(r.len() as u64)
+    );
+    let re = j["train_metrics"][0]["metrics"]["re_pct"].as_f64().unwrap();
+    assert!(re < 5.0, "relative error {re} %");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -75,7 +75,7 @@ fn a_fitted_cbw_predicts_what_fit_simulated() {
     ));
     let fit = Record::read(dir.join("p.csv")).unwrap();
     let text = std::fs::read_to_string(dir.join("y.csv")).unwrap();
-    assert!(text.lines().any(|l| l == "t,y"), "{}", &text[..200]);
+    assert!(text.lines().any(|l| l == "t_s,y_um"), "{}", &text[..200]);
     let ys: Vec<f64> = text
         .lines()
         .filter(|l| !l.starts_with('#') && !l.starts_with('t'))
@@ -151,7 +151,7 @@ fn state_space_fit_and_predict_with_clear_errors() {
         ],
     ));
     let text = std::fs::read_to_string(dir.join("y.csv")).unwrap();
-    assert!(text.lines().any(|l| l == "t,y1,y2"));
+    assert!(text.lines().any(|l| l == "t_s,y1_um,y2_um"), "{text:.300}");
     // Scored when the record has outputs: the right order, small error over the last period.
     let s = ok(&piezo(
         &["predict"],

@@ -34,6 +34,8 @@ struct Fake {
     ctl: control::Ctl,
     y_um: f64,
     dac: i32,
+    /// ADC code at 0 um (0: the stage at rest reads the bottom code, out of range).
+    code_at_zero: f64,
 }
 
 impl Fake {
@@ -42,6 +44,7 @@ impl Fake {
             ctl: control::Ctl::new(control::c(control::SAMPLE_HZ as f64)),
             y_um: 0.0,
             dac: 0,
+            code_at_zero: 0.0,
         }
     }
 
@@ -49,7 +52,7 @@ impl Fake {
         for _ in 0..periods {
             let volts = self.dac as f64 * 150.0 / control::DAC_MAX as f64;
             self.y_um += 0.3 * (0.16 * volts - self.y_um);
-            let code = (self.y_um * 655.35).clamp(0.0, 65535.0) as i32;
+            let code = (self.code_at_zero + self.y_um * 655.35).clamp(0.0, 65535.0) as i32;
             [self.dac] = self.ctl.lp.step([code]);
             self.ctl.record([code], [self.dac]);
             self.ctl.timing.step.record(40);
@@ -117,10 +120,14 @@ fn serve(s: &mut (impl Read + Write), fake: &mut Fake) {
 /// Serves TCP connections one after another on one firmware state, like a UART that stays
 /// up while host programs come and go.
 fn spawn_firmware() -> String {
+    spawn_firmware_with(Fake::new())
+}
+
+/// [`spawn_firmware`] on a given firmware and stage state.
+fn spawn_firmware_with(mut fake: Fake) -> String {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     thread::spawn(move || {
-        let mut fake = Fake::new();
         for mut s in listener.incoming().flatten() {
             serve(&mut s, &mut fake);
         }
@@ -345,6 +352,15 @@ fn the_recorder_comes_back_as_csv_with_units() {
         &rows[62..66]
     );
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    // The header is the record convention: `t_s`, `u_volts` and `y_um` are the time,
+    // input and output `piezo fit` reads; the other signals are kept by name.
+    let r = hal_sim::record::Record::read(&csv).unwrap();
+    assert_eq!(r.unit_note, None);
+    assert_eq!(r.t[64], 0.0);
+    assert_eq!(r.u, vec![rows.iter().map(|r| r[4]).collect::<Vec<_>>()]);
+    assert_eq!(r.y, vec![rows.iter().map(|r| r[3]).collect::<Vec<_>>()]);
+    let extras: Vec<&str> = r.extra.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(extras, ["i", "ref_um", "ff_volts"]);
 
     // The same capture again without arming.
     let mut c = connect(&conn(&addr)).unwrap();
@@ -623,6 +639,88 @@ fn a_divided_capture_spans_longer() {
     assert!(e.to_string().contains("firmware error 8"), "{e}");
 }
 
+/// `piezo serial record` then `piezo fit` on its CSV, as at the bench: the fake stage is
+/// 0.16 um/V with a lag far shorter than a frame, so the fit must find that gain.
+#[test]
+fn a_recorded_capture_is_fitted_by_piezo_fit() {
+    // The sensor reads mid-range at rest (at its bottom code the firmware latches a
+    // sensor-range fault that holds the output at 0 V).
+    let addr = spawn_firmware_with(Fake {
+        code_at_zero: 32768.0,
+        ..Fake::new()
+    });
+    run(
+        &addr,
+        Action::Mode {
+            law: "open-loop".into(),
+            ff: None,
+        },
+    )
+    .unwrap();
+    run(
+        &addr,
+        Action::Wave(WaveCmd::Sine(WaveArgs {
+            amplitude: 5.0,
+            freq: 16.0,
+            offset: 10.0,
+        })),
+    )
+    .unwrap();
+    let csv = tmp("fit-rec.csv");
+    run(
+        &addr,
+        Action::Record(RecordArgs {
+            signals: vec!["ref_um".into(), "y_um".into(), "u_volts".into()],
+            out: csv.clone(),
+            ..ref_capture("unused.csv", 20)
+        }),
+    )
+    .unwrap();
+    let fault = run(
+        &addr,
+        Action::Send {
+            lines: vec!["fault".into()],
+        },
+    )
+    .unwrap();
+    assert!(fault.starts_with("ok fault none"), "{fault}");
+    let out = Process::new(env!("CARGO_BIN_EXE_piezo"))
+        .args([
+            "fit",
+            "--model",
+            "pi",
+            "--json",
+            "--quiet",
+            "--generations",
+            "20",
+        ])
+        .arg("--train")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Units stated in the header: no note about assumed ones.
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("note"));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let m = &j["train_metrics"][0]["metrics"];
+    assert_eq!(m["samples"].as_u64(), Some(1024));
+    assert_eq!(j["sample_rate_hz"].as_f64(), Some(5000.0));
+    // A real excitation (tens of volts, about 12 um), and the fit explains y_um from
+    // u_volts (the linear stage: a few per cent at most; the reference or a constant
+    // column in their place would not fit).
+    let rec = hal_sim::record::Record::read(&csv).unwrap();
+    let span = |v: &[f64]| {
+        v.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+            - v.iter().cloned().fold(f64::INFINITY, f64::min)
+    };
+    assert!(span(&rec.u[0]) > 10.0 && span(&rec.y[0]) > 1.0);
+    assert!(m["re_pct"].as_f64().unwrap() < 2.0, "{m}");
+}
+
 /// A report in the shape `piezo fit --model cbw --out <dir>` writes (`fit.json`).
 fn fit_json(name: &str, model: &str, params: &[(&str, f64)]) -> PathBuf {
     let params: Vec<serde_json::Value> = params
@@ -722,6 +820,40 @@ fn load_fit_sends_the_identified_cbw_and_params_reads_it_back() {
     assert!(msg.contains("error 8"), "{msg}");
     let still = run(&addr, params()).unwrap();
     assert!((param(&still, "cbw_d") - 0.21).abs() < 1e-6, "{still}");
+
+    // A report in nm is converted to the firmware's um (d and alpha / 1000), never sent
+    // 1000 times too large; one in an unknown unit is refused and nothing is sent.
+    let with_units = |name: &str, d: f64, alpha: f64, unit: &str| {
+        let path = fit_json(
+            name,
+            "cbw",
+            &[
+                ("d", d),
+                ("alpha", alpha),
+                ("beta", 0.005),
+                ("gamma/beta", 0.4),
+            ],
+        );
+        let mut j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        j["input_unit"] = "V".into();
+        j["output_unit"] = unit.into();
+        std::fs::write(&path, j.to_string()).unwrap();
+        path
+    };
+    let nm = with_units("fit-nm.json", 230.0, 65.0, "nm");
+    let out = run(&addr, Action::LoadFit { fit: nm }).unwrap();
+    assert!(out.contains("ok cbw 0.23 0.065 0.005 0.002"), "{out}");
+    assert!(
+        out.contains("in nm and V was converted to um and V"),
+        "{out}"
+    );
+    assert!(out.contains("offset -0.0005 um is not sent"), "{out}");
+    let ft = with_units("fit-ft.json", 0.25, 0.06, "ft");
+    let msg = format!("{:#}", run(&addr, Action::LoadFit { fit: ft }).unwrap_err());
+    assert!(msg.contains("unknown length unit `ft`"), "{msg}");
+    let still = run(&addr, params()).unwrap();
+    assert!((param(&still, "cbw_d") - 0.23).abs() < 1e-6, "{still}");
 
     // Reports without a CBW fit or with a key missing: named, nothing sent.
     let pi = fit_json("fit-pi.json", "pi", &[("c2", 0.1)]);

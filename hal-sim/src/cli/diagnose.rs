@@ -7,14 +7,15 @@
 //! ```
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+use super::fit_args::Columns;
 use crate::ident::diagnose::{self, Diagnosis, Options, Signals};
-use crate::record::Record;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yk`); all parameters are fitted on it.
+    /// Training record (CSV: `t_s,u_V,y_um` or `t_s,u1_V..uk_V,y1_um..yk_um`; units
+    /// optional); all parameters are fitted on it.
     /// Repeat for several records: one model is fitted on all of them.
     #[arg(long, required = true)]
     pub train: Vec<PathBuf>,
@@ -36,15 +37,19 @@ pub struct Args {
     /// Write plots (loops before/after, residual against the cause's signal) into this folder.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Columns and units of the records.
+    #[command(flatten)]
+    pub columns: Columns,
 }
 
-fn read(path: &PathBuf) -> Result<Signals> {
-    let r = Record::read(path)?;
+fn read(path: &Path, columns: &Columns) -> Result<Signals> {
+    let r = columns.read(path, false)?;
     Signals::new(r.t, r.u, r.y).with_context(|| format!("record {}", path.display()))
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let records = args.train.iter().map(read).collect::<Result<Vec<_>>>()?;
+    let load = |p: &PathBuf| read(p, &args.columns);
+    let records = args.train.iter().map(load).collect::<Result<Vec<_>>>()?;
     let (train, valid, split_note) = if args.valid.is_empty() {
         let f = args.split.unwrap_or(0.5);
         anyhow::ensure!(
@@ -73,7 +78,7 @@ pub fn run(args: Args) -> Result<()> {
             args.split.is_none(),
             "--split and --valid exclude each other"
         );
-        let valid = args.valid.iter().map(read).collect::<Result<Vec<_>>>()?;
+        let valid = args.valid.iter().map(load).collect::<Result<Vec<_>>>()?;
         (records, valid, None)
     };
     let d = diagnose::diagnose_records(&train, &valid, &Options::default())?;

@@ -5,7 +5,7 @@ use crate::ident::fit::{fit_siso, metrics, models, FitOptions, Fitted, Metrics};
 use crate::ident::multibw::{self, MultiBwFit};
 pub use crate::ident::saved::{simulate, Part, FORMAT};
 use crate::plot::{write_grid, Plot};
-use crate::record::Record;
+use crate::record::{Quantity, Record};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::path::Path;
@@ -234,8 +234,12 @@ pub fn run(args: Args) -> Result<()> {
         args.linear
     );
     let t0 = std::time::Instant::now();
-    let train = Record::read(train_path)?;
-    let valid = args.valid.as_ref().map(Record::read).transpose()?;
+    let train = args.columns.read(train_path, args.quiet)?;
+    let valid = args
+        .valid
+        .as_ref()
+        .map(|v| args.columns.read(v, args.quiet))
+        .transpose()?;
     if let Some(v) = &valid {
         anyhow::ensure!(
             v.u.len() >= train.u.len().min(v.u.len()) && v.y.len() == train.y.len(),
@@ -259,7 +263,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     // Two-step Hammerstein: linear part from its own record first.
     let linear_step = if let Some(path) = &args.linear_train {
-        let rec = Record::read(path)?;
+        let rec = args.columns.read(path, args.quiet)?;
         anyhow::ensure!(
             rec.u.len() == 1 && rec.y.len() == 1,
             "--linear-train {}: needs one input and one output",
@@ -300,8 +304,8 @@ pub fn run(args: Args) -> Result<()> {
         sample_rate_hz: train.sample_rate_hz(),
         inputs: train.u.len(),
         outputs: train.y.len(),
-        input_unit: args.input_unit.clone(),
-        output_unit: args.output_unit.clone(),
+        input_unit: Quantity::Voltage.internal().into(),
+        output_unit: Quantity::Length.internal().into(),
         train: train_path.display().to_string(),
         valid: args.valid.as_ref().map(|p| p.display().to_string()),
         linear_step,
@@ -362,6 +366,7 @@ fn write_prediction(
         u: rec.u.clone(),
         y: sim.to_vec(),
         extra: Vec::new(),
+        unit_note: rec.unit_note.clone(),
     };
     for (i, y) in rec.y.iter().enumerate() {
         out.extra.push((

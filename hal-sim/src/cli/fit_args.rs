@@ -1,14 +1,87 @@
 //! `piezo fit`'s command line (its own file so that the fitting modules can take it without
 //! importing the command that dispatches to them).
 use crate::ident::optim::Optimizer;
-use std::path::PathBuf;
+use crate::record::{Layout, Record};
+use std::path::{Path, PathBuf};
+
+/// Where the records keep time, inputs and outputs, and the units of columns that name
+/// none: one definition for `piezo fit`, `diagnose` and `predict` (the convention is
+/// `crate::record`'s).
+#[derive(clap::Args, Debug, Clone, PartialEq)]
+pub struct Columns {
+    /// Time column, by its header name (default: `t` or `t_<unit>`, e.g. `t_s`, `t_ms`).
+    #[arg(long, value_name = "NAME")]
+    pub t_col: Option<String>,
+    /// Input columns by header name, in channel order: repeat or a comma list (default:
+    /// `u` or `u1..uk`, with or without a unit, e.g. `u_V`, `u_volts`, `u_mV`).
+    #[arg(long, value_name = "NAME", value_delimiter = ',')]
+    pub u_col: Vec<String>,
+    /// Output columns by header name, in channel order: repeat or a comma list (default:
+    /// `y` or `y1..yn`, with or without a unit, e.g. `y_um`, `y_nm`, `y_m`).
+    #[arg(long, value_name = "NAME", value_delimiter = ',')]
+    pub y_col: Vec<String>,
+    /// Unit of input columns whose header names none (V or mV); read values are in V.
+    #[arg(long, default_value = "V")]
+    pub input_unit: String,
+    /// Unit of output columns whose header names none (um, nm, mm or m); read values are
+    /// in um.
+    #[arg(long, default_value = "um")]
+    pub output_unit: String,
+}
+
+impl Default for Columns {
+    fn default() -> Self {
+        let l = Layout::default();
+        Self {
+            t_col: None,
+            u_col: Vec::new(),
+            y_col: Vec::new(),
+            input_unit: l.u_unit,
+            output_unit: l.y_unit,
+        }
+    }
+}
+
+impl Columns {
+    /// The record layout these options select; `outputs_optional` for input records.
+    pub fn layout(&self, outputs_optional: bool) -> Layout {
+        Layout {
+            t: self.t_col.clone(),
+            u: self.u_col.clone(),
+            y: self.y_col.clone(),
+            u_unit: self.input_unit.clone(),
+            y_unit: self.output_unit.clone(),
+            outputs_optional,
+        }
+    }
+
+    /// Reads a record (with outputs) through `crate::record`; a unit the header did not
+    /// state is said on stderr unless `quiet`.
+    pub fn read(&self, path: &Path, quiet: bool) -> anyhow::Result<Record> {
+        self.read_layout(path, &self.layout(false), quiet)
+    }
+
+    /// [`Columns::read`] for a record that may hold inputs only (`y` then empty).
+    pub fn read_inputs(&self, path: &Path, quiet: bool) -> anyhow::Result<Record> {
+        self.read_layout(path, &self.layout(true), quiet)
+    }
+
+    fn read_layout(&self, path: &Path, layout: &Layout, quiet: bool) -> anyhow::Result<Record> {
+        let r = Record::read_with(path, layout)?;
+        if let (Some(note), false) = (&r.unit_note, quiet) {
+            eprintln!("note: record {}: {note}", path.display());
+        }
+        Ok(r)
+    }
+}
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Model name (`piezo fit --list` shows them all), e.g. cbw, gbw, pi, structural-bw.
     #[arg(long, required_unless_present = "list")]
     pub model: Option<String>,
-    /// Training record (CSV: `t,u,y` or `t,u1..uk,y1..yn`). The state-space models
+    /// Training record (CSV: `t_s,u_V,y_um` or `t_s,u1_V..uk_V,y1_um..yn_um`; units
+    /// optional; other columns with --t-col, --u-col, --y-col). The state-space models
     /// (`ss`, `hammerstein-ss`, `scheduled-ss`) take several (repeat `--train`): one model
     /// for all.
     #[arg(long, required_unless_present = "list")]
@@ -27,12 +100,9 @@ pub struct Args {
     /// `scheduled-ss`: time constant of the running input RMS that schedules the model (s).
     #[arg(long, default_value_t = 0.15)]
     pub schedule_tau_s: f64,
-    /// Unit of the input columns, written to fit.json.
-    #[arg(long, default_value = "V")]
-    pub input_unit: String,
-    /// Unit of the output columns, written to fit.json.
-    #[arg(long, default_value = "um")]
-    pub output_unit: String,
+    /// Columns and units of the records.
+    #[command(flatten)]
+    pub columns: Columns,
     /// Validation record, simulated with the identified model (never used for fitting).
     #[arg(long)]
     pub valid: Option<PathBuf>,

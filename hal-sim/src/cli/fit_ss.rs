@@ -8,7 +8,7 @@ use crate::ident::saved::{score_last_period, Loaded};
 use crate::ident::ss::frf::{self, PeriodicSpectra};
 use crate::ident::ss::saved::SsJson;
 use crate::ident::ss::{identify, SsOptions};
-use crate::record::Record;
+use crate::record::{Quantity, Record};
 use anyhow::{Context, Result};
 
 fn read_all(args: &Args) -> Result<Vec<Record>> {
@@ -16,7 +16,10 @@ fn read_all(args: &Args) -> Result<Vec<Record>> {
         !args.train.is_empty(),
         "--train is required (repeat it for several records)"
     );
-    args.train.iter().map(Record::read).collect()
+    args.train
+        .iter()
+        .map(|p| args.columns.read(p, args.quiet))
+        .collect()
 }
 
 pub fn run(args: &Args) -> Result<()> {
@@ -52,7 +55,7 @@ pub fn run(args: &Args) -> Result<()> {
             "BLA over the training records: noise {:.4e}, nonlinear distortion {} {} RMS per period",
             l.noise_rms,
             l.distortion_rms.map_or("n/a".into(), |d| format!("{d:.4e}")),
-            args.output_unit
+            Quantity::Length.internal()
         );
     }
     let fit = identify(&recs, &opts)?;
@@ -70,19 +73,19 @@ pub fn run(args: &Args) -> Result<()> {
     let saved = SsJson::new(
         &fit.model,
         fit.fs_hz,
-        (&args.input_unit, &args.output_unit),
+        (Quantity::Voltage.internal(), Quantity::Length.internal()),
         serde_json::Value::Null,
     )
     .with_schedule(fit.schedule.clone());
     let loaded = Loaded::Ss(Box::new(saved.clone()));
     if let Some(v) = &args.valid {
-        let rec = Record::read(v)?;
+        let rec = args.columns.read(v, args.quiet)?;
         let sim = loaded.simulate(&rec)?;
         let (per_output, mean) = score_last_period(&rec, &sim);
         println!(
             "valid {}: RMSE over the last period {mean:.4e} {} (per output {})",
             v.display(),
-            args.output_unit,
+            Quantity::Length.internal(),
             super::predict::list(&per_output)
         );
         report["valid"] = serde_json::json!({"record": v.display().to_string(), "rmse_last_period": per_output, "mean": mean});
@@ -94,7 +97,7 @@ pub fn run(args: &Args) -> Result<()> {
         recs.len(),
         fit.linear_rms,
         fit.hammerstein_rms.map_or(String::new(), |h| format!(", hammerstein {h:.4e}")),
-        args.output_unit
+        Quantity::Length.internal()
     );
     for (f, p) in &fit.model.fronts.iter().enumerate().collect::<Vec<_>>() {
         println!("  u{} hysteresis {}: {:?}", f + 1, p.def.name, p.params);

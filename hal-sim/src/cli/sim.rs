@@ -1,7 +1,8 @@
 //! `piezo sim`: runs scenarios x controllers on the simulated stage and prints tracking
 //! metrics; `--json` for machines, `--out DIR` for CSV time series, SVG plots and each run
-//! as a `piezo fit` record (`<scenario>_<controller>_record.csv`: t, u = applied volts,
-//! y = measured um).
+//! as a `piezo fit` record (`<scenario>_<controller>_record.csv`: `t_s,u_V,y_um`, applied
+//! volts and measured position in the convention of `crate::record`; the time series
+//! `<scenario>_<controller>.csv` names its units the same way).
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::io::Write;
@@ -265,7 +266,7 @@ fn write_outputs(dir: &Path, r: &RunResult, rec: &Record) -> Result<()> {
     let n_ax = rec.reference.len();
     let mut header = String::from("t_s");
     for i in 0..n_ax {
-        header += &format!(",ref{i}_um,pos{i}_um,meas{i}_um,volts{i},err{i}_um");
+        header += &format!(",ref{i}_um,pos{i}_um,meas{i}_um,volts{i}_V,err{i}_um");
     }
     writeln!(f, "{header}")?;
     for k in 0..rec.t.len() {

@@ -6,7 +6,7 @@ use crate::ident::multibw::MultiBwFit;
 use crate::ident::ss::frf::detect_period;
 use crate::ident::ss::saved::SsJson;
 use crate::numeric::rmse;
-use crate::record::Record;
+use crate::record::{Quantity, Record};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use serde_json::Value;
@@ -82,6 +82,32 @@ fn num(v: &Value, key: &str, path: &str) -> Result<f64> {
         .with_context(|| format!("{path}: `{key}` is not a number"))
 }
 
+/// The models are simulated in V and um (what `crate::record` reads records in): a report
+/// in other units (written by hand or by another tool) is refused rather than run off by a
+/// factor; one without units (older `piezo fit`) is taken as V and um.
+fn check_units(v: &Value, path: &str) -> Result<()> {
+    for (key, q) in [
+        ("input_unit", Quantity::Voltage),
+        ("output_unit", Quantity::Length),
+    ] {
+        let Some(unit) = v.get(key).filter(|u| !u.is_null()) else {
+            continue;
+        };
+        let unit = unit
+            .as_str()
+            .with_context(|| format!("{path}: `{key}` is not a unit name"))?;
+        let f = q
+            .factor(unit.trim())
+            .map_err(|e| anyhow::anyhow!("{path}: `{key}`: {e}"))?;
+        anyhow::ensure!(
+            f == 1.0,
+            "{path}: `{key}` is {unit}; models are simulated in {} (refit on a record whose header names its units, which `piezo fit` converts)",
+            q.internal()
+        );
+    }
+    Ok(())
+}
+
 /// Rebuilds a classic fit part from its JSON (`Part` as `piezo fit` writes it).
 fn part(v: &Value, path: &str) -> Result<Part> {
     let fit = field(v, "fit", path)?;
@@ -146,6 +172,7 @@ impl Loaded {
         let v: Value =
             serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
         let p = path.display().to_string();
+        check_units(&v, &p)?;
         let model = field(&v, "model", &p)?.as_str().unwrap_or_default();
         if handles(model) {
             let s: SsJson = serde_json::from_value(v)

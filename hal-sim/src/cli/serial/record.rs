@@ -64,7 +64,9 @@ pub struct RecordArgs {
     /// Read with the text `rec read` lines instead of the binary `rec bin` packets.
     #[arg(long)]
     pub text: bool,
-    /// CSV file: `i,t_s,<signal>...`, `#` lines say what and the units.
+    /// CSV file: `i,t_s,<signal>...` in the record convention of `piezo fit` (each signal
+    /// name ends in its unit: `t_s`, `u_volts` and `y_um` are the time, input and output
+    /// `piezo fit` reads); `#` lines say what was recorded.
     #[arg(long)]
     pub out: PathBuf,
     /// SVG plot of every channel against time.

@@ -52,6 +52,9 @@ impl Recording {
         (i as f64 - self.pre as f64) / self.sample_hz
     }
 
+    /// The capture as a record (`crate::record`): header `i,t_s,<signal>...`, whose names
+    /// end in their units (`ref_um`, `u_volts`), so `piezo fit` reads `t_s`, `u_volts` and
+    /// `y_um` as time, input and output; the `# units:` line repeats them for a reader.
     pub fn write_csv(&self, path: &Path) -> Result<()> {
         use std::fmt::Write as _;
         let mut s = String::new();
