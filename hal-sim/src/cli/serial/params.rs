@@ -281,12 +281,24 @@ mod tests {
         assert_eq!(ok("u_max = 120V"), ("u_max", 120.0));
         assert_eq!(ok("pid_ki=3000V/(um s)"), ("pid_ki", 3000.0));
         let err = |a: &str| parse_assignment(a).unwrap_err().to_string();
-        assert!(err("u_max=200V").contains("outside 0 .. 150"), "{}", err("u_max=200V"));
+        assert!(
+            err("u_max=200V").contains("outside 0 .. 150"),
+            "{}",
+            err("u_max=200V")
+        );
         assert!(err("warp=1").contains("unknown setting") && err("warp=1").contains("pid_kp"));
         assert!(err("sample_hz=1").contains("read-only"));
-        assert!(err("slew=20V").contains("unknown unit `V`"), "{}", err("slew=20V"));
+        assert!(
+            err("slew=20V").contains("unknown unit `V`"),
+            "{}",
+            err("slew=20V")
+        );
         assert!(err("slew").contains("NAME=VALUE"));
-        assert!(err("notch_q=nan").contains("outside"), "{}", err("notch_q=nan"));
+        assert!(
+            err("notch_q=nan").contains("outside"),
+            "{}",
+            err("notch_q=nan")
+        );
         assert!(table_help().contains("notch_hz") && !table_help().contains("sample_hz"));
     }
 
