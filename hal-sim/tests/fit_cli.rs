@@ -32,24 +32,17 @@ fn periodic_validation_reports_steady_state_and_from_rest() {
     let dir = std::env::temp_dir().join(format!("fit_cli_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     records(&dir);
-    let out = cli_support::piezo(&[
-        &"fit",
-        &"--model",
-        &"cbw",
-        &"--json",
-        &"--quiet",
-        &"--generations",
-        &"40",
-        &"--valid-periodic",
-        &"2",
-        &"--train",
+    let j = fit_json(
         &dir.join("train.csv"),
-        &"--valid",
-        &dir.join("valid.csv"),
-        &"--predict",
-        &dir.join("p.csv"),
-    ]);
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        &[
+            &"--valid-periodic",
+            &"2",
+            &"--valid",
+            &dir.join("valid.csv"),
+            &"--predict",
+            &dir.join("p.csv"),
+        ],
+    );
     let steady = j["valid_metrics"][0]["metrics"]["rmse"].as_f64().unwrap();
     let rest = j["valid_from_rest_metrics"][0]["metrics"]["rmse"]
         .as_f64()
@@ -68,7 +61,7 @@ fn periodic_validation_reports_steady_state_and_from_rest() {
 }
 
 /// `piezo fit --model cbw --json` on `train`: the report.
-fn fit_json(train: &std::path::Path, more: &[&str]) -> serde_json::Value {
+fn fit_json(train: &std::path::Path, more: &[&dyn AsRef<std::ffi::OsStr>]) -> serde_json::Value {
     let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
         &"fit",
         &"--model",
@@ -80,9 +73,7 @@ fn fit_json(train: &std::path::Path, more: &[&str]) -> serde_json::Value {
         &"--train",
         &train,
     ];
-    for a in more {
-        args.push(a);
-    }
+    args.extend_from_slice(more);
     serde_json::from_slice(&cli_support::piezo(&args).stdout).unwrap()
 }
 
@@ -164,12 +155,12 @@ fn a_record_in_nm_fits_the_same_model_as_in_um() {
     let j = fit_json(
         &foreign,
         &[
-            "--t-col",
-            "Time [s]",
-            "--u-col",
-            "Drive (V)",
-            "--y-col",
-            "Sensor [m]",
+            &"--t-col",
+            &"Time [s]",
+            &"--u-col",
+            &"Drive (V)",
+            &"--y-col",
+            &"Sensor [m]",
         ],
     );
     assert!(
@@ -181,7 +172,7 @@ fn a_record_in_nm_fits_the_same_model_as_in_um() {
     // Unitless outputs in nm, said with --output-unit.
     let bare = dir.join("bare.csv");
     rewrite(&train, &bare, "t,u,y,temp", [1.0, 1.0, 1e3]);
-    let j = fit_json(&bare, &["--output-unit", "nm"]);
+    let j = fit_json(&bare, &[&"--output-unit", &"nm"]);
     assert!(
         same(&params(&j), &params(&um), 1e-6),
         "{:?} vs {:?}",
