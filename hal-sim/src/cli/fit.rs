@@ -73,13 +73,21 @@ fn simulate_identified(id: &Identified, rec: &Record, periodic: usize) -> Result
 }
 
 fn all_metrics(rec: &Record, sim: &[Vec<f64>]) -> Vec<ChannelMetrics> {
+    metrics_after(rec, sim, 0)
+}
+
+/// Metrics of every output over the samples from `skip` on (a fit's warm-up is not scored).
+fn metrics_after(rec: &Record, sim: &[Vec<f64>], skip: usize) -> Vec<ChannelMetrics> {
     rec.y
         .iter()
         .zip(sim)
         .enumerate()
-        .map(|(i, (y, s))| ChannelMetrics {
-            output: i,
-            metrics: metrics(y, s),
+        .map(|(i, (y, s))| {
+            let k = skip.min(y.len()).min(s.len());
+            ChannelMetrics {
+                output: i,
+                metrics: metrics(&y[k..], &s[k..]),
+            }
         })
         .collect()
 }
@@ -313,7 +321,7 @@ pub fn fit(input: FitInput<'_>, opts: &FitOptions) -> Result<Fit> {
         train: train_name,
         valid: valid_name,
         linear_step,
-        train_metrics: all_metrics(train, &train_sim),
+        train_metrics: metrics_after(train, &train_sim, opts.warmup),
         valid_metrics: match (valid, &valid_sim) {
             (Some(v), Some(s)) => all_metrics(v, s),
             _ => Vec::new(),
