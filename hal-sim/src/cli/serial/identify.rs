@@ -156,7 +156,12 @@ fn check_no_fault(c: &mut Client, during: &str) -> Result<()> {
 /// `rec len`: the capture length and the storage (`ok rec len <n> of <capacity>`).
 fn rec_len(c: &mut Client, set: Option<usize>) -> Result<(usize, usize)> {
     let r = c.send(&Command::Rec(RecCmd::Length(set)))?;
-    let bad = || anyhow!("`{}`: expected `ok rec len <n> of <capacity>`", r.reply_line());
+    let bad = || {
+        anyhow!(
+            "`{}`: expected `ok rec len <n> of <capacity>`",
+            r.reply_line()
+        )
+    };
     let rest = r.details.strip_prefix("rec len ").ok_or_else(bad)?;
     let (n, cap) = rest.split_once(" of ").ok_or_else(bad)?;
     Ok((
@@ -199,7 +204,13 @@ struct Capture {
 
 /// Stops any capture, selects `signals`, triggers now every `div` periods for `frames`
 /// frames and arms.
-fn arm(c: &mut Client, signals: &[&str], div: usize, frames: usize, sample_hz: f64) -> Result<Capture> {
+fn arm(
+    c: &mut Client,
+    signals: &[&str],
+    div: usize,
+    frames: usize,
+    sample_hz: f64,
+) -> Result<Capture> {
     let sel: Vec<Signal> = signals
         .iter()
         .map(|s| Signal::from_name(s).ok_or_else(|| anyhow!("unknown signal {s}")))
@@ -218,7 +229,13 @@ fn arm(c: &mut Client, signals: &[&str], div: usize, frames: usize, sample_hz: f
 }
 
 /// Waits for the armed capture and reads it over `rec bin`.
-fn finish(c: &mut Client, cap: Capture, a: &IdentifyArgs, sample_hz: f64, what: &str) -> Result<Recording> {
+fn finish(
+    c: &mut Client,
+    cap: Capture,
+    a: &IdentifyArgs,
+    sample_hz: f64,
+    what: &str,
+) -> Result<Recording> {
     let wait = RecordArgs {
         signals: cap.channels.clone(),
         xy: false,
@@ -267,7 +284,13 @@ fn fit_record(rec: &Recording, what: &str) -> Result<Record> {
 
 /// One tracking measurement: `ff ims-cbw`, `mode feedforward`, the reference sine, one
 /// period to settle, `--ref-periods` recorded; the tracking error (um RMS).
-fn tracking(c: &mut Client, a: &IdentifyArgs, sample_hz: f64, div: usize, what: &str) -> Result<(Recording, f64)> {
+fn tracking(
+    c: &mut Client,
+    a: &IdentifyArgs,
+    sample_hz: f64,
+    div: usize,
+    what: &str,
+) -> Result<(Recording, f64)> {
     c.send(&Command::Feedforward("ims-cbw"))?;
     c.send(&Command::Mode("feedforward"))?;
     c.send(&Command::Wave {
@@ -279,7 +302,13 @@ fn tracking(c: &mut Client, a: &IdentifyArgs, sample_hz: f64, div: usize, what: 
     let period = (sample_hz / a.ref_hz).round() as u64;
     run_periods(c, period, a.wall_cap_s)?;
     let frames = (period as f64 * f64::from(a.ref_periods) / div as f64).round() as usize;
-    let cap = arm(c, &["ref_um", "y_um", "u_volts", "ff_volts"], div, frames, sample_hz)?;
+    let cap = arm(
+        c,
+        &["ref_um", "y_um", "u_volts", "ff_volts"],
+        div,
+        frames,
+        sample_hz,
+    )?;
     let rec = finish(c, cap, a, sample_hz, what)?;
     check_no_fault(c, what)?;
     let rmse = rec
@@ -353,7 +382,8 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
              --record-hz, --ref-periods, --sine-periods or --prbs-frames"
         );
     }
-    std::fs::create_dir_all(&a.out).with_context(|| format!("cannot create {}", a.out.display()))?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
     let cbw_before = firmware_cbw(c)?;
     check_no_fault(c, "the start (identify needs a running loop)")?;
 
@@ -362,11 +392,16 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
     eprintln!("  tracking error {rmse_before:.4} um RMS");
     before_rec.write_csv(&a.out.join("before.csv"))?;
 
-    progress(2, "excite: PRBS (linear part), then sines (hysteresis), open loop");
+    progress(
+        2,
+        "excite: PRBS (linear part), then sines (hysteresis), open loop",
+    );
     let um_per_volt = c.get("um_per_volt")?;
     let offset_um = c.get("offset_um")?;
     if !(um_per_volt.is_finite() && um_per_volt > 0.0) {
-        bail!("the firmware's um_per_volt is {um_per_volt}: the open loop cannot place the voltages");
+        bail!(
+            "the firmware's um_per_volt is {um_per_volt}: the open loop cannot place the voltages"
+        );
     }
     let to_um = |v: f64| um_of_volts(v, um_per_volt, offset_um);
     c.send(&Command::Feedforward("linear"))?;
@@ -389,7 +424,13 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
         bit_hz: f32_of(a.prbs_bit_hz),
         seed: 1,
     })?;
-    let cap = arm(c, &["u_volts", "y_um", "ref_um", "ff_volts"], 1, prbs_frames, sample_hz)?;
+    let cap = arm(
+        c,
+        &["u_volts", "y_um", "ref_um", "ff_volts"],
+        1,
+        prbs_frames,
+        sample_hz,
+    )?;
     let prbs = fit_record(&finish(c, cap, a, sample_hz, "prbs")?, "PRBS")?;
     prbs.write(a.out.join("prbs.csv"))?;
     check_no_fault(c, "the PRBS")?;
@@ -406,7 +447,13 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
     c.send(&sine(half, a.sine_hz))?;
     run_periods(c, period / 2, a.wall_cap_s)?;
     let frames = ((2 * each - period / 2) as f64 / div as f64).round() as usize;
-    let cap = arm(c, &["u_volts", "y_um", "ref_um", "ff_volts"], div, frames, sample_hz)?;
+    let cap = arm(
+        c,
+        &["u_volts", "y_um", "ref_um", "ff_volts"],
+        div,
+        frames,
+        sample_hz,
+    )?;
     run_periods(c, each - period / 2, a.wall_cap_s)?;
     c.send(&sine(0.5 * half, a.sine_hz))?;
     let train = fit_record(&finish(c, cap, a, sample_hz, "sines")?, "sines")?;
@@ -418,19 +465,47 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
     let held_period = (sample_hz / held_hz).round() as u64;
     run_periods(c, held_period / 2, a.wall_cap_s)?;
     let frames = ((held_period * u64::from(a.sine_periods)) as f64 / div as f64).round() as usize;
-    let cap = arm(c, &["u_volts", "y_um", "ref_um", "ff_volts"], div, frames, sample_hz)?;
-    let held = fit_record(&finish(c, cap, a, sample_hz, "held-back")?, "held-back sine")?;
+    let cap = arm(
+        c,
+        &["u_volts", "y_um", "ref_um", "ff_volts"],
+        div,
+        frames,
+        sample_hz,
+    )?;
+    let held = fit_record(
+        &finish(c, cap, a, sample_hz, "held-back")?,
+        "held-back sine",
+    )?;
     held.write(a.out.join("held_back.csv"))?;
     check_no_fault(c, "the held-back sine")?;
     c.send(&Command::WaveHold(to_um(mid)))?;
 
-    progress(3, "fit: CBW with the PRBS's linear part fixed (piezo fit's library)");
+    progress(
+        3,
+        "fit: CBW with the PRBS's linear part fixed (piezo fit's library)",
+    );
     let opts = FitOptions {
         generations: a.generations,
         progress: true,
         ..Default::default()
     };
-    let cbw_now = |c: &mut Client| firmware_cbw(c).map(|m| format!("{m:?}")).unwrap_or_else(|e| format!("unknown ({e})"));
+    // The firmware's CBW has no output offset (`y = d u - h` from the sensor's zero): the
+    // hysteresis is fitted with the offset held at 0, else the offset absorbs part of the
+    // gain and the loop, and the model the firmware gets is not the one that was fitted.
+    // The capture starts at the bottom of the sine with the stage's loop state, the model
+    // from rest: the first rising half period brings the model's state up to date and is
+    // not scored (it sweeps the whole range, which wipes the CBW's memory of where it
+    // started).
+    let hyst_opts = FitOptions {
+        fixed_offset: Some(0.0),
+        warmup: ((period / 2) as f64 / div as f64).round() as usize,
+        ..opts.clone()
+    };
+    let cbw_now = |c: &mut Client| {
+        firmware_cbw(c)
+            .map(|m| format!("{m:?}"))
+            .unwrap_or_else(|e| format!("unknown ({e})"))
+    };
     let fitted = (|| -> Result<Fit> {
         let t0 = Instant::now();
         let linear = fit_linear_part(&prbs, 1, &opts).context("linear part from the PRBS")?;
@@ -440,13 +515,14 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
                 train: &train,
                 train_name: a.out.join("sines.csv").display().to_string(),
                 valid: Some((&held, a.out.join("held_back.csv").display().to_string())),
-                valid_periodic: 0,
+                // Whole periods: simulated once before the scored pass (periodic state).
+                valid_periodic: 1,
                 linear_step: Some(linear),
                 input_unit: "V".into(),
                 output_unit: "um".into(),
                 started: t0,
             },
-            &opts,
+            &hyst_opts,
         )
     })();
     let fitted = match fitted {
@@ -463,14 +539,19 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
     let fit_json = write_fit_json(&a.out, report)?;
     if let Some(l) = &report.linear_step {
         for (k, (f, z)) in l.linear.iter().enumerate() {
-            writeln!(out, "linear part (PRBS) {}: f = {f:.1} Hz, zeta = {z:.3}", k + 1)?;
+            writeln!(
+                out,
+                "linear part (PRBS) {}: f = {f:.1} Hz, zeta = {z:.3}",
+                k + 1
+            )?;
         }
     }
     let held_back_rmse_um = report.valid_metrics.first().map(|m| m.metrics.rmse);
     if let (Some(t), Some(v)) = (report.train_metrics.first(), report.valid_metrics.first()) {
         writeln!(
             out,
-            "fit: CBW rmse {:.4} um on the sines, {:.4} um on the held-back sine (RE {:.3} %)",
+            "fit: CBW rmse {:.4} um on the sines (after the warm-up), {:.4} um on the held-back \
+             sine (RE {:.3} %)",
             t.metrics.rmse, v.metrics.rmse, v.metrics.re_pct
         )?;
     }
@@ -478,9 +559,13 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
     let diagnosis = if a.no_diagnose {
         None
     } else {
-        progress(4, "diagnose: what the CBW still misses (held-back sine as validation)");
+        progress(
+            4,
+            "diagnose: what the CBW still misses (held-back sine as validation)",
+        );
         let sig = |r: &Record| Signals::new(r.t.clone(), r.u.clone(), r.y.clone());
-        let d = diagnose::diagnose(&sig(&train)?, &sig(&held)?, &diagnose::Options::default())
+        let held_sig = sig(&held)?.with_warmup(((held_period / 2) as f64 / div as f64) as usize);
+        let d = diagnose::diagnose(&sig(&train)?, &held_sig, &diagnose::Options::default())
             .context("diagnose")?;
         let text = crate::cli::diagnose::summary(
             &d,
@@ -491,7 +576,10 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
         Some(d.cause().to_string())
     };
 
-    progress(5, "load: the model against the firmware's conditions (load-fit)");
+    progress(
+        5,
+        "load: the model against the firmware's conditions (load-fit)",
+    );
     load_fit::run(c, &fit_json, out).with_context(|| {
         format!(
             "the firmware keeps its previous model (cbw d, alpha, beta, gamma = {})",
@@ -564,7 +652,11 @@ fn write_summary_svg(
         tracking_plot(after, "after (identified model)"),
         Plot::new("sines: u -> y", "u [V]", "y [um]")
             .line("measured", &train.u[0], &train.y[0])
-            .line("fitted CBW + linear part", &train.u[0], &fitted.train_sim[0]),
+            .line(
+                "fitted CBW + linear part",
+                &train.u[0],
+                &fitted.train_sim[0],
+            ),
     ];
     if let Some(sim) = &fitted.valid_sim {
         let e: Vec<f64> = held.y[0].iter().zip(&sim[0]).map(|(y, s)| y - s).collect();
