@@ -233,3 +233,28 @@ fn a_voltage_range_beyond_the_limits_is_refused_before_anything_moves() {
         "rec idle 0"
     );
 }
+
+#[test]
+fn a_model_the_firmware_refuses_leaves_its_model_in_place_and_says_so() {
+    // d below the largest hysteresis slope (37-load-fit's refused model as a stage): the
+    // fit finds it, the IMS cannot invert it, the firmware refuses it.
+    let mut c = Client::new(
+        Box::new(Fake::new([0.05, 0.07, 0.02, 0.01])),
+        Duration::from_secs(5),
+    );
+    c.sync().unwrap();
+    let a = args("identify-refusal");
+    let e = identify::run(&mut c, &a, &mut Vec::new()).unwrap_err();
+    let msg = format!("{e:#}");
+    assert!(
+        msg.contains("the firmware keeps its previous model")
+            && msg.contains("[0.16, 0.07, 0.02, 0.01]")
+            && msg.contains("refused the CBW model"),
+        "{msg}"
+    );
+    assert_eq!(
+        c.send(&Command::Get("cbw_d")).unwrap().details,
+        "cbw_d 0.16"
+    );
+    assert!(a.out.join("fit.json").is_file());
+}
