@@ -243,6 +243,8 @@ fn a_model_the_firmware_refuses_leaves_its_model_in_place_and_says_so() {
         Duration::from_secs(5),
     );
     c.sync().unwrap();
+    let len = |c: &mut Client| c.send(&Command::Rec(RecCmd::Length(None))).unwrap().details;
+    let len_before = len(&mut c);
     let a = args("identify-refusal");
     let e = identify::run(&mut c, &a, &mut Vec::new()).unwrap_err();
     let msg = format!("{e:#}");
@@ -257,4 +259,14 @@ fn a_model_the_firmware_refuses_leaves_its_model_in_place_and_says_so() {
         "cbw_d 0.16"
     );
     assert!(a.out.join("fit.json").is_file());
+    // Nothing left running: the capture length as before, no capture armed, the
+    // reference held.
+    assert_eq!(len(&mut c), len_before);
+    let status = c.send(&Command::Rec(RecCmd::Status)).unwrap().details;
+    assert!(!status.starts_with("rec armed"), "{status}");
+    assert!(c
+        .send(&Command::Fault)
+        .unwrap()
+        .details
+        .starts_with("fault none"));
 }

@@ -29,7 +29,8 @@
 //! `--out`. Progress goes to stderr. Waits are bounded by the firmware's own time (control
 //! periods in `stats`), with a wall-clock cap only for a firmware that stopped.
 //! The firmware is left in `mode feedforward`, `ff ims-cbw`, holding `--ref-offset`, with
-//! its recorder's capture length as it was.
+//! its recorder's capture length as it was; after an error, in the mode the error found it
+//! in, holding `--ref-offset`, no capture armed, the capture length as it was.
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -386,7 +387,46 @@ pub fn run(c: &mut Client, a: &IdentifyArgs, out: &mut impl Write) -> Result<Ide
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let cbw_before = firmware_cbw(c)?;
     check_no_fault(c, "the start (identify needs a running loop)")?;
+    let setup = Setup {
+        sample_hz,
+        div,
+        len_before,
+        cbw_before,
+    };
+    let r = phases(c, a, out, &setup);
+    if r.is_err() {
+        // Best effort, whatever failed: no excitation left running (hold the reference's
+        // centre in the current mode), no capture armed, the capture length as it was.
+        let _ = c.send(&Command::Rec(RecCmd::Stop));
+        let _ = c.send(&Command::WaveHold(f32_of(a.ref_offset)));
+        let _ = rec_len(c, Some(len_before));
+    }
+    r
+}
 
+/// What [`run`] found out before the phases.
+struct Setup {
+    sample_hz: f64,
+    /// The recorder's divider of the sine and tracking captures.
+    div: usize,
+    /// The capture length before identify (restored at the end).
+    len_before: usize,
+    cbw_before: [f64; 4],
+}
+
+/// The six phases of [`run`].
+fn phases(
+    c: &mut Client,
+    a: &IdentifyArgs,
+    out: &mut impl Write,
+    setup: &Setup,
+) -> Result<Identified> {
+    let &Setup {
+        sample_hz,
+        div,
+        len_before,
+        cbw_before,
+    } = setup;
     progress(1, "before: tracking error with the firmware's model");
     let (before_rec, rmse_before) = tracking(c, a, sample_hz, div, "before")?;
     eprintln!("  tracking error {rmse_before:.4} um RMS");
