@@ -73,13 +73,21 @@ fn simulate_identified(id: &Identified, rec: &Record, periodic: usize) -> Result
 }
 
 fn all_metrics(rec: &Record, sim: &[Vec<f64>]) -> Vec<ChannelMetrics> {
+    metrics_after(rec, sim, 0)
+}
+
+/// Metrics of every output over the samples from `skip` on (a fit's warm-up is not scored).
+fn metrics_after(rec: &Record, sim: &[Vec<f64>], skip: usize) -> Vec<ChannelMetrics> {
     rec.y
         .iter()
         .zip(sim)
         .enumerate()
-        .map(|(i, (y, s))| ChannelMetrics {
-            output: i,
-            metrics: metrics(y, s),
+        .map(|(i, (y, s))| {
+            let k = skip.min(y.len()).min(s.len());
+            ChannelMetrics {
+                output: i,
+                metrics: metrics(&y[k..], &s[k..]),
+            }
         })
         .collect()
 }
@@ -206,6 +214,143 @@ pub fn identify_pairs(
     Ok(parts)
 }
 
+/// Step 1 of the two-step Hammerstein identification (004 sec. 4.2): the linear part alone,
+/// a gain followed by `sections` second-order sections (unity DC gain), from a record of
+/// one input and one output (PRBS or step response); `piezo fit --linear-train`.
+pub fn fit_linear_part(rec: &Record, sections: usize, opts: &FitOptions) -> Result<Fitted> {
+    anyhow::ensure!(
+        rec.u.len() == 1 && rec.y.len() == 1,
+        "the linear part needs a record of one input and one output"
+    );
+    anyhow::ensure!(
+        (1..=2).contains(&sections),
+        "the linear part has 1 or 2 sections, {sections} asked"
+    );
+    let step1 = FitOptions {
+        linear_sections: sections,
+        linear_fixed: None,
+        ..opts.clone()
+    };
+    fit_siso(
+        models::find("gain")?,
+        &rec.u[0],
+        &rec.y[0],
+        rec.dt(),
+        &step1,
+    )
+}
+
+/// What a fit starts from.
+pub struct FitInput<'a> {
+    pub def: &'static models::ModelDef,
+    pub train: &'a Record,
+    /// Where the training record came from (the report's `train`).
+    pub train_name: String,
+    /// Validation record and its name: simulated with the identified model, never fitted.
+    pub valid: Option<(&'a Record, String)>,
+    /// The validation record is one period of a periodic steady state: simulate this many
+    /// periods first (0: from rest).
+    pub valid_periodic: usize,
+    /// Step 1 of the two-step Hammerstein ([`fit_linear_part`]): its linear part is kept
+    /// fixed while `def` is fitted.
+    pub linear_step: Option<Fitted>,
+    pub input_unit: String,
+    pub output_unit: String,
+    /// When the work began (the report's `seconds`).
+    pub started: std::time::Instant,
+}
+
+/// A fit: the report (`fit.json`) and the simulated outputs it was scored on.
+pub struct Fit {
+    pub report: Report,
+    pub train_sim: Vec<Vec<f64>>,
+    pub valid_sim: Option<Vec<Vec<f64>>>,
+    pub valid_rest_sim: Option<Vec<Vec<f64>>>,
+}
+
+/// Identifies `input.def` on the training record and scores it there and on the
+/// validation record: what `piezo fit` does between reading its records and writing them
+/// out (`piezo serial identify` runs it on what it recorded).
+pub fn fit(input: FitInput<'_>, opts: &FitOptions) -> Result<Fit> {
+    let FitInput {
+        def,
+        train,
+        train_name,
+        valid,
+        valid_periodic,
+        linear_step,
+        input_unit,
+        output_unit,
+        started,
+    } = input;
+    let (valid, valid_name) = match valid {
+        Some((v, name)) => (Some(v), Some(name)),
+        None => (None, None),
+    };
+    if let Some(v) = valid {
+        anyhow::ensure!(
+            v.u.len() >= train.u.len().min(v.u.len()) && v.y.len() == train.y.len(),
+            "validation record has {} inputs / {} outputs, training record {} / {}",
+            v.u.len(),
+            v.y.len(),
+            train.u.len(),
+            train.y.len()
+        );
+    }
+    let mut opts = opts.clone();
+    if let Some(l) = &linear_step {
+        opts.linear_fixed = Some(l.linear.clone());
+    }
+    let id = identify(def, train, &opts)?;
+    let train_sim = simulate_identified(&id, train, 0)?;
+    let valid_sim = valid
+        .map(|v| simulate_identified(&id, v, valid_periodic))
+        .transpose()?;
+    let valid_rest_sim = match valid {
+        Some(v) if valid_periodic > 0 => Some(simulate_identified(&id, v, 0)?),
+        _ => None,
+    };
+    let report = Report {
+        format: FORMAT,
+        model: def.name.into(),
+        sample_rate_hz: train.sample_rate_hz(),
+        inputs: train.u.len(),
+        outputs: train.y.len(),
+        input_unit,
+        output_unit,
+        train: train_name,
+        valid: valid_name,
+        linear_step,
+        train_metrics: metrics_after(train, &train_sim, opts.warmup),
+        valid_metrics: match (valid, &valid_sim) {
+            (Some(v), Some(s)) => all_metrics(v, s),
+            _ => Vec::new(),
+        },
+        valid_from_rest_metrics: match (valid, &valid_rest_sim) {
+            (Some(v), Some(s)) => all_metrics(v, s),
+            _ => Vec::new(),
+        },
+        parts: id.parts,
+        multibw: id.multibw,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    Ok(Fit {
+        report,
+        train_sim,
+        valid_sim,
+        valid_rest_sim,
+    })
+}
+
+/// Writes `dir/fit.json` (what `piezo predict` and `piezo serial load-fit` read); its path.
+pub fn write_fit_json(dir: &Path, report: &Report) -> Result<std::path::PathBuf> {
+    let path = dir.join("fit.json");
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    std::fs::write(&path, serde_json::to_string_pretty(report)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
+}
+
 pub fn run(args: Args) -> Result<()> {
     if args.list {
         for m in models::MODELS {
@@ -240,17 +385,7 @@ pub fn run(args: Args) -> Result<()> {
         .as_ref()
         .map(|v| args.columns.read(v, args.quiet))
         .transpose()?;
-    if let Some(v) = &valid {
-        anyhow::ensure!(
-            v.u.len() >= train.u.len().min(v.u.len()) && v.y.len() == train.y.len(),
-            "validation record has {} inputs / {} outputs, training record {} / {}",
-            v.u.len(),
-            v.y.len(),
-            train.u.len(),
-            train.y.len()
-        );
-    }
-    let mut opts = FitOptions {
+    let opts = FitOptions {
         optimizer: args.optimizer,
         generations: args.generations,
         population: args.population,
@@ -264,64 +399,37 @@ pub fn run(args: Args) -> Result<()> {
     // Two-step Hammerstein: linear part from its own record first.
     let linear_step = if let Some(path) = &args.linear_train {
         let rec = args.columns.read(path, args.quiet)?;
-        anyhow::ensure!(
-            rec.u.len() == 1 && rec.y.len() == 1,
-            "--linear-train {}: needs one input and one output",
-            path.display()
-        );
-        let step1 = FitOptions {
-            linear_sections: args.linear.max(1),
-            ..opts.clone()
-        };
         if opts.progress {
             eprintln!("step 1: linear part from {}", path.display());
         }
-        let f = fit_siso(
-            models::find("gain")?,
-            &rec.u[0],
-            &rec.y[0],
-            rec.dt(),
-            &step1,
-        )?;
-        opts.linear_fixed = Some(f.linear.clone());
-        Some(f)
+        Some(
+            fit_linear_part(&rec, args.linear.max(1), &opts)
+                .with_context(|| format!("--linear-train {}", path.display()))?,
+        )
     } else {
         None
     };
-    let id = identify(def, &train, &opts)?;
-    let train_sim = simulate_identified(&id, &train, 0)?;
-    let valid_sim = valid
-        .as_ref()
-        .map(|v| simulate_identified(&id, v, args.valid_periodic))
-        .transpose()?;
-    let valid_rest_sim = match &valid {
-        Some(v) if args.valid_periodic > 0 => Some(simulate_identified(&id, v, 0)?),
-        _ => None,
-    };
-    let report = Report {
-        format: FORMAT,
-        model: def.name.into(),
-        sample_rate_hz: train.sample_rate_hz(),
-        inputs: train.u.len(),
-        outputs: train.y.len(),
-        input_unit: Quantity::Voltage.internal().into(),
-        output_unit: Quantity::Length.internal().into(),
-        train: train_path.display().to_string(),
-        valid: args.valid.as_ref().map(|p| p.display().to_string()),
-        linear_step,
-        train_metrics: all_metrics(&train, &train_sim),
-        valid_metrics: match (&valid, &valid_sim) {
-            (Some(v), Some(s)) => all_metrics(v, s),
-            _ => Vec::new(),
+    let Fit {
+        report,
+        train_sim,
+        valid_sim,
+        valid_rest_sim,
+    } = fit(
+        FitInput {
+            def,
+            train: &train,
+            train_name: train_path.display().to_string(),
+            valid: valid
+                .as_ref()
+                .zip(args.valid.as_ref().map(|p| p.display().to_string())),
+            valid_periodic: args.valid_periodic,
+            linear_step,
+            input_unit: Quantity::Voltage.internal().into(),
+            output_unit: Quantity::Length.internal().into(),
+            started: t0,
         },
-        valid_from_rest_metrics: match (&valid, &valid_rest_sim) {
-            (Some(v), Some(s)) => all_metrics(v, s),
-            _ => Vec::new(),
-        },
-        parts: id.parts,
-        multibw: id.multibw,
-        seconds: t0.elapsed().as_secs_f64(),
-    };
+        &opts,
+    )?;
     if let Some(path) = &args.predict {
         let (rec, sim) = match (&valid, &valid_sim) {
             (Some(v), Some(s)) => (v, s),
@@ -334,8 +442,7 @@ pub fn run(args: Args) -> Result<()> {
         if let (Some(v), Some(s)) = (&valid, &valid_sim) {
             write_plots(dir, v, s, "valid")?;
         }
-        std::fs::write(dir.join("fit.json"), serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("cannot write {}", dir.join("fit.json").display()))?;
+        write_fit_json(dir, &report)?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

@@ -14,6 +14,7 @@
 //! piezo serial --tcp 127.0.0.1:4444 wave steps 10um 30um 5 2Hz
 //! piezo serial --tcp 127.0.0.1:4444 wave table --freq 10Hz --points 0,20,5,15
 //! piezo serial --tcp 127.0.0.1:4444 record --signals ref_um,y_um,u_volts --out rec.csv --svg rec.svg
+//! piezo serial --tcp 127.0.0.1:4444 identify --out ident
 //! ```
 use std::io::{self, Write};
 use std::path::PathBuf;
@@ -26,6 +27,7 @@ use crate::serial::link::{connect_tcp, open_serial};
 use crate::serial::{Client, Link, SerialError};
 
 pub mod bode;
+pub mod identify;
 pub mod load_fit;
 pub mod params;
 pub mod record;
@@ -159,6 +161,11 @@ pub enum Action {
     /// Frequency response (open or closed loop) from the firmware's own excitation and
     /// record: CSV, SVG Bode plot, the resonance and a suggested notch_hz / notch_q.
     Bode(bode::BodeArgs),
+    /// Identify the stage and load the model in one command: the tracking error with the
+    /// firmware's model, PRBS and sines in open loop, the CBW fit (`piezo fit`'s library),
+    /// the diagnosis (`piezo diagnose`'s), the model checked and loaded (`load-fit`), the
+    /// tracking error again; `identify: rmse before <a> um, after <b> um`.
+    Identify(identify::IdentifyArgs),
 }
 
 /// Opens the link of `conn` and syncs (unless --no-sync).
@@ -273,6 +280,9 @@ pub fn execute(
         Action::Stats { reset, clock } => status::stats(c, reset, clock, out)?,
         Action::Record(a) => record::run(c, &a, out)?,
         Action::Bode(a) => bode::run(c, &a, out)?,
+        Action::Identify(a) => {
+            identify::run(c, &a, out)?;
+        }
     }
     Ok(())
 }

@@ -88,6 +88,14 @@ pub struct FitOptions {
     /// Hammerstein two-step (004 sec. 4.2): the linear part identified beforehand
     /// (`(f_hz, zeta)` per section), kept fixed while the hysteresis is fitted.
     pub linear_fixed: Option<Vec<(f64, f64)>>,
+    /// Static models: hold the output offset at this value instead of solving it in closed
+    /// form (`None`, the default): for a model that goes where there is no offset (the
+    /// firmware's CBW, `piezo serial identify`).
+    pub fixed_offset: Option<f64>,
+    /// Samples at the start of the training record that run the model (bring its state
+    /// up to date) but are not scored: a record cut from a running excitation starts with
+    /// a hysteresis state the model, started from rest, does not have (0: score all).
+    pub warmup: usize,
     /// Print progress on stderr.
     pub progress: bool,
 }
@@ -106,6 +114,8 @@ impl Default for FitOptions {
             lm_iterations: 60,
             linear_sections: 0,
             linear_fixed: None,
+            fixed_offset: None,
+            warmup: 0,
             progress: false,
         }
     }
@@ -198,6 +208,10 @@ struct Problem<'a> {
     n_model: usize,
     /// Fixed linear part (two-step), used when `specs` has no linear parameters.
     linear_fixed: Vec<(f64, f64)>,
+    /// Static models: the output offset held here instead of solved ([`FitOptions`]).
+    fixed_offset: Option<f64>,
+    /// Leading outputs that are simulated but not scored ([`FitOptions::warmup`]).
+    skip: usize,
 }
 
 impl Problem<'_> {
@@ -226,16 +240,22 @@ impl Problem<'_> {
         let mut sim = vec![0.0; self.u.len()];
         (self.def.simulate)(&p[..self.n_model], &self.u, self.dt, &mut sim).ok()?;
         apply_linear(&self.linear(&p), self.dt, &mut sim).ok()?;
-        for (ri, yi) in r.iter_mut().zip(sim.iter().step_by(self.stride)) {
+        for (ri, yi) in r
+            .iter_mut()
+            .zip(sim.iter().step_by(self.stride).skip(self.skip))
+        {
             *ri = self.sign * yi;
         }
+        let y = &self.y[self.skip..];
         let offset = if self.def.dynamic {
             0.0
+        } else if let Some(o) = self.fixed_offset {
+            o
         } else {
-            self.y.iter().zip(r.iter()).map(|(y, m)| y - m).sum::<f64>() / self.y.len() as f64
+            y.iter().zip(r.iter()).map(|(y, m)| y - m).sum::<f64>() / y.len() as f64
         };
         let mut ok = true;
-        for (ri, yi) in r.iter_mut().zip(&self.y) {
+        for (ri, yi) in r.iter_mut().zip(y) {
             *ri += offset - yi;
             ok &= ri.is_finite();
         }
@@ -243,7 +263,7 @@ impl Problem<'_> {
     }
 
     fn cost(&self, z: &[f64]) -> f64 {
-        let mut r = vec![0.0; self.y.len()];
+        let mut r = vec![0.0; self.y.len() - self.skip];
         match self.residuals(z, &mut r) {
             Some(_) => (r.iter().map(|v| v * v).sum::<f64>() / r.len() as f64).sqrt(),
             None => f64::INFINITY,
@@ -274,6 +294,12 @@ pub fn fit_siso(
     anyhow::ensure!(
         u.len() >= 10,
         "{} samples are too few to fit a model",
+        u.len()
+    );
+    anyhow::ensure!(
+        opts.warmup + 10 <= u.len(),
+        "a warm-up of {} samples leaves fewer than 10 of {} to fit on",
+        opts.warmup,
         u.len()
     );
     anyhow::ensure!(
@@ -319,6 +345,8 @@ pub fn fit_siso(
             sign,
             n_model,
             linear_fixed: linear_fixed.clone(),
+            fixed_offset: opts.fixed_offset,
+            skip: opts.warmup.min(n.saturating_sub(10)),
         }
     } else {
         let k = u.len().div_ceil(opts.de_samples.max(10));
@@ -332,6 +360,8 @@ pub fn fit_siso(
             sign,
             n_model,
             linear_fixed: linear_fixed.clone(),
+            fixed_offset: opts.fixed_offset,
+            skip: opts.warmup / k,
         }
     };
     let centre: Vec<f64> = lo.iter().zip(&hi).map(|(a, b)| 0.5 * (a + b)).collect();
@@ -377,6 +407,8 @@ pub fn fit_siso(
             sign,
             n_model,
             linear_fixed: linear_fixed.clone(),
+            fixed_offset: opts.fixed_offset,
+            skip: opts.warmup,
         }
     } else {
         Problem {
@@ -389,6 +421,8 @@ pub fn fit_siso(
             sign,
             n_model,
             linear_fixed: linear_fixed.clone(),
+            fixed_offset: opts.fixed_offset,
+            skip: opts.warmup,
         }
     };
     let lm = LmConfig {
@@ -396,7 +430,7 @@ pub fn fit_siso(
         progress: label.clone(),
         ..Default::default()
     };
-    let m = full.y.len();
+    let m = full.y.len() - full.skip;
     let z = if full.cost(&z0).is_finite() && opts.lm_iterations > 0 {
         levenberg_marquardt(
             |z, r| {
@@ -573,6 +607,84 @@ mod tests {
             assert!((got - want).abs() < 1e-4 * want.abs().max(1.0), "{f:?}");
         }
         assert!((f.offset - 3.0).abs() < 1e-6);
+        // Offset held: the fit keeps it and still finds the model (0.5 um off: the
+        // parameters take what they can of it, the RMSE shows the rest).
+        let held = FitOptions {
+            fixed_offset: Some(3.0),
+            ..opts.clone()
+        };
+        let f = fit_siso(truth, &u, &y, 1.0 / fs, &held).unwrap();
+        assert_eq!(f.offset, 3.0);
+        assert!(
+            f.values()
+                .iter()
+                .zip([0.16, 0.07, 0.02, 0.5])
+                .all(|(g, w)| (g - w).abs() < 1e-3),
+            "{f:?}"
+        );
+        let off = FitOptions {
+            fixed_offset: Some(2.5),
+            ..opts
+        };
+        let f = fit_siso(truth, &u, &y, 1.0 / fs, &off).unwrap();
+        assert_eq!(f.offset, 2.5);
+        let m = metrics(&y, &f.simulate(&u, 1.0 / fs, Edge::Hold).unwrap());
+        assert!(
+            m.rmse > 1e-3,
+            "a held offset 0.5 um off cannot fit exactly: {m:?}"
+        );
+    }
+
+    #[test]
+    fn a_warm_up_is_run_but_not_scored() {
+        // The record starts with the loop's state far from rest (the model's start), and
+        // holds the offset at 0: scored from the start the fit is pulled off, with the
+        // first 1.5 periods as warm-up it finds the model.
+        let fs = 200.0;
+        let truth = models::find("cbw").unwrap();
+        let want = [0.16, 0.07, 0.02, 0.5];
+        let gen = Fitted::from_params(truth, &want, 1.0, 0.0, 1).unwrap();
+        let whole = sine_input(2000, fs);
+        let y_whole = gen.simulate(&whole, 1.0 / fs, Edge::Hold).unwrap();
+        // Cut where the state is far from rest.
+        let cut = 2000 - 700;
+        let (u, y) = (&whole[cut..], &y_whole[cut..]);
+        let base = FitOptions {
+            generations: 60,
+            fixed_offset: Some(0.0),
+            ..Default::default()
+        };
+        let err = |f: &Fitted| {
+            f.values()
+                .iter()
+                .zip(want)
+                .map(|(g, w)| ((g - w) / w).abs())
+                .fold(0.0, f64::max)
+        };
+        let cold = fit_siso(truth, u, y, 1.0 / fs, &base).unwrap();
+        let warm = fit_siso(
+            truth,
+            u,
+            y,
+            1.0 / fs,
+            &FitOptions {
+                warmup: 300,
+                ..base.clone()
+            },
+        )
+        .unwrap();
+        assert!(err(&warm) < 0.2 * err(&cold), "warm {warm:?} cold {cold:?}");
+        assert!(fit_siso(
+            truth,
+            u,
+            y,
+            1.0 / fs,
+            &FitOptions {
+                warmup: 695,
+                ..base
+            }
+        )
+        .is_err());
     }
 
     #[test]

@@ -6,7 +6,13 @@
 //! * SysTick (25 MHz in QEMU's mps2 model) fires at the sample rate and runs the control
 //!   period at the highest priority. The stage is [`stage::SimStage`]: the CBW model of the
 //!   core plus a first-order lag (and a mechanical resonance after the harness line
-//!   `resonance <hz> <zeta>`, none by default; `piezo serial bode`'s test finds it). It sits behind the firmware's real converter drivers: the
+//!   `resonance <hz> <zeta>`, none by default; `piezo serial bode`'s test finds it). The
+//!   harness line `stage <gain> <hysteresis> <creep>` makes the stage differ from the
+//!   firmware's built-in model (`piezo serial identify`'s test): `gain` scales the CBW's `d`
+//!   and `alpha` (0.5..2), `hysteresis` the loop width on top (`alpha`, 0.25..3), `creep`
+//!   adds creep the firmware's model does not have (0..4; [`stage::CREEP_GAINS`]); it
+//!   answers `ok stage <g> <h> <c>`, or `err stage: ...` for a value out of range, which
+//!   changes nothing. `stage 1 1 0` is the stage of power-up. It sits behind the firmware's real converter drivers: the
 //!   control task runs `Ad4000::start_conversion` + `Ad4000::read` and `Ad5791::set_code`
 //!   (the drivers of `piezo_core::drivers`, the ones hal-sim runs) over the no_std mock
 //!   chips of [`chips`] (an AD4020 whose CNV edge samples the stage, an AD5791 whose LDAC
@@ -244,6 +250,54 @@ mod board {
         true
     }
 
+    /// The harness line `stage <gain> <hysteresis> <creep>`: the simulated stages differ from
+    /// the firmware's built-in model (see [`stage::STAGE_GAIN`]; `stage 1 1 0` is the stage of
+    /// power-up). Unlike the other harness lines it answers, since a value out of
+    /// [`stage::STAGE_RANGES`] must not pass silently: `ok stage <gain> <hysteresis> <creep>`,
+    /// or `err stage: gain 0.5..2, hysteresis 0.25..3, creep 0..4` and nothing changes. True
+    /// when the line is one.
+    fn set_stage(line: &[u8]) -> bool {
+        let Some(rest) = line.strip_prefix(b"stage ") else {
+            return false;
+        };
+        let mut v = [f32::NAN; 3];
+        let mut words = core::str::from_utf8(rest).unwrap_or("").split(' ');
+        for x in v.iter_mut() {
+            *x = words
+                .next()
+                .and_then(|w| piezo_core::command::parse_f32(w).ok())
+                .unwrap_or(f32::NAN);
+        }
+        let checked = match words.next() {
+            None => stage::checked_stage(v[0], v[1], v[2]),
+            Some(_) => None,
+        };
+        let Some(scales) = checked else {
+            uart::line("err stage: gain 0.5..2, hysteresis 0.25..3, creep 0..4");
+            return true;
+        };
+        for (a, x) in [
+            &stage::STAGE_GAIN,
+            &stage::STAGE_HYSTERESIS,
+            &stage::STAGE_CREEP,
+        ]
+        .iter()
+        .zip(scales)
+        {
+            a.store(x.to_bits(), Relaxed);
+        }
+        stage::STAGE_GEN.fetch_add(1, Relaxed);
+        let mut r = Reply::<REPLY_LEN>::new();
+        r.push_str("ok stage");
+        for x in scales {
+            // Within 0..4: three decimals say it exactly enough.
+            r.push_str(" ");
+            r.push_fixed(libm::roundf(x * 1000.0) as u32, 3);
+        }
+        uart::line(r.as_str());
+        true
+    }
+
     /// The periods of a `wait <n>` line (decimal, 1 ..= [`PERIODS_MAX`]).
     fn wait_periods(line: &[u8]) -> Option<u32> {
         let digits = line.strip_prefix(WAIT_PREFIX)?;
@@ -282,7 +336,7 @@ mod board {
                 FLOOD_STOP => self.flood = Some(false),
                 _ => match wait_periods(line) {
                     Some(n) => self.wait = Some(n),
-                    None => return set_resonance(line),
+                    None => return set_resonance(line) || set_stage(line),
                 },
             }
             true
