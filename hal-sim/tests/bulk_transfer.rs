@@ -10,8 +10,8 @@ use std::time::Duration;
 
 use hal_sim::serial::bulk::{read_bin, shortest};
 use hal_sim::serial::{Client, Link};
-use piezo_core::command::{self, Command, LineBuffer, RecCmd};
-use piezo_core::firmware::{c, stream_bin, stream_frames, Ctl, OnChip, Port, SAMPLE_HZ};
+use piezo_core::command::{self, LineBuffer};
+use piezo_core::firmware::{c, Ctl, OnChip, Port, SAMPLE_HZ};
 
 /// Bytes the executor sends.
 struct Out<'a>(&'a mut VecDeque<u8>);
@@ -102,28 +102,7 @@ impl Fake {
     }
 
     fn answer(&mut self, line: Result<&[u8], command::Error>) {
-        let mut out = Out(&mut self.out);
-        match line.and_then(command::parse) {
-            Ok(Command::Empty) => {}
-            Ok(Command::Rec(RecCmd::Bin { start, count })) => {
-                let rec = &self.ctl.rec;
-                stream_bin(start, count, rec.len(), |i| rec.frame(i).copied(), &mut out);
-            }
-            Ok(Command::Rec(RecCmd::Read { start, count })) => {
-                let rec = &self.ctl.rec;
-                stream_frames(start, count, |i| rec.frame(i).copied(), |l| out.send(l));
-            }
-            Ok(cmd) => {
-                let mut r = command::Reply::<256>::new();
-                self.ctl.execute(cmd, &mut r);
-                out.send(r.as_str());
-            }
-            Err(e) => {
-                let mut r = command::Reply::<64>::new();
-                r.push_error(e);
-                out.send(r.as_str());
-            }
-        }
+        self.ctl.serve(line, &mut Out(&mut self.out));
     }
 }
 

@@ -29,6 +29,19 @@ use piezo_core::command::{self, Command, LineBuffer, RecCmd};
 /// host talks).
 const PERIODS_PER_LINE: usize = 300;
 
+/// Bytes the executor sends.
+struct Out<'a>(&'a mut Vec<u8>);
+
+impl control::Port for Out<'_> {
+    fn send(&mut self, line: &str) {
+        self.0.extend_from_slice(line.as_bytes());
+        self.0.push(b'\n');
+    }
+    fn send_bytes(&mut self, bytes: &[u8]) {
+        self.0.extend_from_slice(bytes);
+    }
+}
+
 /// The firmware's control state and a stage: y follows 0.16 um/V of the output with a lag.
 struct Fake {
     ctl: control::Ctl,
@@ -63,30 +76,7 @@ impl Fake {
     /// What the boards' command task does with one line.
     fn answer(&mut self, line: Result<&[u8], command::Error>, out: &mut Vec<u8>) {
         self.run(PERIODS_PER_LINE);
-        let mut reply = command::Reply::<{ control::REPLY_LEN }>::new();
-        match line.and_then(command::parse) {
-            Ok(Command::Empty) => return,
-            Ok(Command::Rec(RecCmd::Read { start, count })) => {
-                let rec = &self.ctl.rec;
-                control::stream_frames(
-                    start,
-                    count,
-                    |i| rec.frame(i).copied(),
-                    |l| {
-                        out.extend_from_slice(l.as_bytes());
-                        out.push(b'\n');
-                    },
-                );
-                return;
-            }
-            Ok(c) => self.ctl.execute(c, &mut reply),
-            Err(e) => {
-                use std::fmt::Write as _;
-                write!(reply, "{e}").ok();
-            }
-        }
-        out.extend_from_slice(reply.as_bytes());
-        out.push(b'\n');
+        self.ctl.serve(line, &mut Out(out));
     }
 }
 
