@@ -11,20 +11,7 @@ use std::time::Duration;
 use hal_sim::serial::bulk::{read_bin, shortest};
 use hal_sim::serial::{Client, Link};
 use piezo_core::command::{self, LineBuffer};
-use piezo_core::firmware::{c, Ctl, OnChip, Port, SAMPLE_HZ};
-
-/// Bytes the executor sends.
-struct Out<'a>(&'a mut VecDeque<u8>);
-
-impl Port for Out<'_> {
-    fn send(&mut self, line: &str) {
-        self.0.extend(line.as_bytes());
-        self.0.push_back(b'\n');
-    }
-    fn send_bytes(&mut self, bytes: &[u8]) {
-        self.0.extend(bytes);
-    }
-}
+use piezo_core::firmware::{c, Ctl, OnChip, SAMPLE_HZ};
 
 /// The firmware's control state behind a link that damages one byte in `one_in` of the
 /// replies to `rec bin` (0: none), from a fixed pseudo-random sequence.
@@ -102,7 +89,7 @@ impl Fake {
     }
 
     fn answer(&mut self, line: Result<&[u8], command::Error>) {
-        self.ctl.serve(line, &mut Out(&mut self.out));
+        self.ctl.serve(line, &mut self.out);
     }
 }
 

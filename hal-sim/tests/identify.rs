@@ -13,23 +13,11 @@ use std::time::Duration;
 use hal_sim::cli::serial::identify::{self, IdentifyArgs};
 use hal_sim::serial::{Client, Link};
 use piezo_core::command::{self, Command, LineBuffer, RecCmd};
-use piezo_core::firmware::{c, Converters, Ctl, OnChip, Port, SAMPLE_HZ};
+use piezo_core::firmware::{c, Converters, Ctl, OnChip, SAMPLE_HZ};
 use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 
 /// Control periods run before each command line is answered.
 const PERIODS_PER_LINE: usize = 300;
-
-struct Out<'a>(&'a mut VecDeque<u8>);
-
-impl Port for Out<'_> {
-    fn send(&mut self, line: &str) {
-        self.0.extend(line.as_bytes());
-        self.0.push_back(b'\n');
-    }
-    fn send_bytes(&mut self, bytes: &[u8]) {
-        self.0.extend(bytes);
-    }
-}
 
 /// The stage: CBW (000 eq. 1-2) with `d`, `alpha`, `beta`, `gamma`, then a 500 Hz lag.
 struct Stage {
@@ -91,7 +79,7 @@ impl Fake {
 
     fn answer(&mut self, line: Result<&[u8], command::Error>) {
         self.run(PERIODS_PER_LINE);
-        self.ctl.serve(line, &mut Out(&mut self.out));
+        self.ctl.serve(line, &mut self.out);
     }
 }
 

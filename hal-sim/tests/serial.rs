@@ -29,19 +29,6 @@ use piezo_core::command::{self, Command, LineBuffer, RecCmd};
 /// host talks).
 const PERIODS_PER_LINE: usize = 300;
 
-/// Bytes the executor sends.
-struct Out<'a>(&'a mut Vec<u8>);
-
-impl control::Port for Out<'_> {
-    fn send(&mut self, line: &str) {
-        self.0.extend_from_slice(line.as_bytes());
-        self.0.push(b'\n');
-    }
-    fn send_bytes(&mut self, bytes: &[u8]) {
-        self.0.extend_from_slice(bytes);
-    }
-}
-
 /// The firmware's control state and a stage: y follows 0.16 um/V of the output with a lag.
 struct Fake {
     ctl: control::Ctl,
@@ -76,7 +63,7 @@ impl Fake {
     /// What the boards' command task does with one line.
     fn answer(&mut self, line: Result<&[u8], command::Error>, out: &mut Vec<u8>) {
         self.run(PERIODS_PER_LINE);
-        self.ctl.serve(line, &mut Out(out));
+        self.ctl.serve(line, out);
     }
 }
 
