@@ -12,6 +12,7 @@ mod control {
     pub const DAC_MAX: i32 = OnChip::DAC_MAX;
 }
 
+use std::collections::VecDeque;
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::PathBuf;
@@ -61,7 +62,7 @@ impl Fake {
     }
 
     /// What the boards' command task does with one line.
-    fn answer(&mut self, line: Result<&[u8], command::Error>, out: &mut Vec<u8>) {
+    fn answer(&mut self, line: Result<&[u8], command::Error>, out: &mut VecDeque<u8>) {
         self.run(PERIODS_PER_LINE);
         self.ctl.serve(line, out);
     }
@@ -82,13 +83,13 @@ fn serve(s: &mut (impl Read + Write), fake: &mut Fake) {
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
             Err(_) => return,
         };
-        let mut out = Vec::new();
+        let mut out = VecDeque::new();
         for &b in &buf[..n] {
             if let Some(line) = lb.push(b) {
                 fake.answer(line, &mut out);
             }
         }
-        if s.write_all(&out).is_err() {
+        if s.write_all(out.make_contiguous()).is_err() {
             return;
         }
     }

@@ -46,22 +46,11 @@ pub trait Port {
     }
 }
 
-/// On the host, bytes in memory are a port (the in-process firmware of tests and tools).
+/// On the host, a byte queue is a port (the in-process firmware of tests and tools).
 #[cfg(not(target_os = "none"))]
 mod host_ports {
     extern crate std;
     use std::collections::VecDeque;
-    use std::vec::Vec;
-
-    impl super::Port for Vec<u8> {
-        fn send(&mut self, line: &str) {
-            self.extend_from_slice(line.as_bytes());
-            self.push(b'\n');
-        }
-        fn send_bytes(&mut self, bytes: &[u8]) {
-            self.extend_from_slice(bytes);
-        }
-    }
 
     impl super::Port for VecDeque<u8> {
         fn send(&mut self, line: &str) {
