@@ -34,28 +34,6 @@ impl<C: Converters> Ctl<C> {
         r
     }
 
-    /// What a board's command task does with one received line, without its replica and
-    /// locks: `rec read` and `rec bin` streamed from the recorder, any other command run,
-    /// a line the parser refused answered with its error; an empty line gets no reply. The
-    /// host's in-process firmware (tests, tools) answers with it.
-    pub fn serve(&mut self, line: Result<&[u8], Error>, port: &mut impl super::console::Port) {
-        let mut r = command::Reply::<REPLY_LEN>::new();
-        match line.and_then(command::parse) {
-            Ok(Command::Empty) => return,
-            Ok(Command::Rec(RecCmd::Bin { start, count })) => {
-                let rec = &self.rec;
-                return stream_bin(start, count, rec.len(), |i| rec.frame(i).copied(), port);
-            }
-            Ok(Command::Rec(RecCmd::Read { start, count })) => {
-                let rec = &self.rec;
-                return stream_frames(start, count, |i| rec.frame(i).copied(), |l| port.send(l));
-            }
-            Ok(cmd) => self.execute(cmd, &mut r),
-            Err(e) => r.push_error(e),
-        }
-        port.send(r.as_str());
-    }
-
     fn try_execute<const N: usize>(
         &mut self,
         cmd: Command<'_>,
