@@ -295,6 +295,16 @@ impl Record {
 
     /// Parses CSV text with the columns and default units of `layout`; time, inputs and
     /// outputs are converted to s, V and um.
+    ///
+    /// ```
+    /// use hal_sim::record::{Layout, Record};
+    /// let r = Record::parse("t_ms,u_mV,y_nm\n0,1500,2500\n1,1600,2600\n").unwrap();
+    /// assert_eq!((r.t[1], r.u[0][0], r.y[0][0], r.unit_note), (1e-3, 1.5, 2.5, None));
+    /// let text = "time [s],drive (V),pos_um\n0,1,2\n0.5,1,2\n";
+    /// let own = |s: &str| vec![s.to_string()];
+    /// let l = Layout { t: Some("time [s]".into()), u: own("drive (V)"), y: own("pos_um"), ..Layout::default() };
+    /// assert_eq!(Record::parse_with(text, &l).unwrap().y, vec![vec![2.0, 2.0]]);
+    /// ```
     pub fn parse_with(text: &str, layout: &Layout) -> Result<Self, RecordError> {
         let mut comments = Vec::new();
         let mut head: Option<(Header, usize)> = None;

@@ -118,7 +118,15 @@ fn write_csv(path: &Path, t: &[f64], l: &Loop) -> Result<()> {
     let mut f = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
     );
-    write!(f, "t,u,y")?;
+    // The record convention of `crate::record`: units in the header names where the loop
+    // has them (time in s, input in V; the output in um, or unitless for mrad and
+    // normalized loops).
+    let y = if l.ylabel.ends_with("[um]") {
+        "y_um"
+    } else {
+        "y"
+    };
+    write!(f, "t_s,u_V,{y}")?;
     for (name, _) in &l.extra {
         write!(f, ",{name}")?;
     }
