@@ -5,14 +5,19 @@
 //! 2. For every cause not yet in the model, fit the model extended by that cause (starting
 //!    from the current fit, global stage on decimated data, then a local polish on all of
 //!    it), and measure it on the validation record, which had a different excitation.
-//! 3. Accept the cause with the largest validated gain if that gain is real: at least
-//!    [`MIN_GAIN`] of the current validation RMSE, and the cause's signature (what the
-//!    residual correlates with, [`evidence`]) explains at least [`MIN_R2`] of the residual.
+//! 3. A cause's gain is real if it is at least [`MIN_GAIN`] of the current validation RMSE
+//!    and the cause's signature (what the residual correlates with, [`evidence`]) explains at
+//!    least [`MIN_R2`] of the residual. Of the real ones, accept the cause that removes most
+//!    of the residual on both records (the product of its train and valid error ratios).
 //! 4. Repeat from 2 with the extended model until nothing passes: two causes present at
 //!    once are both found, and clean data answers `none`.
+//! 5. A backward check drops causes a later one made redundant; a swap check refuses a cause
+//!    that does not gain with the records' roles swapped (fitted on the validation records,
+//!    scored on the training ones).
 //!
 //! Errors are RMSE (004 eq. 23); all parameters are fitted on the training record only.
 
+mod coords;
 pub mod evidence;
 mod fitting;
 pub mod model;
@@ -114,6 +119,10 @@ pub struct Confidence {
     pub min_gain: f64,
     /// Share of the blocks on which the cause gains at least [`MIN_GAIN`].
     pub share_gaining: f64,
+    /// The cause's gain with the records' roles swapped (the final model fitted on the
+    /// validation records with and without it, scored on the training records); `None` when
+    /// not checked (validation records that continue the training ones, `--split`).
+    pub swapped_gain: Option<f64>,
 }
 
 /// Blocks per validation record for [`Confidence`].
@@ -144,6 +153,7 @@ fn confidence(scored: &[Signals], before: &[Vec<Vec<f64>>], after: &[Vec<Vec<f64
         block_gains,
         min_gain,
         share_gaining,
+        swapped_gain: None,
     }
 }
 
@@ -167,6 +177,9 @@ pub struct Diagnosis {
     pub noise_rms: f64,
     /// Causes found, then dropped by the backward check (a later cause made them redundant).
     pub dropped: Vec<Cause>,
+    /// Causes found, then refused because they did not hold up with the records' roles
+    /// swapped (their gain then, see [`Confidence::swapped_gain`]).
+    pub refused: Vec<(Cause, f64)>,
     /// Number of training records.
     pub n_train: usize,
     /// Per validation record, in the order given.
@@ -224,6 +237,7 @@ impl Diagnosis {
             "findings": self.findings,
             "noise_rms": self.noise_rms,
             "dropped": self.dropped.iter().map(|c| c.name()).collect::<Vec<_>>(),
+            "refused": self.refused.iter().map(|(c, g)| json!({"cause": c.name(), "swapped_gain": g})).collect::<Vec<_>>(),
             "unexplained": self.unexplained,
             "rule": {"min_gain": MIN_GAIN, "min_abs_gain_of_span": MIN_ABS_GAIN, "min_evidence_r2": MIN_R2},
         })
@@ -494,7 +508,16 @@ pub fn diagnose_records(
                 evidence: ev.clone(),
                 significant,
             });
-            if significant && best.is_none_or(|b: usize| e < tried[b].2) {
+            // Among the significant candidates, the one that removes most of the residual on
+            // both records (the product of its error ratios on train and valid): a cause that
+            // gains on the validation record by standing in for another, while explaining
+            // little of the training record, loses to the one that explains both.
+            let both = |e: f64, t: f64| (e / current_valid) * (t / current.rmse_train);
+            if significant
+                && best.is_none_or(|b: usize| {
+                    both(e, rmse_train) < both(tried[b].2, tried[b].0.rmse_train)
+                })
+            {
                 best = Some(k);
             }
         }
@@ -553,6 +576,30 @@ pub fn diagnose_records(
         current_pred = p;
         current_valid = e;
     }
+    // Swap check: a named cause must hold up whichever record trains. The final model is
+    // refitted on the validation records, with and without each cause, and scored on the
+    // training records; a cause that does not then gain by the rule for a gain is refused.
+    let mut refused = Vec::new();
+    if !findings.is_empty() && valid.iter().all(|v| v.warmup == 0) {
+        let swapped = swap_gains(&current, &findings, train, &scored, opt, y_span);
+        for (fd, g) in findings.iter_mut().zip(&swapped) {
+            fd.confidence.swapped_gain = Some(g.0);
+        }
+        let mut k = 0;
+        for (gain, holds) in swapped {
+            if holds {
+                k += 1;
+                continue;
+            }
+            let fd = findings.remove(k);
+            refused.push((fd.cause, gain));
+            current = reduce(&current, fd.cause, &tiers, opt);
+        }
+        if !refused.is_empty() {
+            current_pred = current.predict_all(valid);
+            current_valid = score(&current_pred);
+        }
+    }
     let per_valid = per_record(&scored, &base_pred)
         .into_iter()
         .zip(per_record(&scored, &current_pred))
@@ -576,6 +623,7 @@ pub fn diagnose_records(
     Ok(Diagnosis {
         unexplained,
         dropped,
+        refused,
         base,
         base_valid,
         extended: current,
@@ -586,6 +634,33 @@ pub fn diagnose_records(
         n_train: train.len(),
         per_valid,
     })
+}
+
+/// For each finding: its gain with the records' roles swapped (the final model `current`
+/// refitted on `valid`, with and without the cause, scored on `train`) and whether that gain
+/// passes the rule for a gain.
+fn swap_gains(
+    current: &Fitted,
+    findings: &[Finding],
+    train: &[Signals],
+    valid: &[Signals],
+    opt: &Options,
+    y_span: f64,
+) -> Vec<(f64, bool)> {
+    let tiers = Tiers::new(valid, opt);
+    let measured = flat_outputs(train);
+    let score = |f: &Fitted| rmse_all(&measured, &flat(&f.predict_all(train)));
+    let full = extend(current, None, &tiers, opt);
+    let e_full = score(&full);
+    findings
+        .par_iter()
+        .map(|fd| {
+            let e = score(&reduce(&full, fd.cause, &tiers, opt));
+            let gain = 1.0 - e_full / e;
+            let holds = !e.is_finite() || (gain >= MIN_GAIN && e - e_full >= MIN_ABS_GAIN * y_span);
+            (if gain.is_finite() { gain } else { 1.0 }, holds)
+        })
+        .collect()
 }
 
 #[cfg(test)]

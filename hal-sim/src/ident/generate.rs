@@ -17,6 +17,8 @@
 //! | `drift` | thermal drift (linear plus a slow exponential) | +-(1-4) % of the stroke over the record |
 //! | `backlash` | a play between actuator and output ([`crate::scenario::Backlash`]) | width 0.8-2.5 um |
 //! | `startup-creep` | start-up deficit after a long rest ([`crate::scenario::StartupCreep`]) | depth 4-10 %, travel 40-150 V |
+//! | `rate-dependence` | rate-dependent hysteresis ([`crate::scenario::RateHysteresis`]) | loop 10-30 % wider, gain 3-10 % lower at high rates, half at 150-800 V/s, rate over 3-8 ms |
+//! | `sensor-nonlinearity` | nonlinear sensor ([`crate::scenario::SensorNonlinearity`]) | `+-(0.5-1.5) % e^2 +-(0.3-1) % e^3` of a 50 um half range |
 //!
 //! Sensor noise is 5-20 nm RMS. [`Hidden::record`] drives the stage with a seeded
 //! excitation, a different draw for each record (`which`: 0 train, 1 valid): two sines
@@ -48,6 +50,83 @@ pub struct Hidden {
     pub sizes: Vec<String>,
     pub rate_hz: f64,
     pub duration_s: f64,
+    /// A realistic sensor's imperfections on the reading (none by default).
+    pub sensor: Option<SensorRealism>,
+}
+
+/// What a real position sensor adds to the reading besides white noise, none of it a cause of
+/// the stage's behaviour: mains hum (the fundamental and its third harmonic), 1/f noise and
+/// a coarse quantisation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorRealism {
+    /// Mains frequency (50 or 60 Hz).
+    pub hum_hz: f64,
+    /// Amplitude of the fundamental (um); the third harmonic has a third of it.
+    pub hum_um: f64,
+    /// RMS of the 1/f noise (um) between [`PINK_LO_HZ`] and [`PINK_HI_HZ`].
+    pub pink_um: f64,
+    /// Quantisation step of the reading (um).
+    pub lsb_um: f64,
+}
+
+/// Band of the 1/f noise (Hz).
+pub const PINK_LO_HZ: f64 = 0.05;
+pub const PINK_HI_HZ: f64 = 500.0;
+
+impl SensorRealism {
+    /// Sizes drawn from `seed`: hum 10-30 nm at 50 or 60 Hz, 1/f noise 10-30 nm RMS, a step
+    /// of 20-60 nm.
+    pub fn draw(seed: u64) -> Self {
+        let mut r = Rng::new(seed.wrapping_mul(0x9E37_79B9).wrapping_add(0x5E45));
+        Self {
+            hum_hz: if r.next_u64().is_multiple_of(2) {
+                50.0
+            } else {
+                60.0
+            },
+            hum_um: r.range(0.01, 0.03),
+            pink_um: r.range(0.01, 0.03),
+            lsb_um: r.range(0.02, 0.06),
+        }
+    }
+
+    /// The reading `y` (sampled at `rate_hz`) with hum, 1/f noise and quantisation; `r`
+    /// draws the hum's phase and the noise.
+    pub fn apply(&self, y: &mut [f64], rate_hz: f64, r: &mut Rng) {
+        let dt = 1.0 / rate_hz;
+        let tau = std::f64::consts::TAU;
+        let (p1, p3) = (r.range(0.0, tau), r.range(0.0, tau));
+        // 1/f: first-order low-passed white noises with equal variance and corners two per
+        // decade (their Lorentzians sum to about 1/f between the corners).
+        let mut corners = Vec::new();
+        let mut f = PINK_LO_HZ;
+        while f <= PINK_HI_HZ.min(0.25 * rate_hz) {
+            corners.push(f);
+            f *= 10f64.sqrt();
+        }
+        let each = self.pink_um / (corners.len().max(1) as f64).sqrt();
+        let poles: Vec<(f64, f64)> = corners
+            .iter()
+            .map(|fc| {
+                let a = (-tau * fc * dt).exp();
+                // Stationary variance each^2: innovations of each*sqrt(1 - a^2).
+                (a, each * (1.0 - a * a).sqrt())
+            })
+            .collect();
+        let mut state: Vec<f64> = poles.iter().map(|_| each * r.normal(1.0)).collect();
+        for (k, y) in y.iter_mut().enumerate() {
+            let t = k as f64 * dt;
+            let mut pink = 0.0;
+            for (x, (a, b)) in state.iter_mut().zip(&poles) {
+                *x = a * *x + b * r.normal(1.0);
+                pink += *x;
+            }
+            let hum = self.hum_um
+                * ((tau * self.hum_hz * t + p1).sin()
+                    + (3.0 * tau * self.hum_hz * t + p3).sin() / 3.0);
+            *y = ((*y + hum + pink) / self.lsb_um).round() * self.lsb_um;
+        }
+    }
 }
 
 impl Hidden {
@@ -122,6 +201,12 @@ impl Hidden {
         let play_um = r.range(0.8, 2.5);
         let startup_depth = r.range(0.04, 0.1);
         let startup_travel = r.log_uniform(40.0, 150.0);
+        let rate_widen = r.range(0.1, 0.3);
+        let rate_drop = r.range(0.03, 0.1);
+        let rate_ref = r.log_uniform(150.0, 800.0);
+        let rate_tau = r.range(3e-3, 8e-3);
+        let sensor_q = r.range(0.005, 0.015) * r.sign();
+        let sensor_c = r.range(0.003, 0.01) * r.sign();
         let mut hidden = Self {
             seed,
             causes: causes.to_vec(),
@@ -129,6 +214,7 @@ impl Hidden {
             sizes: Vec::new(),
             rate_hz,
             duration_s,
+            sensor: None,
         };
         let st = &mut hidden.scenario.stage;
         for &c in causes {
@@ -186,6 +272,34 @@ impl Hidden {
                     sizes.push(format!(
                         "start-up deficit {:.1} % decaying over {startup_travel:.0} V of travel",
                         100.0 * startup_depth
+                    ));
+                }
+                Cause::RateDependence => {
+                    let rh = &mut st.rate_hysteresis;
+                    rh.enabled = true;
+                    rh.widen = rate_widen;
+                    rh.gain_drop = rate_drop;
+                    rh.rate_ref_v_per_s = rate_ref;
+                    rh.tau_s = rate_tau;
+                    sizes.push(format!(
+                        "rate dependence: loop {:.0} % wider and gain {:.1} % lower at high rates, half at {rate_ref:.0} V/s (tau {:.1} ms)",
+                        100.0 * rate_widen,
+                        100.0 * rate_drop,
+                        1e3 * rate_tau
+                    ));
+                }
+                Cause::SensorNonlinearity => {
+                    let sn = &mut st.sensor_nonlinearity;
+                    sn.enabled = true;
+                    sn.center_um = 0.5 * STROKE_UM;
+                    sn.half_range_um = 0.5 * STROKE_UM;
+                    sn.quadratic = sensor_q;
+                    sn.cubic = sensor_c;
+                    sizes.push(format!(
+                        "sensor error {:+.2} % e^2 {:+.2} % e^3 of the {:.0} um half range",
+                        100.0 * sensor_q,
+                        100.0 * sensor_c,
+                        0.5 * STROKE_UM
                     ));
                 }
                 Cause::Drift => {
@@ -264,7 +378,27 @@ impl Hidden {
                 y.push(stage.sensor_um(i));
             }
         }
+        if let Some(sensor) = &self.sensor {
+            let mut r = Rng::new(s.run.seed.wrapping_mul(0x51_7CC1).wrapping_add(7));
+            for y in y.iter_mut() {
+                sensor.apply(y, self.rate_hz, &mut r);
+            }
+        }
         Signals::new(t, u, y).expect("generated record is valid")
+    }
+
+    /// The same stage read by a realistic sensor ([`SensorRealism::draw`] from the seed).
+    pub fn with_realistic_sensor(mut self) -> Self {
+        let s = SensorRealism::draw(self.seed);
+        self.sizes.push(format!(
+            "sensor: hum {:.0} nm at {:.0} Hz, 1/f noise {:.0} nm rms, step {:.0} nm",
+            1e3 * s.hum_um,
+            s.hum_hz,
+            1e3 * s.pink_um,
+            1e3 * s.lsb_um
+        ));
+        self.sensor = Some(s);
+        self
     }
 
     /// Record `which` as a CSV record, its comments naming the hidden causes and sizes.

@@ -96,6 +96,7 @@ impl Plant {
             zeta: 1.0,
             play_um: 0.0,
             startup_travel_v: f64::INFINITY,
+            rate_ref_v_per_s: f64::INFINITY,
         };
         let v = effective_input(&u[i], dt, &shape);
         let g = hysteresis(&v, self.beta, self.gamma);

@@ -7,7 +7,10 @@
 
 use serde::Serialize;
 
-use super::model::{effective_input, least_squares, own_input, play, startup_decay, Cause, Shape};
+use super::model::{
+    effective_input, hysteresis, least_squares, own_input, play, rate_weight, startup_decay, Cause,
+    Shape,
+};
 use super::Signals;
 use crate::numeric::lowpass;
 
@@ -130,6 +133,11 @@ pub fn signal(
                 .collect(),
         ),
         Some(Cause::Drift) => ("time [s]".into(), data.t.clone()),
+        Some(Cause::RateDependence) => (
+            "input rate |du/dt| [V/s]".into(),
+            derivative(u, dt).iter().map(|v| v.abs()).collect(),
+        ),
+        Some(Cause::SensorNonlinearity) => ("model output [um]".into(), y_model.to_vec()),
         Some(Cause::StartupCreep) => (
             "input travel since the record's start [V]".into(),
             u.iter()
@@ -391,6 +399,60 @@ pub fn evidence(
                 ),
             }
         }
+        Cause::RateDependence => {
+            let g = hysteresis(u, fitted.beta, fitted.gamma);
+            let abs: Vec<f64> = derivative(u, dt).iter().map(|v| v.abs()).collect();
+            let moving: Vec<f64> = abs.iter().copied().filter(|v| *v > 0.0).collect();
+            // The hysteresis and the operating point's offset weighted by the rate, for the
+            // typical moving rate and the fitted reference rate.
+            let sig: Vec<Vec<f64>> = [quantile(&moving, 0.5), fitted.rate_ref_v_per_s]
+                .iter()
+                .filter(|r| r.is_finite() && **r > 0.0)
+                .flat_map(|&rr| {
+                    let (rho, ubar) = rate_weight(u, dt, rr);
+                    [
+                        rho.iter().zip(&g).map(|(r, g)| r * g).collect::<Vec<f64>>(),
+                        rho.iter()
+                            .zip(u.iter().zip(&ubar))
+                            .map(|(r, (u, b))| r * (u - b))
+                            .collect(),
+                    ]
+                })
+                .collect();
+            let r2 = explained(r, &sig);
+            let fast_at = quantile(&abs, 0.75);
+            let fast = |k: usize| abs[k] > fast_at;
+            let (e_fast, e_slow) = (rms_where(r, fast), rms_where(r, |k| !fast(k)));
+            Evidence {
+                signal: "hysteresis and operating-point offset weighted by the input rate".into(),
+                r2,
+                text: format!(
+                    "residual rms {e_fast:.3} where |du/dt| is in its top quarter vs {e_slow:.3} elsewhere; the loop's widening and rotation with the rate explain {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::SensorNonlinearity => {
+            let (lo, hi) = (quantile(y_model, 0.0), quantile(y_model, 1.0));
+            let mid = 0.5 * (lo + hi);
+            let half = (0.5 * (hi - lo)).max(1e-12);
+            let e: Vec<f64> = y_model.iter().map(|y| (y - mid) / half).collect();
+            let sig = vec![
+                e.iter().map(|e| e * e).collect(),
+                e.iter().map(|e| e * e * e).collect(),
+            ];
+            let r2 = explained(r, &sig);
+            let ends = |k: usize| e[k].abs() > 0.8;
+            let (e_ends, e_mid) = (rms_where(r, ends), rms_where(r, |k| !ends(k)));
+            Evidence {
+                signal: "position^2, position^3 (the model's output)".into(),
+                r2,
+                text: format!(
+                    "residual rms {e_ends:.3} in the outer tenths of the position range vs {e_mid:.3} inside; a polynomial of the position (not of the input) explains {:.0} %",
+                    100.0 * r2
+                ),
+            }
+        }
         Cause::Drift => {
             let r2 = explained(r, std::slice::from_ref(&data.t));
             let t_mean = data.t.iter().sum::<f64>() / n.max(1) as f64;
@@ -426,6 +488,7 @@ pub fn no_shape() -> Shape {
         zeta: 1.0,
         play_um: 0.0,
         startup_travel_v: f64::INFINITY,
+        rate_ref_v_per_s: f64::INFINITY,
     }
 }
 

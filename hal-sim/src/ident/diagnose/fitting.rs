@@ -111,6 +111,9 @@ impl Fitted {
                 if c.has(Cause::StartupCreep) {
                     put("startup_travel_v", s.startup_travel_v);
                 }
+                if c.has(Cause::RateDependence) {
+                    put("rate_ref_v_per_s", s.rate_ref_v_per_s);
+                }
                 if c.has(Cause::Creep) {
                     put("creep_taus_s", f64::NAN);
                     o.insert("creep_taus_s".into(), json!(self.taus));
@@ -138,8 +141,21 @@ fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
     let mut v = Vec::new();
     let span = scales.span();
     match cause {
-        None | Some(Cause::Asymmetry | Cause::Creep | Cause::CrossCoupling | Cause::Drift) => {
-            v.push(*shape)
+        None
+        | Some(
+            Cause::Asymmetry
+            | Cause::Creep
+            | Cause::CrossCoupling
+            | Cause::Drift
+            | Cause::SensorNonlinearity,
+        ) => v.push(*shape),
+        Some(Cause::RateDependence) => {
+            for f in [0.01, 0.05, 0.2, 1.0] {
+                v.push(Shape {
+                    rate_ref_v_per_s: f * scales.rate_max,
+                    ..*shape
+                });
+            }
         }
         Some(Cause::Delay) => {
             for ms in [0.3, 1.0, 3.0, 10.0, 30.0] {
@@ -298,6 +314,7 @@ pub(super) fn fit_base(tiers: &Tiers, opt: &Options) -> Fitted {
                     (a.0.min(b.0), a.1.max(b.1))
                 });
             s.y_span = (hi - lo).max(1e-12);
+            s.y_mid = 0.5 * (hi + lo);
             s
         })
         .collect();
@@ -413,11 +430,13 @@ pub(super) fn neutral(mut shape: Shape, cause: Cause) -> Shape {
             shape.zeta = 1.0;
         }
         Cause::Backlash => shape.play_um = 0.0,
+        Cause::RateDependence => shape.rate_ref_v_per_s = f64::INFINITY,
         Cause::Asymmetry
         | Cause::Creep
         | Cause::CrossCoupling
         | Cause::Drift
-        | Cause::StartupCreep => {}
+        | Cause::StartupCreep
+        | Cause::SensorNonlinearity => {}
     }
     shape
 }
@@ -430,6 +449,8 @@ fn coef_prefix(cause: Cause) -> Option<&'static str> {
         Cause::CrossCoupling => Some("couple_"),
         Cause::Drift => Some("drift_"),
         Cause::StartupCreep => Some("startup_"),
+        Cause::RateDependence => Some("rate_"),
+        Cause::SensorNonlinearity => Some("sensor_"),
         _ => None,
     }
 }

@@ -1,9 +1,9 @@
 //! The residual no cause in the catalogue explains: is a significant part of it structured,
 //! and where does that part live?
 //!
-//! The final model's residual on the validation records is grouped by five signals a person
-//! can act on: the input level, the position in the loop (input level and direction of
-//! motion), the input rate, the drive amplitude (the input's recent excursion) and the time
+//! The final model's residual on the validation records is grouped by six signals a person
+//! can act on: the input level, the output level (the modelled position), the position in the
+//! loop (input level and direction of motion), the input rate, the drive amplitude (the input's recent excursion) and the time
 //! since the record's start from rest. The share of the residual variance a grouping explains
 //! (between-group variance over total variance, less what as many groups explain in white
 //! noise) says how structured the residual is along that signal. The residual is called
@@ -46,8 +46,8 @@ pub struct Unexplained {
     pub non_noise: f64,
     pub rms: f64,
     pub noise_rms: f64,
-    /// The best grouping: `input level`, `position in the loop`, `input rate`, `amplitude`
-    /// or `time since rest`; else `frequency band`.
+    /// The best grouping: `input level`, `output level`, `position in the loop`, `input
+    /// rate`, `amplitude` or `time since rest`; else `frequency band`.
     pub location: &'static str,
     pub detail: String,
     /// The frequency band holding most of the residual's energy above the noise.
@@ -82,7 +82,7 @@ fn bins(x: &[f64], n_bins: usize, unit: &str, what: &str) -> (Vec<usize>, Vec<St
     (labels, phrases)
 }
 
-fn groupings(rec: &Signals, i: usize) -> Vec<Grouping> {
+fn groupings(rec: &Signals, i: usize, r: &[f64]) -> Vec<Grouping> {
     let u = &rec.u[own_input(i, rec.u.len())];
     let dt = rec.dt();
     let n = u.len();
@@ -91,6 +91,16 @@ fn groupings(rec: &Signals, i: usize) -> Vec<Grouping> {
     let (labels, phrases) = bins(u, BINS, "V", "input");
     out.push(Grouping {
         name: "input level",
+        labels,
+        phrases,
+    });
+    // The position the model puts the stage at (measurement less residual): a sensor's
+    // error that depends on the position lives here, not at an input level.
+    let y = &rec.y[i];
+    let x: Vec<f64> = y.iter().zip(r).map(|(y, r)| y - r).collect();
+    let (labels, phrases) = bins(&x, BINS, "um", "position");
+    out.push(Grouping {
+        name: "output level",
         labels,
         phrases,
     });
@@ -171,6 +181,20 @@ fn between(r: &[f64], labels: &[usize], groups: usize) -> (f64, f64, usize) {
     (contrib.iter().sum(), total, top)
 }
 
+/// `r` less the mean of its group under `labels`.
+fn without_means(r: &[f64], labels: &[usize], groups: usize) -> Vec<f64> {
+    let mut sum = vec![0.0; groups];
+    let mut cnt = vec![0usize; groups];
+    for (v, &l) in r.iter().zip(labels) {
+        sum[l] += v;
+        cnt[l] += 1;
+    }
+    r.iter()
+        .zip(labels)
+        .map(|(v, &l)| v - sum[l] / cnt[l].max(1) as f64)
+        .collect()
+}
+
 /// The band of `r` (below 1 Hz, 1-10, 10-100, 100-1000 Hz, above) holding most of its
 /// energy above the white noise's share of that band: its name and that excess as a share of
 /// the residual's energy.
@@ -230,6 +254,8 @@ pub fn find(scored: &[Signals], residual: &[Vec<Vec<f64>>], noise_rms: f64) -> O
     let mut pools: Vec<Pool> = Vec::new();
     let (mut ss, mut count) = (0.0, 0usize);
     let mut band_of = (0.0, String::new(), 0.0);
+    // Every series' residual and groupings, for the tie-break between the best two.
+    let mut series: Vec<(&[f64], Vec<Grouping>)> = Vec::new();
     for (rec, res) in scored.iter().zip(residual) {
         for (i, r) in res.iter().enumerate() {
             let n = r.len();
@@ -239,7 +265,8 @@ pub fn find(scored: &[Signals], residual: &[Vec<Vec<f64>>], noise_rms: f64) -> O
             let e: f64 = r.iter().map(|v| v * v).sum();
             ss += e;
             count += n;
-            for (g, grouping) in groupings(rec, i).into_iter().enumerate() {
+            let gs = groupings(rec, i, r);
+            for (g, grouping) in gs.iter().enumerate() {
                 let groups = grouping.phrases.len();
                 let (b, tot, top) = between(r, &grouping.labels, groups);
                 if pools.len() <= g {
@@ -266,6 +293,7 @@ pub fn find(scored: &[Signals], residual: &[Vec<Vec<f64>>], noise_rms: f64) -> O
                 let (name, share) = band(r, rec.dt(), noise_rms);
                 band_of = (e, name, share);
             }
+            series.push((r, gs));
         }
     }
     if count == 0 {
@@ -290,6 +318,31 @@ pub fn find(scored: &[Signals], residual: &[Vec<Vec<f64>>], noise_rms: f64) -> O
         })
         .collect();
     locations.sort_by(|a, b| b.share.total_cmp(&a.share));
+    // Two groupings that both explain much may share it (the input level also changes with
+    // time): the one that explains more of what the other leaves is where it lives.
+    if locations.len() > 1 && locations[1].share >= MIN_SHARE {
+        let unique = |a: &str, b: &str| -> f64 {
+            let (mut bt, mut tot) = (0.0, 0.0);
+            for (r, gs) in &series {
+                let find = |name: &str| gs.iter().find(|g| g.name == name);
+                if let (Some(ga), Some(gb)) = (find(a), find(b)) {
+                    let left = without_means(r, &gb.labels, gb.phrases.len());
+                    let (x, t, _) = between(&left, &ga.labels, ga.phrases.len());
+                    bt += x;
+                    tot += t;
+                }
+            }
+            if tot > 0.0 {
+                bt / tot
+            } else {
+                0.0
+            }
+        };
+        let (a, b) = (locations[0].name, locations[1].name);
+        if unique(b, a) > unique(a, b) {
+            locations.swap(0, 1);
+        }
+    }
     // A signal a person can act on first; else the frequency band, when the residual's
     // excess energy sits in one band (many lightly damped modes: no level or rate groups it).
     let band_location = Location {
