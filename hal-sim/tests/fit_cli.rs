@@ -60,6 +60,11 @@ fn periodic_validation_reports_steady_state_and_from_rest() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--t-col`, `--u-col`, `--y-col` of the foreign exports, the output column `y`.
+fn foreign_cols(y: &str) -> [String; 6] {
+    ["--t-col", "Time [s]", "--u-col", "Drive (V)", "--y-col", y].map(String::from)
+}
+
 /// `piezo fit --model cbw --json` on `train`: the report.
 fn fit_json(train: &std::path::Path, more: &[&dyn AsRef<std::ffi::OsStr>]) -> serde_json::Value {
     let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
@@ -152,17 +157,9 @@ fn a_record_in_nm_fits_the_same_model_as_in_um() {
         "Time [s],Drive (V),Sensor [m],Temp",
         [1.0, 1.0, 1e-6],
     );
-    let j = fit_json(
-        &foreign,
-        &[
-            &"--t-col",
-            &"Time [s]",
-            &"--u-col",
-            &"Drive (V)",
-            &"--y-col",
-            &"Sensor [m]",
-        ],
-    );
+    let cols = foreign_cols("Sensor [m]");
+    let more: Vec<&dyn AsRef<std::ffi::OsStr>> = cols.iter().map(|c| c as _).collect();
+    let j = fit_json(&foreign, &more);
     assert!(
         same(&params(&j), &params(&um), 1e-6),
         "{:?} vs {:?}",
@@ -220,15 +217,9 @@ fn missing_columns_and_unknown_units_are_named() {
             && e.contains("the columns are `Time [s]`, `Drive (V)`, `Sensor [ft]`, `Temp`"),
         "{e}"
     );
+    let position = foreign_cols("Position");
     let mut chosen = fit.to_vec();
-    chosen.extend([
-        &"--t-col" as &dyn AsRef<std::ffi::OsStr>,
-        &"Time [s]",
-        &"--u-col",
-        &"Drive (V)",
-        &"--y-col",
-        &"Position",
-    ]);
+    chosen.extend(position.iter().map(|c| c as &dyn AsRef<std::ffi::OsStr>));
     let e = refused(&chosen);
     assert!(
         e.contains("no output column `Position` in the header"),
@@ -242,17 +233,10 @@ fn missing_columns_and_unknown_units_are_named() {
         "{e}"
     );
     // diagnose and predict take the same options and the same reader.
-    let e = refused(&[
-        &"diagnose",
-        &"--train",
-        &foreign,
-        &"--t-col",
-        &"Time [s]",
-        &"--u-col",
-        &"Drive (V)",
-        &"--y-col",
-        &"Sensor [ft]",
-    ]);
+    let ft = foreign_cols("Sensor [ft]");
+    let mut diagnose: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![&"diagnose", &"--train", &foreign];
+    diagnose.extend(ft.iter().map(|c| c as &dyn AsRef<std::ffi::OsStr>));
+    let e = refused(&diagnose);
     assert!(e.contains("unknown length unit `ft`"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }

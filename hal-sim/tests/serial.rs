@@ -278,11 +278,10 @@ fn typed_commands_drive_the_firmware_executor() {
     }
 }
 
-#[test]
-fn the_recorder_comes_back_as_csv_with_units() {
-    let addr = spawn_firmware();
+/// `wave sine 5 16 10`: 5 um at 16 Hz around 10 um.
+fn sine_5um_16hz(addr: &str) {
     run(
-        &addr,
+        addr,
         Action::Wave(WaveCmd::Sine(WaveArgs {
             amplitude: 5.0,
             freq: 16.0,
@@ -290,6 +289,12 @@ fn the_recorder_comes_back_as_csv_with_units() {
         })),
     )
     .unwrap();
+}
+
+#[test]
+fn the_recorder_comes_back_as_csv_with_units() {
+    let addr = spawn_firmware();
+    sine_5um_16hz(&addr);
     let (csv, svg) = (tmp("rec.csv"), tmp("rec.svg"));
     let out = run(
         &addr,
@@ -635,15 +640,7 @@ fn a_recorded_capture_is_fitted_by_piezo_fit() {
         },
     )
     .unwrap();
-    run(
-        &addr,
-        Action::Wave(WaveCmd::Sine(WaveArgs {
-            amplitude: 5.0,
-            freq: 16.0,
-            offset: 10.0,
-        })),
-    )
-    .unwrap();
+    sine_5um_16hz(&addr);
     let csv = tmp("fit-rec.csv");
     run(
         &addr,
