@@ -283,3 +283,44 @@ fn a_sim_out_record_is_read_by_fit() {
     assert!(re < 5.0, "relative error {re} %");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--split` (shared with `diagnose`): the first part fits, the model runs on through the
+/// rest, which is scored; a fraction outside 0.1..0.9 or beside `--valid` is refused.
+#[test]
+fn split_fits_the_first_part_and_scores_the_rest() {
+    let dir = std::env::temp_dir().join(format!("fit_cli_split_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    records(&dir);
+    let train = dir.join("train.csv");
+    let j = fit_json(&train, &[&"--split", &"0.6"]);
+    assert!(
+        j["valid"]
+            .as_str()
+            .unwrap()
+            .contains("samples 1200..2000 after fitting on 0..1200"),
+        "{}",
+        j["valid"]
+    );
+    let rmse = j["valid_metrics"][0]["metrics"]["rmse"].as_f64().unwrap();
+    // Noise-free CBW data: the model of the first 1200 samples predicts the rest.
+    assert!(rmse < 1e-2, "{rmse}");
+    let fit = [
+        &"fit" as &dyn AsRef<std::ffi::OsStr>,
+        &"--model",
+        &"cbw",
+        &"--train",
+        &train,
+    ];
+    let mut far = fit.to_vec();
+    far.extend([&"--split" as &dyn AsRef<std::ffi::OsStr>, &"0.95"]);
+    assert!(refused(&far).contains("--split must be within 0.1..0.9"));
+    let mut both = fit.to_vec();
+    both.extend([
+        &"--split" as &dyn AsRef<std::ffi::OsStr>,
+        &"0.5",
+        &"--valid",
+        &train,
+    ]);
+    assert!(refused(&both).contains("cannot be used with"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

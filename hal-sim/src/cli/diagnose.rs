@@ -9,24 +9,15 @@ use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use super::fit_args::Columns;
+use super::fit_args::{Columns, Records};
 use crate::ident::diagnose::{self, Diagnosis, Options, Signals};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Training record (CSV: `t_s,u_V,y_um` or `t_s,u1_V..uk_V,y1_um..yk_um`; units
-    /// optional); all parameters are fitted on it.
-    /// Repeat for several records: one model is fitted on all of them.
-    #[arg(long, required = true)]
-    pub train: Vec<PathBuf>,
-    /// Validation record, ideally with a different excitation; gains are measured on it.
-    /// Repeat for several records: gains are measured on all of them (and per record).
-    #[arg(long, conflicts_with = "split")]
-    pub valid: Vec<PathBuf>,
-    /// Without --valid: split every training record at this fraction of its samples (first
-    /// part fits, the rest validates).
-    #[arg(long)]
-    pub split: Option<f64>,
+    /// Training and validation records (one model fitted on all training records; without
+    /// --valid, --split 0.5).
+    #[command(flatten)]
+    pub records: Records,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -49,17 +40,14 @@ fn read(path: &Path, columns: &Columns) -> Result<Signals> {
 
 pub fn run(args: Args) -> Result<()> {
     let load = |p: &PathBuf| read(p, &args.columns);
-    let records = args.train.iter().map(load).collect::<Result<Vec<_>>>()?;
-    let (train, valid, split_note) = if args.valid.is_empty() {
-        let f = args.split.unwrap_or(0.5);
-        anyhow::ensure!(
-            f.is_finite() && (0.1..=0.9).contains(&f),
-            "--split must be within 0.1..0.9, got {f}"
-        );
+    let rs = &args.records;
+    anyhow::ensure!(!rs.train.is_empty(), "--train is required (see --help)");
+    let records = rs.train.iter().map(load).collect::<Result<Vec<_>>>()?;
+    let (train, valid, split_note) = if rs.valid.is_empty() {
         let mut notes = Vec::new();
         let (mut train, mut valid) = (Vec::new(), Vec::new());
-        for (whole, path) in records.into_iter().zip(&args.train) {
-            let k = (whole.len() as f64 * f) as usize;
+        for (whole, path) in records.into_iter().zip(&rs.train) {
+            let k = rs.split_at(whole.len(), Some(0.5))?.unwrap_or(0);
             notes.push(format!(
                 "samples 0..{k} of {} fit, {k}..{} validate",
                 path.display(),
@@ -74,11 +62,8 @@ pub fn run(args: Args) -> Result<()> {
         );
         (train, valid, Some(note))
     } else {
-        anyhow::ensure!(
-            args.split.is_none(),
-            "--split and --valid exclude each other"
-        );
-        let valid = args.valid.iter().map(load).collect::<Result<Vec<_>>>()?;
+        rs.split_at(0, None)?;
+        let valid = rs.valid.iter().map(load).collect::<Result<Vec<_>>>()?;
         (records, valid, None)
     };
     let d = diagnose::diagnose_records(&train, &valid, &Options::default())?;
@@ -105,15 +90,15 @@ pub fn run(args: Args) -> Result<()> {
             j["split"] = serde_json::json!(note);
         }
         if j.get("records").is_some() {
-            j["records"]["train_files"] = serde_json::json!(args
+            j["records"]["train_files"] = serde_json::json!(rs
                 .train
                 .iter()
                 .map(|p| p.display().to_string())
                 .collect::<Vec<_>>());
-            let valid_files: Vec<String> = if args.valid.is_empty() {
-                args.train.iter().map(|p| p.display().to_string()).collect()
+            let valid_files: Vec<String> = if rs.valid.is_empty() {
+                rs.train.iter().map(|p| p.display().to_string()).collect()
             } else {
-                args.valid.iter().map(|p| p.display().to_string()).collect()
+                rs.valid.iter().map(|p| p.display().to_string()).collect()
             };
             j["records"]["valid_files"] = serde_json::json!(valid_files);
         }

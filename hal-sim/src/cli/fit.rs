@@ -72,10 +72,6 @@ fn simulate_identified(id: &Identified, rec: &Record, periodic: usize) -> Result
     }
 }
 
-fn all_metrics(rec: &Record, sim: &[Vec<f64>]) -> Vec<ChannelMetrics> {
-    metrics_after(rec, sim, 0)
-}
-
 /// Metrics of every output over the samples from `skip` on (a fit's warm-up is not scored).
 fn metrics_after(rec: &Record, sim: &[Vec<f64>], skip: usize) -> Vec<ChannelMetrics> {
     rec.y
@@ -248,6 +244,9 @@ pub struct FitInput<'a> {
     pub train_name: String,
     /// Validation record and its name: simulated with the identified model, never fitted.
     pub valid: Option<(&'a Record, String)>,
+    /// Samples at the start of the validation record that are not scored (`--split`: the
+    /// training part the model runs through first).
+    pub valid_from: usize,
     /// The validation record is one period of a periodic steady state: simulate this many
     /// periods first (0: from rest).
     pub valid_periodic: usize,
@@ -277,6 +276,7 @@ pub fn fit(input: FitInput<'_>, opts: &FitOptions) -> Result<Fit> {
         train,
         train_name,
         valid,
+        valid_from,
         valid_periodic,
         linear_step,
         input_unit,
@@ -323,11 +323,11 @@ pub fn fit(input: FitInput<'_>, opts: &FitOptions) -> Result<Fit> {
         linear_step,
         train_metrics: metrics_after(train, &train_sim, opts.warmup),
         valid_metrics: match (valid, &valid_sim) {
-            (Some(v), Some(s)) => all_metrics(v, s),
+            (Some(v), Some(s)) => metrics_after(v, s, valid_from),
             _ => Vec::new(),
         },
         valid_from_rest_metrics: match (valid, &valid_rest_sim) {
-            (Some(v), Some(s)) => all_metrics(v, s),
+            (Some(v), Some(s)) => metrics_after(v, s, valid_from),
             _ => Vec::new(),
         },
         parts: id.parts,
@@ -364,11 +364,20 @@ pub fn run(args: Args) -> Result<()> {
     if super::fit_ss::handles(model) {
         return super::fit_ss::run(&args);
     }
-    let train_path = match args.train.as_slice() {
+    let rs = &args.records;
+    let train_path = match rs.train.as_slice() {
         [one] => one,
         [] => anyhow::bail!("--model and --train are required (see --help)"),
         more => anyhow::bail!(
             "model `{model}` takes one --train record, {} given (several: --model ss, hammerstein-ss or scheduled-ss)",
+            more.len()
+        ),
+    };
+    let valid_path = match rs.valid.as_slice() {
+        [] => None,
+        [one] => Some(one),
+        more => anyhow::bail!(
+            "model `{model}` takes one --valid record, {} given",
             more.len()
         ),
     };
@@ -379,12 +388,28 @@ pub fn run(args: Args) -> Result<()> {
         args.linear
     );
     let t0 = std::time::Instant::now();
-    let train = args.columns.read(train_path, args.quiet)?;
-    let valid = args
-        .valid
-        .as_ref()
-        .map(|v| args.columns.read(v, args.quiet))
-        .transpose()?;
+    let whole = args.columns.read(train_path, args.quiet)?;
+    // --split: the model fits the first part and runs on through the rest, scored there.
+    let (train, valid, valid_name, valid_from) = match (valid_path, rs.split_at(whole.len(), None)?)
+    {
+        (Some(v), _) => {
+            let rec = args.columns.read(v, args.quiet)?;
+            (whole, Some(rec), Some(v.display().to_string()), 0)
+        }
+        (None, Some(k)) => {
+            anyhow::ensure!(
+                args.valid_periodic == 0,
+                "--valid-periodic needs a --valid record of whole periods, not --split"
+            );
+            let name = format!(
+                "{} (samples {k}..{} after fitting on 0..{k})",
+                train_path.display(),
+                whole.len()
+            );
+            (whole.slice(0, k), Some(whole), Some(name), k)
+        }
+        (None, None) => (whole, None, None, 0),
+    };
     let opts = FitOptions {
         optimizer: args.optimizer,
         generations: args.generations,
@@ -419,9 +444,8 @@ pub fn run(args: Args) -> Result<()> {
             def,
             train: &train,
             train_name: train_path.display().to_string(),
-            valid: valid
-                .as_ref()
-                .zip(args.valid.as_ref().map(|p| p.display().to_string())),
+            valid: valid.as_ref().zip(valid_name),
+            valid_from,
             valid_periodic: args.valid_periodic,
             linear_step,
             input_unit: Quantity::Voltage.internal().into(),

@@ -75,17 +75,56 @@ impl Columns {
     }
 }
 
+/// The records a model is fitted and validated on, the same options for `piezo fit` and
+/// `piezo diagnose`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Records {
+    /// Training record (CSV: `t_s,u_V,y_um` or `t_s,u1_V..uk_V,y1_um..yn_um`; units
+    /// optional; other columns with --t-col, --u-col, --y-col). Repeat for several:
+    /// `diagnose` and the state-space models (`ss`, `hammerstein-ss`, `scheduled-ss`) fit
+    /// one model on all of them.
+    #[arg(long)]
+    pub train: Vec<PathBuf>,
+    /// Validation record, never used for fitting, ideally with another excitation. Repeat
+    /// for several (`diagnose` measures its gains on all of them).
+    #[arg(long, conflicts_with = "split")]
+    pub valid: Vec<PathBuf>,
+    /// Without --valid: split each training record at this fraction of its samples
+    /// (0.1..0.9): the first part fits, the model runs on through the rest, which validates.
+    #[arg(long)]
+    pub split: Option<f64>,
+}
+
+impl Records {
+    /// The sample a record of `len` samples is split at (`--split`, else `default`; `None`
+    /// with --valid or without either), the fraction checked.
+    pub fn split_at(&self, len: usize, default: Option<f64>) -> anyhow::Result<Option<usize>> {
+        if !self.valid.is_empty() {
+            anyhow::ensure!(
+                self.split.is_none(),
+                "--split and --valid exclude each other"
+            );
+            return Ok(None);
+        }
+        let Some(f) = self.split.or(default) else {
+            return Ok(None);
+        };
+        anyhow::ensure!(
+            f.is_finite() && (0.1..=0.9).contains(&f),
+            "--split must be within 0.1..0.9, got {f}"
+        );
+        Ok(Some((len as f64 * f) as usize))
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Model name (`piezo fit --list` shows them all), e.g. cbw, gbw, pi, structural-bw.
     #[arg(long, required_unless_present = "list")]
     pub model: Option<String>,
-    /// Training record (CSV: `t_s,u_V,y_um` or `t_s,u1_V..uk_V,y1_um..yn_um`; units
-    /// optional; other columns with --t-col, --u-col, --y-col). The state-space models
-    /// (`ss`, `hammerstein-ss`, `scheduled-ss`) take several (repeat `--train`): one model
-    /// for all.
-    #[arg(long, required_unless_present = "list")]
-    pub train: Vec<PathBuf>,
+    /// Training and validation records.
+    #[command(flatten)]
+    pub records: Records,
     /// State-space models: order (number of states) or `auto` (chosen by validation on
     /// every fourth training record).
     #[arg(long, default_value = "auto")]
@@ -103,9 +142,6 @@ pub struct Args {
     /// Columns and units of the records.
     #[command(flatten)]
     pub columns: Columns,
-    /// Validation record, simulated with the identified model (never used for fitting).
-    #[arg(long)]
-    pub valid: Option<PathBuf>,
     /// The validation record is one period of a periodic steady state: simulate this many
     /// periods of its input first and score the last (0: from rest).
     #[arg(long, default_value_t = 0)]

@@ -12,11 +12,16 @@ use crate::record::{Quantity, Record};
 use anyhow::{Context, Result};
 
 fn read_all(args: &Args) -> Result<Vec<Record>> {
+    let rs = &args.records;
     anyhow::ensure!(
-        !args.train.is_empty(),
+        !rs.train.is_empty(),
         "--train is required (repeat it for several records)"
     );
-    args.train
+    anyhow::ensure!(
+        rs.split.is_none(),
+        "--split: the state-space models validate on --valid records (or on every fourth training record)"
+    );
+    rs.train
         .iter()
         .map(|p| args.columns.read(p, args.quiet))
         .collect()
@@ -61,7 +66,7 @@ pub fn run(args: &Args) -> Result<()> {
     let fit = identify(&recs, &opts)?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = serde_json::json!({
-        "train": args.train.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "train": args.records.train.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         "period_samples": fit.period,
         "order_scan": fit.order_scan,
         "train_rms_linear": fit.linear_rms,
@@ -78,7 +83,8 @@ pub fn run(args: &Args) -> Result<()> {
     )
     .with_schedule(fit.schedule.clone());
     let loaded = Loaded::Ss(Box::new(saved.clone()));
-    if let Some(v) = &args.valid {
+    let mut valid = Vec::new();
+    for v in &args.records.valid {
         let rec = args.columns.read(v, args.quiet)?;
         let sim = loaded.simulate(&rec)?;
         let (per_output, mean) = score_last_period(&rec, &sim);
@@ -88,7 +94,13 @@ pub fn run(args: &Args) -> Result<()> {
             Quantity::Length.internal(),
             super::predict::list(&per_output)
         );
-        report["valid"] = serde_json::json!({"record": v.display().to_string(), "rmse_last_period": per_output, "mean": mean});
+        valid.push(serde_json::json!({"record": v.display().to_string(), "rmse_last_period": per_output, "mean": mean}));
+    }
+    // One record: its object (as before several were allowed); several: the list.
+    match valid.len() {
+        0 => {}
+        1 => report["valid"] = valid.remove(0),
+        _ => report["valid"] = serde_json::Value::Array(valid),
     }
     println!(
         "{} order {} fitted on {} records in {seconds:.1} s: training RMS output error linear {:.4e}{} {}",

@@ -555,6 +555,7 @@ fn phases(
                 train: &train,
                 train_name: a.out.join("sines.csv").display().to_string(),
                 valid: Some((&held, a.out.join("held_back.csv").display().to_string())),
+                valid_from: 0,
                 // Whole periods: simulated once before the scored pass (periodic state).
                 valid_periodic: 1,
                 linear_step: Some(linear),
