@@ -152,9 +152,12 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
         );
     }
     for f in &d.findings {
+        let swapped = f.confidence.swapped_gain.map_or_else(String::new, |g| {
+            format!(", {:.1} % with the records swapped", 100.0 * g)
+        });
         let _ = writeln!(
             s,
-            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %; gains on {:.0} % of the validation blocks, worst block {:+.1} %); {}",
+            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %; gains on {:.0} % of the validation blocks, worst block {:+.1} %{swapped}); {}",
             f.cause.name(),
             f.round,
             f.rmse_valid_before,
@@ -163,6 +166,14 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
             100.0 * f.confidence.share_gaining,
             100.0 * f.confidence.min_gain,
             f.evidence.text
+        );
+    }
+    for (c, g) in &d.refused {
+        let _ = writeln!(
+            s,
+            "refused: {} (gains {:.1} % with the records swapped: does not hold up)",
+            c.name(),
+            100.0 * g
         );
     }
     if let Some(u) = &d.unexplained {
