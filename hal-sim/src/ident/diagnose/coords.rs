@@ -1,6 +1,7 @@
 //! Search coordinates of the diagnosis model's nonlinear parameters ([`Shape`]): one
 //! unbounded vector per cause set, mapped into the valid ranges by clamping.
 
+use super::evidence::no_shape;
 use super::model::{Cause, Causes, Scales, Shape};
 
 impl Scales {
@@ -60,15 +61,7 @@ impl Coords {
         let mut shape = Shape {
             beta: 0.5 * a * (1.0 + r),
             gamma: 0.5 * a * (1.0 - r),
-            delay_s: 0.0,
-            rail_lo_v: f64::NEG_INFINITY,
-            rail_hi_v: f64::INFINITY,
-            slew_v_per_s: f64::INFINITY,
-            wn_hz: f64::INFINITY,
-            zeta: 1.0,
-            play_um: 0.0,
-            startup_travel_v: f64::INFINITY,
-            rate_ref_v_per_s: f64::INFINITY,
+            ..no_shape()
         };
         let c = self.causes;
         if c.has(Cause::Delay) {
