@@ -259,20 +259,7 @@ fn a_sim_out_record_is_read_by_fit() {
     assert!(text.starts_with("t_s,u_V,y_um\n"), "{:.100}", text);
     let r = Record::read(&rec).unwrap();
     assert_eq!(r.unit_note, None);
-    let out = cli_support::piezo(&[
-        &"fit",
-        &"--model",
-        &"cbw",
-        &"--json",
-        &"--quiet",
-        &"--generations",
-        &"20",
-        &"--lm-iterations",
-        &"10",
-        &"--train",
-        &rec,
-    ]);
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let j = fit_json(&rec, &[&"--lm-iterations", &"10"]);
     // The simulated stage's open-loop response is a hysteresis loop CBW describes well:
     // the fit reads the record's volts and um (a wrong column would not fit).
     assert_eq!(
