@@ -23,6 +23,7 @@ mod control_loop;
 mod converters;
 mod ctl;
 mod execute;
+mod flash_job;
 mod laws;
 mod nor;
 mod params;
@@ -43,6 +44,7 @@ pub use ctl::{Ctl, PointTable};
 pub use execute::{
     push_dac_readback, push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY,
 };
+pub use flash_job::{run_flash_job, FlashDone, FlashOp, FlashWork, SettingsJob, WithFlash};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;

@@ -261,3 +261,106 @@ fn encode_refuses_what_decode_would() {
     let n = encode(stored().map(|n| (n, 1.0)), &mut out).unwrap();
     assert!(decode(&out[..n]).is_ok());
 }
+
+/// The boards' path: the command task hands `save`/`load` to the flash job, idle runs it,
+/// the command task replies. Meanwhile every command is refused (err 12), so replies keep
+/// the commands' order; `load` installs the record in the live loop.
+#[test]
+fn save_and_load_through_the_command_line_and_idle() {
+    use piezo_core::firmware::{
+        run_flash_job, CommandLine, FlashWork, Port, SettingsJob, WithFlash,
+    };
+    use rtic_core::Exclusive;
+
+    #[derive(Default)]
+    struct Lines(Vec<String>);
+    impl Port for Lines {
+        fn send(&mut self, line: &str) {
+            self.0.push(line.to_string());
+        }
+        fn send_bytes(&mut self, _: &[u8]) {}
+    }
+    struct Board {
+        ctl: Ctl<OnChip>,
+        cli: CommandLine<OnChip>,
+        lines: Lines,
+        job: SettingsJob,
+        work: FlashWork,
+        flash: SettingsFlash<Nor>,
+    }
+    impl Board {
+        /// Types a line (the command task); the replies sent so far.
+        fn type_line(&mut self, line: &str) -> Vec<String> {
+            let mut port = WithFlash {
+                port: &mut self.lines,
+                job: &mut Exclusive(&mut self.job),
+            };
+            for b in line.bytes().chain(Some(b'\n')) {
+                self.cli.byte(b, &mut Exclusive(&mut self.ctl), &mut port);
+            }
+            std::mem::take(&mut self.lines.0)
+        }
+        /// Idle runs the job; the command task, pended, replies.
+        fn idle(&mut self) -> Vec<String> {
+            let ready = run_flash_job(
+                &mut Exclusive(&mut self.job),
+                &mut self.work,
+                Some(&mut self.flash),
+            );
+            let mut port = WithFlash {
+                port: &mut self.lines,
+                job: &mut Exclusive(&mut self.job),
+            };
+            let sent = self
+                .cli
+                .flash_poll(&mut Exclusive(&mut self.ctl), &mut port);
+            assert_eq!(ready, sent, "a reply exactly when idle finished a job");
+            std::mem::take(&mut self.lines.0)
+        }
+    }
+    let ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
+    let mut b = Board {
+        cli: CommandLine::new(&ctl.lp),
+        ctl,
+        lines: Lines::default(),
+        job: SettingsJob::new(),
+        work: FlashWork::new(),
+        flash: SettingsFlash::new(Nor::new(), RANGE).unwrap(),
+    };
+    let n = 8 + 8 * stored().count() + 4;
+    let count = stored().count();
+    assert_eq!(b.type_line("load"), Vec::<String>::new());
+    assert_eq!(b.idle(), ["err 15 no settings stored"]);
+    assert_eq!(b.type_line("set u_max 120"), ["ok u_max 120"]);
+    assert_eq!(
+        b.type_line("save"),
+        Vec::<String>::new(),
+        "the reply waits for idle"
+    );
+    assert_eq!(
+        b.type_line("ping"),
+        ["err 12 not possible in the current state"]
+    );
+    assert_eq!(
+        b.type_line("load"),
+        ["err 12 not possible in the current state"]
+    );
+    assert_eq!(b.idle(), [format!("ok save {count} settings {n} B")]);
+    assert_eq!(b.idle(), Vec::<String>::new(), "one reply per job");
+    assert_eq!(b.type_line("set u_max 100"), ["ok u_max 100"]);
+    assert_eq!(b.type_line("load"), Vec::<String>::new());
+    assert_eq!(b.idle(), [format!("ok load {count} settings")]);
+    assert_eq!(b.type_line("get u_max"), ["ok u_max 120"]);
+    assert_eq!(
+        b.ctl.answer("get u_max").as_str(),
+        "ok u_max 120",
+        "the live loop has it"
+    );
+    // Not while the loop drives the stage: refused at once, nothing handed to idle.
+    assert!(b.type_line("wave sine 1 10 5")[0].starts_with("ok wave sine"));
+    assert_eq!(
+        b.type_line("save"),
+        ["err 12 not possible in the current state"]
+    );
+    assert_eq!(b.idle(), Vec::<String>::new());
+}

@@ -48,7 +48,7 @@ run() {
   cp "target/$target/release/qemu" "$elf"
   status=0
   pipe_run "$dir" "$elf" "$machine" "$cpu" "$dir/defmt.bin" \
-    'ping\nbench\nget u_max\nset slew 0\nset pid_kp 0.75\nsave\nset pid_kp 0.25\nload\nget pid_kp\ndefaults\nget pid_kp\nmode nmpc\nmode ff+hgo-robust\nwave sine 5 100 10\nsave\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nwave prbs 9 11 10 5000\nwait 500\nwave chirp 1 10 2000 0.05 10\nwait 500\nwave multisine 1 100 32 10 3\nwait 500\nfault\nexit\n' ||
+    'ping\nbench\nget u_max\nset slew 0\nset pid_kp 0.75\nsave\nwait 1000\nset pid_kp 0.25\nload\nwait 1000\nget pid_kp\ndefaults\nget pid_kp\nmode nmpc\nmode ff+hgo-robust\nwave sine 5 100 10\nsave\nrec sel ref_um y_um u_volts error_um\nrec arm\nfault\nstats\nselftest\nwave prbs 9 11 10 5000\nwait 500\nwave chirp 1 10 2000 0.05 10\nwait 500\nwave multisine 1 100 32 10 3\nwait 500\nfault\nexit\n' ||
     status=$?
   echo "=== $name: serial port"
   cat "$dir/uart.txt"
@@ -62,7 +62,8 @@ run() {
   grep -q '^ok pong$' "$dir/uart.txt" || { echo "$name: no answer to ping"; exit 1; }
   grep -q '^err 8 value out of range$' "$dir/uart.txt" || { echo "$name: bad set not rejected"; exit 1; }
   # Settings in the (RAM-backed) settings flash: save, load back, defaults; no save while
-  # the loop drives the stage.
+  # the loop drives the stage. Idle runs save and load (as on the H743) and commands are
+  # refused until their reply went out: the script waits 10 ms of virtual time for each.
   grep -Eq '^ok save [0-9]+ settings [0-9]+ B$' "$dir/uart.txt" || { echo "$name: save failed"; exit 1; }
   [ "$(grep -A1 -E '^ok load [0-9]+ settings$' "$dir/uart.txt" | tail -1)" = "ok pid_kp 0.75" ] || { echo "$name: load did not restore pid_kp"; exit 1; }
   [ "$(grep -A1 '^ok defaults$' "$dir/uart.txt" | tail -1)" = "ok pid_kp 0.5" ] || { echo "$name: defaults did not restore pid_kp"; exit 1; }

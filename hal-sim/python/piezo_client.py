@@ -2,7 +2,9 @@
 
 A lab script talks to the firmware (the Nucleo's ST-LINK serial port, or the QEMU board's
 UART on TCP) with `Piezo`; a refused command raises the exception of its numbered error
-(`OutOfRange` for `err 8`, ...), and the recorder comes back as a NumPy array.
+(`OutOfRange` for `err 8`, ...), and the recorder comes back as a NumPy array, read over the
+framed binary transfer (`rec bin`: COBS packets, each checked by its CRC-32; a damaged packet
+is asked for again, never taken as data) or, with `binary=False`, as text (`rec read`).
 
     from piezo_client import Piezo, OutOfRange
     with Piezo(port="/dev/ttyACM0") as p:          # or Piezo(tcp="127.0.0.1:4000")
@@ -17,7 +19,9 @@ UART on TCP) with `Piezo`; a refused command raises the exception of its numbere
 Needs numpy; pyserial for a serial port (not for TCP).
 """
 import socket
+import struct
 import time
+import zlib
 
 import numpy as np
 
@@ -47,6 +51,48 @@ globals().update({cls.__name__: cls for cls in ERROR_CLASSES.values()})
 
 class LinkError(Exception):
     """No reply within the timeout, or a line that is neither a reply nor data."""
+
+
+# `rec bin` packets (src/bulk.rs): before COBS framing, start (u32 LE), count (u8),
+# channels (u8), format (u16 LE, 1 = f32 LE), count x channels f32 LE, CRC-32 of all before.
+FRAMES_PER_PACKET = 32
+MAX_CHANNELS = 4
+FORMAT_F32 = 1
+# Requests of the same damaged frames before a transfer fails (as the Rust client).
+MAX_ROUNDS = 8
+
+
+def cobs_decode(framed):
+    """The bytes of one COBS-framed packet (its zero delimiter removed); None for a zero
+    byte inside or a block running past the end (as src/bulk.rs `cobs_decode`)."""
+    out, i = bytearray(), 0
+    while i < len(framed):
+        code = framed[i]
+        block = framed[i + 1:i + code]
+        if code == 0 or len(block) != code - 1 or 0 in block:
+            return None
+        out += block
+        i += code
+        if code != 0xFF and i < len(framed):
+            out.append(0)
+    return bytes(out)
+
+
+def decode_packet(framed):
+    """A checked packet: (start, array count x channels of float32); None when its framing,
+    length, checksum or header is wrong (damaged on the way)."""
+    p = cobs_decode(framed)
+    if p is None or len(p) < 12:
+        return None
+    body, crc = p[:-4], struct.unpack("<I", p[-4:])[0]
+    if zlib.crc32(body) != crc:
+        return None
+    start, count, channels, fmt = struct.unpack("<IBBH", body[:8])
+    if fmt != FORMAT_F32 or not 0 < count <= FRAMES_PER_PACKET or not 0 < channels <= MAX_CHANNELS:
+        return None
+    if len(body) - 8 != count * channels * 4:
+        return None
+    return start, np.frombuffer(body[8:], dtype="<f4").reshape(count, channels)
 
 
 class Piezo:
@@ -89,10 +135,7 @@ class Piezo:
         while b"\n" not in self._buf:
             if time.monotonic() > deadline:
                 raise LinkError(f"no reply within {self.timeout} s")
-            chunk = self._sock.recv(4096) if self._sock else self._serial.read(256)
-            if self._sock and not chunk:
-                raise LinkError("the connection closed")
-            self._buf += chunk
+            self._recv()
         line, self._buf = self._buf.split(b"\n", 1)
         return line.decode("ascii", "replace").strip()
 
@@ -127,25 +170,118 @@ class Piezo:
             self.command(f"ff {ff}")
         return self.command(f"mode {law}")
 
-    def record(self, signals, poll_s=0.05, max_wait_s=600.0):
-        """Captures one recorder buffer of `signals` (triggered at once) and returns it as
-        an array (frames x signals). Waits on the firmware's own progress (`rec status`),
-        with `max_wait_s` of wall clock only for a dead link."""
-        self.command("rec sel " + " ".join(signals))
+    def _packet(self):
+        """Bytes up to the next zero delimiter (a COBS packet without it)."""
+        deadline = time.monotonic() + self.timeout
+        while b"\0" not in self._buf:
+            if time.monotonic() > deadline:
+                raise LinkError(f"no packet within {self.timeout} s")
+            self._recv()
+        packet, self._buf = self._buf.split(b"\0", 1)
+        return packet
+
+    def _recv(self):
+        chunk = self._sock.recv(4096) if self._sock else self._serial.read(256)
+        if self._sock and not chunk:
+            raise LinkError("the connection closed")
+        self._buf += chunk
+
+    def _drain(self):
+        """After damage: drop what still arrives of the broken transfer (until 0.2 s of
+        quiet), then get in step again (`ping`)."""
+        link = self._sock or self._serial
+        old = link.gettimeout() if self._sock else link.timeout
+        try:
+            if self._sock:
+                self._sock.settimeout(0.2)
+            else:
+                self._serial.timeout = 0.2
+            while True:
+                try:
+                    chunk = self._sock.recv(4096) if self._sock else self._serial.read(4096)
+                except socket.timeout:
+                    break
+                if not chunk:
+                    break
+        finally:
+            if self._sock:
+                self._sock.settimeout(old)
+            else:
+                self._serial.timeout = old
+        self._buf = b""
+        self.command("ping")
+
+    def capture(self, signals, poll_s=0.05, max_wait_s=600.0):
+        """Captures one recorder buffer of `signals` (triggered at once); returns its frame
+        count and the recorder's channels (the selected signals first: the firmware records
+        all of its channels). Waits on the firmware's own progress (`rec status`), with
+        `max_wait_s` of wall clock only for a dead link."""
+        channels = self.command("rec sel " + " ".join(signals)).split()[3:]
         self.command("rec trig now")
         self.command("rec arm")
         deadline = time.monotonic() + max_wait_s
         while True:
             state = self.command("rec status").split()
             if state[2] == "done":
-                n = int(state[3])
-                break
+                return int(state[3]), channels
             if time.monotonic() > deadline:
                 raise LinkError(f"recorder not done after {max_wait_s} s: {state}")
             time.sleep(poll_s)
-        rows = []
-        for start in range(0, n, 64):
-            lines = []
-            self.command(f"rec read {start} {min(64, n - start)}", data=lines)
-            rows += [[float(v) for v in l.split()[1:]] for l in lines]
-        return np.array(rows)
+
+    def read_recorder(self, n, channels, binary=True, request=4096):
+        """Frames 0..n of a finished capture as an array (n x channels). Binary: damaged
+        packets are counted in `self.damaged` and their frames asked for again (at most
+        `MAX_ROUNDS` times, then `LinkError`). Values are the f32 the firmware recorded, as
+        the float of their shortest decimal form (what `rec read` prints), either way."""
+        if not binary:
+            rows = []
+            for start in range(0, n, 64):
+                lines = []
+                self.command(f"rec read {start} {min(64, n - start)}", data=lines)
+                rows += [[float(v) for v in l.split()[1:]] for l in lines]
+            return np.array(rows)
+        out = np.full((n, channels), np.nan, dtype=np.float32)
+        have = np.zeros(n, dtype=bool)
+        self.damaged = 0
+        for _ in range(MAX_ROUNDS):
+            missing = np.flatnonzero(~have)
+            if missing.size == 0:
+                break
+            at = int(missing[0])
+            while at < n:
+                k = min(request, n - at)
+                if not have[at:at + k].all() and not self._bin(at, k, channels, out, have):
+                    self.damaged += 1
+                    self._drain()
+                at += k
+        if not have.all():
+            first = int(np.flatnonzero(~have)[0])
+            raise LinkError(f"rec bin: frame {first} still damaged after {MAX_ROUNDS} requests")
+        return out.astype(str).astype(np.float64)
+
+    def _bin(self, at, k, channels, out, have):
+        """One `rec bin at k`: True when its reply and every packet were whole (the frames
+        of whole packets are kept either way)."""
+        reply = self.command(f"rec bin {at} {k}").split()
+        packets = -(-k // FRAMES_PER_PACKET)
+        if reply[1:] != ["rec", "bin", str(k), str(packets)]:
+            return False
+        clean = True
+        for _ in range(packets):
+            got = decode_packet(self._packet())
+            if got is None:
+                clean = False
+                continue
+            start, frames = got
+            if frames.shape[1] != channels or not at <= start <= start + len(frames) <= at + k:
+                clean = False
+                continue
+            out[start:start + len(frames)] = frames
+            have[start:start + len(frames)] = True
+        return clean
+
+    def record(self, signals, binary=True, poll_s=0.05, max_wait_s=600.0):
+        """Captures one recorder buffer of `signals` and returns it (frames x the recorder's
+        channels, the selected signals first), read as `read_recorder` does."""
+        n, channels = self.capture(signals, poll_s, max_wait_s)
+        return self.read_recorder(n, len(channels), binary)

@@ -6,6 +6,7 @@ use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
 use super::execute::{push_stats, run, stream_bin, stream_frames};
+use super::flash_job::{FlashDone, FlashOp, SettingsJob, WithFlash};
 use super::storage::{decode, stored, Boot, SettingsFlash, MAX_RECORD};
 use super::target::{R, REPLY_LEN};
 use crate::command::{self, Command, Error, LineBuffer, RecCmd};
@@ -29,14 +30,11 @@ pub trait Port {
     fn selftest(&mut self, _reply: &mut command::Reply<REPLY_LEN>) -> Result<(), Error> {
         Err(Error::Unsupported)
     }
-    /// `save`: keeps the settings record in the board's settings flash. Boards without
-    /// one answer [`Error::Unsupported`].
-    fn save(&mut self, _record: &[u8]) -> Result<(), Error> {
-        Err(Error::Unsupported)
-    }
-    /// `load`: the stored settings record copied into `out`, its length (`None`: nothing
-    /// stored).
-    fn load(&mut self, _out: &mut [u8; MAX_RECORD]) -> Result<Option<usize>, Error> {
+    /// `save`/`load`: hands the operation to the board's settings-flash job, which runs it
+    /// in thread mode ([`super::flash_job`]); the reply goes out when the board passes the
+    /// outcome to [`CommandLine::flash_poll`]. Boards without one answer
+    /// [`Error::Unsupported`].
+    fn flash(&mut self, _op: FlashOp, _record: &[u8]) -> Result<(), Error> {
         Err(Error::Unsupported)
     }
     /// A line of the board's own, outside the protocol (the QEMU test harness' `exit`):
@@ -101,6 +99,9 @@ pub struct CommandLine<C> {
     replica: Replica<C>,
     /// What the board's control period affords each mode (`mode`/`ff` beyond it: err 18).
     budget: Budget,
+    /// A `save` or `load` is with the board's flash job: every command is refused (`err
+    /// 12`) until its reply went out, so replies stay in the order of the commands.
+    flash_pending: bool,
 }
 
 /// The command task's replica of the loop, with what only commands use (the point table of
@@ -123,6 +124,7 @@ impl<C: Converters> CommandLine<C> {
                 axis: 0,
             },
             budget: Budget::UNLIMITED,
+            flash_pending: false,
         }
     }
 
@@ -138,6 +140,7 @@ impl<C: Converters> CommandLine<C> {
                 axis: 0,
             },
             budget,
+            flash_pending: false,
         }
     }
 
@@ -160,6 +163,19 @@ impl<C: Converters> CommandLine<C> {
         Ok(())
     }
 
+    /// A record read from the flash (`got`: its length in `buf`, `None` if none stored),
+    /// checked and installed like [`CommandLine::apply`]; the number of settings.
+    fn install_loaded<M: Mutex<T = Ctl<C>>>(
+        &mut self,
+        got: Result<Option<usize>, Error>,
+        buf: &[u8; MAX_RECORD],
+        ctl: &mut M,
+    ) -> Result<usize, Error> {
+        let n = got?.ok_or(Error::NoSettings)?;
+        let rec = decode(buf.get(..n).ok_or(Error::BadSettings)?)?;
+        self.apply(&rec, ctl).map(|()| rec.len())
+    }
+
     /// At power-up: the stored settings if a valid record is there (installed like `load`),
     /// else the defaults stay.
     pub fn boot_settings<M, F>(&mut self, ctl: &mut M, flash: &mut SettingsFlash<F>) -> Boot
@@ -168,16 +184,52 @@ impl<C: Converters> CommandLine<C> {
         F: embedded_storage::nor_flash::NorFlash,
     {
         let mut buf = [0u8; MAX_RECORD];
-        let got = flash
-            .load(&mut buf)
-            .and_then(|n| n.ok_or(Error::NoSettings))
-            .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
-            .and_then(|rec| self.apply(&rec, ctl));
-        match got {
-            Ok(()) => Boot::Loaded,
+        let got = flash.load(&mut buf);
+        match self.install_loaded(got, &buf, ctl) {
+            Ok(_) => Boot::Loaded,
             Err(Error::NoSettings) => Boot::Empty,
             Err(e) => Boot::Refused(e),
         }
+    }
+
+    /// The command task's side of a `save`/`load` (call it on every run of the task; the
+    /// board's idle pends the task when the flash job finished): takes the outcome from
+    /// the port's job and sends its reply (`load` installs the record first, all or nothing). True
+    /// when a reply went out.
+    pub fn flash_poll<M, J, P>(&mut self, ctl: &mut M, port: &mut WithFlash<'_, P, J>) -> bool
+    where
+        M: Mutex<T = Ctl<C>>,
+        J: Mutex<T = SettingsJob>,
+        P: Port,
+    {
+        let mut buf = [0u8; MAX_RECORD];
+        let Some(FlashDone { op, result }) = port.job.lock(|j| j.take(&mut buf)) else {
+            return false;
+        };
+        self.flash_pending = false;
+        let mut reply = command::Reply::<REPLY_LEN>::new();
+        match op {
+            FlashOp::Save => match result.and_then(|n| n.ok_or(Error::Flash)) {
+                Ok(n) => {
+                    reply.push_str("ok save ");
+                    reply.push_usize(stored().count());
+                    reply.push_str(" settings ");
+                    reply.push_usize(n);
+                    reply.push_str(" B");
+                }
+                Err(e) => reply.push_error(e),
+            },
+            FlashOp::Load => match self.install_loaded(result, &buf, ctl) {
+                Ok(n) => {
+                    reply.push_str("ok load ");
+                    reply.push_usize(n);
+                    reply.push_str(" settings");
+                }
+                Err(e) => reply.push_error(e),
+            },
+        }
+        port.send(reply.as_str());
+        true
     }
 
     /// Takes one received byte; at the end of a line runs the command and sends its reply.
@@ -198,6 +250,7 @@ impl<C: Converters> CommandLine<C> {
         let mut reply = command::Reply::<REPLY_LEN>::new();
         match line.and_then(command::parse) {
             Ok(Command::Empty) => return false,
+            Ok(_) if self.flash_pending => reply.push_error(Error::Busy),
             Ok(Command::Bench) => match port.bench() {
                 Ok(rows) => {
                     reply.push_str("ok bench ");
@@ -236,37 +289,25 @@ impl<C: Converters> CommandLine<C> {
                 let r = &mut self.replica;
                 ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
                 let mut buf = [0u8; MAX_RECORD];
-                let saved =
+                let asked =
                     r.lp.settings_record(&mut buf)
                         .and_then(|n| buf.get(..n).ok_or(Error::Flash))
-                        .and_then(|rec| port.save(rec).map(|()| rec.len()));
-                match saved {
-                    Ok(n) => {
-                        reply.push_str("ok save ");
-                        reply.push_usize(stored().count());
-                        reply.push_str(" settings ");
-                        reply.push_usize(n);
-                        reply.push_str(" B");
+                        .and_then(|rec| port.flash(FlashOp::Save, rec));
+                match asked {
+                    Ok(()) => {
+                        self.flash_pending = true;
+                        return false;
                     }
                     Err(e) => reply.push_error(e),
                 }
             }
-            Ok(Command::Load) => {
-                let mut buf = [0u8; MAX_RECORD];
-                let loaded = port
-                    .load(&mut buf)
-                    .and_then(|n| n.ok_or(Error::NoSettings))
-                    .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
-                    .and_then(|rec| self.apply(&rec, ctl).map(|()| rec.len()));
-                match loaded {
-                    Ok(n) => {
-                        reply.push_str("ok load ");
-                        reply.push_usize(n);
-                        reply.push_str(" settings");
-                    }
-                    Err(e) => reply.push_error(e),
+            Ok(Command::Load) => match port.flash(FlashOp::Load, &[]) {
+                Ok(()) => {
+                    self.flash_pending = true;
+                    return false;
                 }
-            }
+                Err(e) => reply.push_error(e),
+            },
             Ok(Command::Stats) => push_stats(&mut reply, &ctl.lock(|c| c.timing)),
             Ok(c @ (Command::StatsReset | Command::Rec(_))) => {
                 ctl.lock(|ctl| ctl.execute(c, &mut reply))

@@ -188,9 +188,12 @@ impl<F: NorFlash> SettingsFlash<F> {
         })
     }
 
-    /// Stores `record` (replacing the one before only once it is completely written).
+    /// Stores `record` (replacing the one before only once it is completely written). The
+    /// generic store, not `store_item`'s `dyn Value`: a call through a vtable would leave
+    /// idle's stack bound unknown to the firmware safety check.
     pub fn save(&mut self, record: &[u8]) -> Result<(), Error> {
-        block_on(self.map.store_item(&mut self.work, &KEY, &record))?.map_err(|_| Error::Flash)
+        block_on(self.map.store_item_generic(&mut self.work, &KEY, &record))?
+            .map_err(|_| Error::Flash)
     }
 
     /// The stored record, copied into `out` (`Ok(None)`: none stored).
@@ -205,6 +208,12 @@ impl<F: NorFlash> SettingsFlash<F> {
             }
             Some(_) => Err(Error::BadSettings),
         }
+    }
+
+    /// Erases the settings sectors (nothing stored afterwards): a board's way out of a
+    /// record it cannot even read.
+    pub fn erase_all(&mut self) -> Result<(), Error> {
+        block_on(self.map.erase_all())?.map_err(|_| Error::Flash)
     }
 
     /// The flash back (tests: a reboot is a new [`SettingsFlash`] over the same flash).

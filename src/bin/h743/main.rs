@@ -62,6 +62,8 @@ mod onchip;
 mod safe;
 #[cfg(target_os = "none")]
 mod selftest;
+#[cfg(target_os = "none")]
+mod settings;
 #[cfg(all(target_os = "none", feature = "spi-converters"))]
 mod spi;
 #[cfg(all(target_os = "none", feature = "spi-converters"))]
@@ -206,10 +208,13 @@ mod board {
 #[cfg(target_os = "none")]
 #[rtic::app(device = stm32h7xx_hal::pac, peripherals = true)]
 mod app {
+    use super::settings::{settings_flash, SettingsBank};
     use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, OVERHEAD_CYCLES, SYSCLK_HZ, WATCHDOG_MS};
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::DWT;
-    use piezo_core::firmware::{c, control_period, Budget, CommandLine, SAMPLE_HZ};
+    use piezo_core::firmware::{c, control_period, Boot, Budget, CommandLine, SAMPLE_HZ};
+    use piezo_core::firmware::{run_flash_job, FlashWork, SettingsFlash, SettingsJob, WithFlash};
+    use stm32h7xx_hal::flash::FlashExt;
     use stm32h7xx_hal::{
         delay::Delay, independent_watchdog::IndependentWatchdog, pac, prelude::*, serial,
     };
@@ -217,6 +222,8 @@ mod app {
     #[shared]
     struct Shared {
         ctl: Ctl,
+        /// `save`/`load` handed from the command task to idle.
+        job: SettingsJob,
     }
 
     #[local]
@@ -230,6 +237,11 @@ mod app {
         rx: serial::Rx<pac::USART3>,
         port: Usart3,
         cli: CommandLine<Conv>,
+        /// Bank 2's settings sectors, idle's alone (`None`: no settings flash).
+        settings: Option<SettingsFlash<SettingsBank>>,
+        work: FlashWork,
+        /// The last boot faulted reading the settings: idle erases them first.
+        erase_settings: bool,
     }
 
     #[init]
@@ -245,6 +257,9 @@ mod app {
         super::load_itcm();
         cp.SCB.enable_icache();
         cp.SCB.enable_dcache(&mut cp.CPUID);
+        // Bank 2's settings sectors (the SCB goes with them: their cache maintenance).
+        let (_, bank2) = dp.FLASH.split();
+        let mut settings = settings_flash(bank2, cp.SCB);
         let safe_code = safe::safe_code::<Conv>();
         safe::SAFE_CODE.store(safe_code, Relaxed);
         #[cfg(not(feature = "spi-converters"))]
@@ -460,6 +475,38 @@ mod app {
         // The on-chip DAC loads its output on TIM2's trigger from now on.
         #[cfg(not(feature = "spi-converters"))]
         safe::dac1::trigger_from_tim2();
+        // The control state, with the stored settings if a valid record is there (read
+        // before the first sample: the loop starts with them).
+        let mut ctl = Ctl::with_recorder(
+            c(SAMPLE_HZ as f64),
+            super::recorder_storage().unwrap_or(&mut []),
+        );
+        // Modes whose worst step (the M4F's instructions, taken as M7 cycles: one per cycle
+        // from ITCM/DTCM, not measured on a board) does not fit the period are refused
+        // (err 18).
+        let mut cli = CommandLine::for_new(
+            c(SAMPLE_HZ as f64),
+            Budget::m4f(SYSCLK_HZ / SAMPLE_HZ, OVERHEAD_CYCLES),
+        );
+        let faulted_before = super::settings::mark_read(true);
+        match settings.as_mut() {
+            None => defmt::warn!("settings: no settings flash (bank 2), defaults"),
+            // Erased from idle (about 4 s: longer than the boot watchdog; the loop feeds
+            // it meanwhile).
+            Some(_) if faulted_before => defmt::warn!(
+                "settings: the last boot faulted reading them (flash ECC?): defaults; idle erases the sectors"
+            ),
+            Some(f) => match cli.boot_settings(&mut rtic_core::Exclusive(&mut ctl), f) {
+                Boot::Loaded => defmt::info!("settings: stored settings loaded"),
+                Boot::Empty => defmt::info!("settings: none stored, defaults"),
+                Boot::Refused(e) => defmt::warn!(
+                    "settings: stored record refused (err {=u8}), defaults",
+                    e.code()
+                ),
+            },
+        }
+        super::settings::mark_read(false);
+
         // TIM2 last: from here on samples arrive.
         let mut io = io;
         io.timer.resume();
@@ -475,10 +522,8 @@ mod app {
         defmt::info!("firmware up: {} Hz sample rate", SAMPLE_HZ);
         (
             Shared {
-                ctl: Ctl::with_recorder(
-                    c(SAMPLE_HZ as f64),
-                    super::recorder_storage().unwrap_or(&mut []),
-                ),
+                ctl,
+                job: SettingsJob::new(),
             },
             Local {
                 #[cfg(not(feature = "spi-converters"))]
@@ -487,13 +532,10 @@ mod app {
                 hw_spi: hw,
                 rx,
                 port: Usart3 { tx },
-                // Modes whose worst step (the M4F's instructions, taken as M7 cycles: one
-                // per cycle from ITCM/DTCM, not measured on a board) does not fit the
-                // period are refused (err 18).
-                cli: CommandLine::for_new(
-                    c(SAMPLE_HZ as f64),
-                    Budget::m4f(SYSCLK_HZ / SAMPLE_HZ, OVERHEAD_CYCLES),
-                ),
+                cli,
+                settings,
+                work: FlashWork::new(),
+                erase_settings: faulted_before,
             },
         )
     }
@@ -548,21 +590,39 @@ mod app {
         }
     }
 
-    /// Command lines from the serial port (priority 1; the control task preempts it).
-    #[task(binds = USART3, priority = 1, shared = [ctl], local = [rx, port, cli])]
+    /// Command lines from the serial port (priority 1; the control task preempts it), and
+    /// the replies of `save`/`load` when idle has run them (idle pends this task).
+    #[task(binds = USART3, priority = 1, shared = [ctl, job], local = [rx, port, cli])]
     fn serial_rx(mut cx: serial_rx::Context) {
         use stm32h7xx_hal::hal::serial::Read;
+        let mut port = WithFlash {
+            port: cx.local.port,
+            job: &mut cx.shared.job,
+        };
+        cx.local.cli.flash_poll(&mut cx.shared.ctl, &mut port);
         while let Ok(byte) = cx.local.rx.read() {
-            cx.local.cli.byte(byte, &mut cx.shared.ctl, cx.local.port);
+            cx.local.cli.byte(byte, &mut cx.shared.ctl, &mut port);
         }
     }
 
-    /// Timing and overruns over defmt, once per second (DWT cycle counter), from thread
-    /// mode: the only context besides `init` that logs.
-    #[idle(shared = [ctl])]
+    /// `save`/`load` on the settings flash, and timing and overruns over defmt once per
+    /// second (DWT cycle counter), from thread mode: the only context besides `init` that
+    /// logs or touches the flash.
+    #[idle(shared = [ctl, job], local = [settings, work, erase_settings])]
     fn idle(mut cx: idle::Context) -> ! {
+        if let (true, Some(f)) = (*cx.local.erase_settings, cx.local.settings.as_mut()) {
+            let erased = f.erase_all().is_ok();
+            defmt::warn!("settings: sectors erased ({=bool})", erased);
+        }
         let mut last = DWT::cycle_count();
         loop {
+            if run_flash_job(
+                &mut cx.shared.job,
+                cx.local.work,
+                cx.local.settings.as_mut(),
+            ) {
+                rtic::pend(pac::Interrupt::USART3);
+            }
             if DWT::cycle_count().wrapping_sub(last) < SYSCLK_HZ {
                 continue;
             }

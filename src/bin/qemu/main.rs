@@ -73,7 +73,7 @@ mod board {
     use cortex_m::peripheral::{SCB, SYST};
     use piezo_core::command::{Error, Reply};
     use piezo_core::firmware::{self, Clock, Converters, Port, SpiPair, REPLY_LEN, SAMPLE_HZ};
-    use piezo_core::firmware::{RamNor, SettingsFlash, MAX_RECORD};
+    use piezo_core::firmware::{RamNor, SettingsFlash};
     use {cortex_m_rt as _, defmt_semihosting as _};
 
     /// Recorder frames: 3.5 MiB of the 4 MiB RAM (the rest holds the statics, about 30 KiB,
@@ -216,8 +216,6 @@ mod board {
     /// harness' `exit` and `panic`.
     pub struct Uart {
         pub table: bench::Table,
-        /// The settings flash (RAM-backed: QEMU keeps nothing across runs).
-        pub settings: SettingsFlash<SettingsNor>,
         /// A harness line asked to start (true) or stop (false) a flood.
         pub flood: Option<bool>,
         /// A harness line asked to wait this many control periods.
@@ -321,12 +319,6 @@ mod board {
         fn bench(&mut self) -> Result<usize, Error> {
             bench::print(&self.table, false);
             Ok(bench::ROWS)
-        }
-        fn save(&mut self, record: &[u8]) -> Result<(), Error> {
-            self.settings.save(record)
-        }
-        fn load(&mut self, out: &mut [u8; MAX_RECORD]) -> Result<Option<usize>, Error> {
-            self.settings.load(out)
         }
         fn harness(&mut self, line: &[u8]) -> bool {
             match line {
@@ -438,19 +430,23 @@ mod board {
 mod app {
     use super::io::SimIo;
     use super::{
-        bench, chips, recorder_storage, settings_flash, uart, Ctl, SysTickClock, Uart, ANSWERED,
-        EXIT, INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ, WAIT_UNTIL,
+        bench, chips, recorder_storage, settings_flash, uart, Ctl, SettingsNor, SysTickClock, Uart,
+        ANSWERED, EXIT, INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ,
+        WAIT_UNTIL,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
     use piezo_core::command::Reply;
     use piezo_core::firmware::{c, control_period, Boot, CommandLine, AXES, SAMPLE_HZ};
+    use piezo_core::firmware::{run_flash_job, FlashWork, SettingsFlash, SettingsJob, WithFlash};
     use piezo_core::firmware::{Converters, SpiPair, Timing};
     use piezo_core::pipeline::Wave;
 
     #[shared]
     struct Shared {
         ctl: Ctl,
+        /// `save`/`load` handed from the command task to idle.
+        job: SettingsJob,
     }
 
     #[local]
@@ -460,6 +456,9 @@ mod app {
         /// Replies sent when the flood started.
         flood_from: u32,
         port: Uart,
+        /// The settings flash (RAM-backed: QEMU keeps nothing across runs), idle's alone.
+        settings: SettingsFlash<SettingsNor>,
+        work: FlashWork,
     }
 
     #[init]
@@ -518,17 +517,21 @@ mod app {
             }
         }
         (
-            Shared { ctl },
+            Shared {
+                ctl,
+                job: SettingsJob::new(),
+            },
             Local {
                 io,
                 cli,
                 port: Uart {
                     table,
-                    settings,
                     flood: None,
                     wait: None,
                 },
                 flood_from: 0,
+                settings,
+                work: FlashWork::new(),
             },
         )
     }
@@ -544,15 +547,27 @@ mod app {
 
     /// Command lines from UART0 (priority 1, under the control task; the H743's USART3
     /// task).
-    #[task(binds = UARTRX0, priority = 1, shared = [ctl], local = [cli, port, flood_from])]
+    #[task(binds = UARTRX0, priority = 1, shared = [ctl, job], local = [cli, port, flood_from])]
     fn serial_rx(mut cx: serial_rx::Context) {
         uart::clear_rx_interrupt();
+        // A `save`/`load` idle finished (idle pended this task): its reply first.
+        let mut port = WithFlash {
+            port: &mut *cx.local.port,
+            job: &mut cx.shared.job,
+        };
+        if cx.local.cli.flash_poll(&mut cx.shared.ctl, &mut port) {
+            ANSWERED.fetch_add(1, Relaxed);
+        }
         if WAIT_UNTIL.load(Relaxed) != 0 {
             // A `wait` runs: the byte stays in the UART (idle pends this task at the end).
             return;
         }
         while let Some(byte) = uart::try_read() {
-            if cx.local.cli.byte(byte, &mut cx.shared.ctl, cx.local.port) {
+            let mut port = WithFlash {
+                port: &mut *cx.local.port,
+                job: &mut cx.shared.job,
+            };
+            if cx.local.cli.byte(byte, &mut cx.shared.ctl, &mut port) {
                 ANSWERED.fetch_add(1, Relaxed);
             }
             match cx.local.port.flood.take() {
@@ -587,9 +602,10 @@ mod app {
         }
     }
 
-    /// The harness' requests, and the timing over defmt every [`LOG_PERIODS`] control
-    /// periods (thread mode only, as on the H743; CI decodes and checks the lines).
-    #[idle(shared = [ctl])]
+    /// The harness' requests, `save`/`load` on the settings flash, and the timing over defmt
+    /// every [`LOG_PERIODS`] control periods (thread mode only, as on the H743; CI decodes
+    /// and checks the lines).
+    #[idle(shared = [ctl, job], local = [settings, work])]
     fn idle(mut cx: idle::Context) -> ! {
         // Twenty lines per second of virtual time, where the H743 logs one: a CI run lasts
         // about 0.1 s.
@@ -605,6 +621,9 @@ mod app {
                     t.step.min, t.step.max, t.step.last, t.isr.min, t.isr.max, t.isr.last,
                     t.isr.count, t.overruns
                 );
+            }
+            if run_flash_job(&mut cx.shared.job, cx.local.work, Some(cx.local.settings)) {
+                rtic::pend(crate::board::pac::Interrupt::UARTRX0);
             }
             let until = WAIT_UNTIL.load(Relaxed);
             if until != 0 && periods >= until {
