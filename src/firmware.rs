@@ -34,7 +34,7 @@ mod target;
 mod timing;
 
 pub use budget::{Budget, WORST_M4F};
-pub use console::{CommandLine, Port, Replica};
+pub use console::{CommandLine, Port, Replica, WithFlash};
 pub use control_loop::Loop;
 pub use converters::{
     converter_config, ActuatorDac, Converters, OnChip, PositionAdc, SpiPair, ADC_CONFIG,
@@ -44,7 +44,7 @@ pub use ctl::{Ctl, PointTable};
 pub use execute::{
     push_dac_readback, push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY,
 };
-pub use flash_job::{run_flash_job, FlashDone, FlashOp, FlashWork, SettingsJob, WithFlash};
+pub use flash_job::{run_flash_job, FlashDone, FlashOp, FlashWork, SettingsJob};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;

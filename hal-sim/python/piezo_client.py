@@ -130,14 +130,18 @@ class Piezo:
         else:
             self._serial.write(data)
 
-    def _line(self):
+    def _take(self, end, what):
+        """Received bytes up to the next `end` byte (dropped), within the timeout."""
         deadline = time.monotonic() + self.timeout
-        while b"\n" not in self._buf:
+        while end not in self._buf:
             if time.monotonic() > deadline:
-                raise LinkError(f"no reply within {self.timeout} s")
+                raise LinkError(f"no {what} within {self.timeout} s")
             self._recv()
-        line, self._buf = self._buf.split(b"\n", 1)
-        return line.decode("ascii", "replace").strip()
+        part, self._buf = self._buf.split(end, 1)
+        return part
+
+    def _line(self):
+        return self._take(b"\n", "reply").decode("ascii", "replace").strip()
 
     def command(self, line, data=None):
         """Sends `line`, returns its `ok ...` reply (data lines before it go to `data`, a
@@ -172,13 +176,7 @@ class Piezo:
 
     def _packet(self):
         """Bytes up to the next zero delimiter (a COBS packet without it)."""
-        deadline = time.monotonic() + self.timeout
-        while b"\0" not in self._buf:
-            if time.monotonic() > deadline:
-                raise LinkError(f"no packet within {self.timeout} s")
-            self._recv()
-        packet, self._buf = self._buf.split(b"\0", 1)
-        return packet
+        return self._take(b"\0", "packet")
 
     def _recv(self):
         chunk = self._sock.recv(4096) if self._sock else self._serial.read(256)

@@ -6,7 +6,7 @@ use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
 use super::execute::{push_stats, run, stream_bin, stream_frames};
-use super::flash_job::{FlashDone, FlashOp, SettingsJob, WithFlash};
+use super::flash_job::{FlashDone, FlashOp, SettingsJob};
 use super::storage::{decode, stored, Boot, SettingsFlash, MAX_RECORD};
 use super::target::{R, REPLY_LEN};
 use crate::command::{self, Command, Error, LineBuffer, RecCmd};
@@ -41,6 +41,34 @@ pub trait Port {
     /// true when the board took it (no reply is sent).
     fn harness(&mut self, _line: &[u8]) -> bool {
         false
+    }
+}
+
+/// A board's port with its settings-flash job (the resource its command task shares with
+/// idle): `save`/`load` go to the job, the rest to the port.
+pub struct WithFlash<'a, P, J> {
+    pub port: &'a mut P,
+    pub job: &'a mut J,
+}
+
+impl<P: Port, J: Mutex<T = SettingsJob>> Port for WithFlash<'_, P, J> {
+    fn send(&mut self, line: &str) {
+        self.port.send(line)
+    }
+    fn send_bytes(&mut self, bytes: &[u8]) {
+        self.port.send_bytes(bytes)
+    }
+    fn bench(&mut self) -> Result<usize, Error> {
+        self.port.bench()
+    }
+    fn selftest(&mut self, reply: &mut command::Reply<REPLY_LEN>) -> Result<(), Error> {
+        self.port.selftest(reply)
+    }
+    fn flash(&mut self, op: FlashOp, record: &[u8]) -> Result<(), Error> {
+        self.job.lock(|j| j.ask(op, record))
+    }
+    fn harness(&mut self, line: &[u8]) -> bool {
+        self.port.harness(line)
     }
 }
 

@@ -10,10 +10,8 @@
 //! Every copy between them is of a whole fixed-size buffer, so the command task's side has
 //! no length check that could panic.
 
-use super::console::Port;
 use super::storage::{SettingsFlash, MAX_RECORD};
-use super::target::REPLY_LEN;
-use crate::command::{Error, Reply};
+use crate::command::Error;
 use embedded_storage::nor_flash::NorFlash;
 use rtic_core::Mutex;
 
@@ -179,34 +177,6 @@ where
     let result = flash.map_or(Err(Error::Unsupported), |f| work.run(f));
     job.lock(|j| j.finish(work, result));
     true
-}
-
-/// A board's port with its settings-flash job (the resource its command task shares with
-/// idle): `save`/`load` go to the job, the rest to the port.
-pub struct WithFlash<'a, P, J> {
-    pub port: &'a mut P,
-    pub job: &'a mut J,
-}
-
-impl<P: Port, J: Mutex<T = SettingsJob>> Port for WithFlash<'_, P, J> {
-    fn send(&mut self, line: &str) {
-        self.port.send(line)
-    }
-    fn send_bytes(&mut self, bytes: &[u8]) {
-        self.port.send_bytes(bytes)
-    }
-    fn bench(&mut self) -> Result<usize, Error> {
-        self.port.bench()
-    }
-    fn selftest(&mut self, reply: &mut Reply<REPLY_LEN>) -> Result<(), Error> {
-        self.port.selftest(reply)
-    }
-    fn flash(&mut self, op: FlashOp, record: &[u8]) -> Result<(), Error> {
-        self.job.lock(|j| j.ask(op, record))
-    }
-    fn harness(&mut self, line: &[u8]) -> bool {
-        self.port.harness(line)
-    }
 }
 
 #[cfg(test)]
