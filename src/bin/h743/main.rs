@@ -466,17 +466,8 @@ mod app {
 
         let _ = delay.free();
 
-        // Independent watchdog (LSI clock, survives a main-clock failure): only a control
-        // period that met its deadline feeds it, so a stalled or overrunning loop resets
-        // the MCU, whose DAC then comes up at its safe code.
-        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
-        watchdog.start(stm32h7xx_hal::time::MilliSeconds::from_ticks(WATCHDOG_MS));
-
-        // The on-chip DAC loads its output on TIM2's trigger from now on.
-        #[cfg(not(feature = "spi-converters"))]
-        safe::dac1::trigger_from_tim2();
         // The control state, with the stored settings if a valid record is there (read
-        // before the first sample: the loop starts with them).
+        // before the first sample, and within the boot watchdog's 100 ms, not the loop's 10).
         let mut ctl = Ctl::with_recorder(
             c(SAMPLE_HZ as f64),
             super::recorder_storage().unwrap_or(&mut []),
@@ -507,6 +498,15 @@ mod app {
         }
         super::settings::mark_read(false);
 
+        // Independent watchdog (LSI clock, survives a main-clock failure): only a control
+        // period that met its deadline feeds it, so a stalled or overrunning loop resets
+        // the MCU, whose DAC then comes up at its safe code.
+        let mut watchdog = IndependentWatchdog::new(dp.IWDG);
+        watchdog.start(stm32h7xx_hal::time::MilliSeconds::from_ticks(WATCHDOG_MS));
+
+        // The on-chip DAC loads its output on TIM2's trigger from now on.
+        #[cfg(not(feature = "spi-converters"))]
+        safe::dac1::trigger_from_tim2();
         // TIM2 last: from here on samples arrive.
         let mut io = io;
         io.timer.resume();
