@@ -239,22 +239,77 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
 fn dots<const N: usize>(x: &[f64], ys: [&[f64]; N]) -> [f64; N] {
     let body = x.len() - x.len() % 4;
     let (xc, xr) = x.split_at(body);
-    let mut acc = [[0.0f64; 4]; N];
-    let heads = ys.map(|y| &y[..body]);
-    for (i, xs) in xc.chunks_exact(4).enumerate() {
+    // dot's four accumulators, as two pairs (one vector register each).
+    let mut lo = [[0.0f64; 2]; N];
+    let mut hi = [[0.0f64; 2]; N];
+    let mut heads = ys.map(|y| y[..body].chunks_exact(4));
+    for xs in xc.chunks_exact(4) {
         for j in 0..N {
-            let ys = &heads[j][4 * i..4 * i + 4];
-            for k in 0..4 {
-                acc[j][k] += xs[k] * ys[k];
-            }
+            let Some(ys) = heads[j].next() else { break };
+            lo[j][0] += xs[0] * ys[0];
+            lo[j][1] += xs[1] * ys[1];
+            hi[j][0] += xs[2] * ys[2];
+            hi[j][1] += xs[3] * ys[3];
         }
     }
     let mut out = [0.0; N];
     for j in 0..N {
         let tail: f64 = xr.iter().zip(&ys[j][body..]).map(|(x, y)| x * y).sum();
-        out[j] = acc[j][0] + acc[j][1] + acc[j][2] + acc[j][3] + tail;
+        out[j] = lo[j][0] + lo[j][1] + hi[j][0] + hi[j][1] + tail;
     }
     out
+}
+
+/// `crate::numeric::lowpass(x, tau, dt)` for each of `taus`, to the bit: the first-order
+/// recurrences run four at a time, interleaved (one alone is latency-bound).
+pub fn lowpass_many(x: &[f64], taus: &[f64], dt: f64) -> Vec<Vec<f64>> {
+    let mut out: Vec<Vec<f64>> = taus.iter().map(|_| vec![0.0; x.len()]).collect();
+    let Some(&first) = x.first() else {
+        return out;
+    };
+    // lowpass_n's coefficients for order 1: s = (1 - a)*x + a*s, a = exp(-dt/tau).
+    let coef: Vec<[f64; 2]> = taus
+        .iter()
+        .map(|tau| {
+            let a = (-(dt / tau)).exp();
+            [1.0 - a, a]
+        })
+        .collect();
+    for (cols, coef) in out.chunks_mut(4).zip(coef.chunks(4)) {
+        match cols {
+            [a, b, c, d] => lowpass_group([a, b, c, d], coef, x, first),
+            [a, b] => lowpass_group([a, b], coef, x, first),
+            [a, b, c] => {
+                lowpass_group([a, b], &coef[..2], x, first);
+                lowpass_group([c], &coef[2..], x, first);
+            }
+            [a] => lowpass_group([a], coef, x, first),
+            _ => {}
+        }
+    }
+    out
+}
+
+#[inline(always)]
+fn lowpass_group<const N: usize>(
+    cols: [&mut Vec<f64>; N],
+    coef: &[[f64; 2]],
+    x: &[f64],
+    first: f64,
+) {
+    let mut s = [first; N];
+    let k: [[f64; 2]; N] = std::array::from_fn(|j| coef[j]);
+    let mut cols = cols.map(|c| c[..x.len()].iter_mut());
+    for &v in x {
+        for j in 0..N {
+            let mut acc = k[j][0] * v;
+            acc += k[j][1] * s[j];
+            s[j] = acc;
+            if let Some(o) = cols[j].next() {
+                *o = acc;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -355,5 +410,20 @@ mod tests {
                 assert_eq!(xty[r].to_bits(), dot(&cols[r], &y).to_bits());
             }
         }
+    }
+
+    #[test]
+    fn lowpass_many_equals_lowpass() {
+        let x: Vec<f64> = (0..2001)
+            .map(|k| ((k * 7) as f64 * 0.013).sin() * 40.0 + 60.0)
+            .collect();
+        for n in 0..=8 {
+            let taus: Vec<f64> = (0..n).map(|j| 0.002 * 2f64.powi(j)).collect();
+            let got = lowpass_many(&x, &taus, 1e-4);
+            for (g, tau) in got.iter().zip(&taus) {
+                assert_eq!(g, &crate::numeric::lowpass(&x, *tau, 1e-4));
+            }
+        }
+        assert!(lowpass_many(&[], &[0.1], 1e-3)[0].is_empty());
     }
 }

@@ -12,7 +12,7 @@ use serde::Serialize;
 
 pub use super::coords::{Coords, PLAY_MAX, PLAY_MIN, TRAVEL_MAX, TRAVEL_MIN};
 use super::Signals;
-use crate::numeric::{lowpass, rmse, solve_spd};
+use crate::numeric::{rmse, solve_spd};
 
 /// A cause the base model may miss; each has one model extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
@@ -440,8 +440,8 @@ pub fn regressors(
         } else {
             v.clone()
         };
+        cols.extend(crate::ident::fast::lowpass_many(&src, taus, dt));
         for &tau in taus {
-            cols.push(lowpass(&src, tau, dt));
             let k = CREEP_TAUS_S.iter().position(|&t| t == tau).unwrap_or(0);
             names.push(NAMES[k]);
         }
@@ -604,6 +604,11 @@ pub fn fit_linear(
         let (n, c) = regressors(d, i, causes, shape, scales, taus);
         if k == 0 {
             (names, cols) = (n, c);
+            // Room for all records at once (no copy of the first one on growth).
+            let total: usize = data.iter().map(Signals::len).sum();
+            for a in cols.iter_mut() {
+                a.reserve_exact(total.saturating_sub(a.len()));
+            }
         } else {
             for (a, b) in cols.iter_mut().zip(c) {
                 a.extend(b);
