@@ -163,6 +163,7 @@ pub fn held_second_order(cols: &mut [&mut [f64]], phi: &[[f64; 2]; 2]) {
 
 /// [`held_second_order`] on `N` columns of equal length.
 #[inline(always)]
+#[allow(clippy::needless_range_loop)] // the sample index runs through all N columns
 fn held_group<const N: usize>(cols: [&mut [f64]; N], phi: &[[f64; 2]; 2]) {
     let len = cols[0].len();
     if len == 0 {
