@@ -471,8 +471,9 @@ pub fn diagnose_records(
         }
         // Every candidate is fitted: its evidence is measured in its own frame (below), and
         // a cause can show in the training record only.
+        // In parallel: each candidate's evidence runs its own predictions on both records.
         let (tried, mut evidence): (Vec<Tried>, Vec<Evidence>) = tried
-            .into_iter()
+            .into_par_iter()
             .zip(&todo)
             .map(|((f, p, e), &c)| {
                 // The residual the candidate's own extension removes: the candidate with

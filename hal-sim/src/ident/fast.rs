@@ -133,6 +133,186 @@ fn cross_zero(h: f64, du: f64, k_toward: f64, k_away: f64) -> f64 {
     s * r * phi(k_away * r)
 }
 
+/// The state-transition recurrence of `model::dynamics` (a second-order system, input held
+/// over each sample, at rest at each column's first sample) on every column in place: the
+/// deviation `d = p - u` from the held input decays by `phi`. Columns of equal length run
+/// four or two at a time, their independent recurrences interleaved (one column's chain is
+/// latency-bound); each column's arithmetic is exactly the one-column loop's.
+pub fn held_second_order(cols: &mut [&mut [f64]], phi: &[[f64; 2]; 2]) {
+    let mut rest = cols;
+    while !rest.is_empty() {
+        let len = rest[0].len();
+        let same = rest.iter().take_while(|c| c.len() == len).count();
+        let take = if same >= 4 {
+            4
+        } else if same >= 2 {
+            2
+        } else {
+            1
+        };
+        let (group, tail) = rest.split_at_mut(take);
+        match group {
+            [a, b, c, d] => held_group([&mut **a, &mut **b, &mut **c, &mut **d], phi),
+            [a, b] => held_group([&mut **a, &mut **b], phi),
+            [a] => held_group([&mut **a], phi),
+            _ => unreachable!("groups of 4, 2 or 1"),
+        }
+        rest = tail;
+    }
+}
+
+/// [`held_second_order`] on `N` columns of equal length.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // the sample index runs through all N columns
+fn held_group<const N: usize>(cols: [&mut [f64]; N], phi: &[[f64; 2]; 2]) {
+    let len = cols[0].len();
+    if len == 0 {
+        return;
+    }
+    let mut p = [0.0; N];
+    let mut v = [0.0; N];
+    for j in 0..N {
+        p[j] = cols[j][0];
+    }
+    let [[a00, a01], [a10, a11]] = *phi;
+    let cols = cols.map(|c| &mut c[..len]);
+    for k in 0..len {
+        for j in 0..N {
+            let u = cols[j][k];
+            let d = p[j] - u;
+            p[j] = u + a00 * d + a01 * v[j];
+            v[j] = a10 * d + a11 * v[j];
+            cols[j][k] = p[j];
+        }
+    }
+}
+
+/// The normal equations' sums of the least squares `min |X b - y|` on columns `cols`: the
+/// Gram matrix `X^T X` (row-major, `p x p`) and `X^T y`. Each sum is [`dot`]'s, to the bit;
+/// a column's products with up to three others are summed in one pass over it (the
+/// accumulators' add chains, not the loads, bound one sum at a time).
+pub fn gram(cols: &[&[f64]], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let p = cols.len();
+    let mut g = vec![0.0; p * p];
+    let mut xty = vec![0.0; p];
+    let mut sums = Vec::with_capacity(p + 1);
+    for (r, &x) in cols.iter().enumerate() {
+        // Column r with columns 0..=r, then with y.
+        let partners: Vec<&[f64]> = cols[..=r].iter().copied().chain([y]).collect();
+        sums.clear();
+        if partners.iter().all(|q| q.len() == x.len()) {
+            for group in partners.chunks(3) {
+                match *group {
+                    [a, b, c] => sums.extend(dots(x, [a, b, c])),
+                    [a, b] => sums.extend(dots(x, [a, b])),
+                    [a] => sums.extend(dots(x, [a])),
+                    _ => unreachable!("groups of 1 to 3"),
+                }
+            }
+        } else {
+            sums.extend(partners.iter().map(|q| dot(x, q)));
+        }
+        for (c, &v) in sums[..=r].iter().enumerate() {
+            g[r * p + c] = v;
+            g[c * p + r] = v;
+        }
+        xty[r] = sums[r + 1];
+    }
+    (g, xty)
+}
+
+/// `sum a_k b_k` with four accumulators (so the loop vectorises), over the shorter slice.
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (ac, ar) = a.split_at(a.len() - a.len() % 4);
+    let (bc, br) = b.split_at(ac.len().min(b.len()));
+    for (x, y) in ac.chunks_exact(4).zip(bc.chunks_exact(4)) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    let tail: f64 = ar.iter().zip(br).map(|(x, y)| x * y).sum();
+    acc[0] + acc[1] + acc[2] + acc[3] + tail
+}
+
+/// [`dot`] of `x` with each of `ys` (all as long as `x`), in one pass over `x`.
+#[inline(always)]
+fn dots<const N: usize>(x: &[f64], ys: [&[f64]; N]) -> [f64; N] {
+    let body = x.len() - x.len() % 4;
+    let (xc, xr) = x.split_at(body);
+    // dot's four accumulators, as two pairs (one vector register each).
+    let mut lo = [[0.0f64; 2]; N];
+    let mut hi = [[0.0f64; 2]; N];
+    let mut heads = ys.map(|y| y[..body].chunks_exact(4));
+    for xs in xc.chunks_exact(4) {
+        for j in 0..N {
+            let Some(ys) = heads[j].next() else { break };
+            lo[j][0] += xs[0] * ys[0];
+            lo[j][1] += xs[1] * ys[1];
+            hi[j][0] += xs[2] * ys[2];
+            hi[j][1] += xs[3] * ys[3];
+        }
+    }
+    let mut out = [0.0; N];
+    for j in 0..N {
+        let tail: f64 = xr.iter().zip(&ys[j][body..]).map(|(x, y)| x * y).sum();
+        out[j] = lo[j][0] + lo[j][1] + hi[j][0] + hi[j][1] + tail;
+    }
+    out
+}
+
+/// `crate::numeric::lowpass(x, tau, dt)` for each of `taus`, to the bit: the first-order
+/// recurrences run four at a time, interleaved (one alone is latency-bound).
+pub fn lowpass_many(x: &[f64], taus: &[f64], dt: f64) -> Vec<Vec<f64>> {
+    let mut out: Vec<Vec<f64>> = taus.iter().map(|_| vec![0.0; x.len()]).collect();
+    let Some(&first) = x.first() else {
+        return out;
+    };
+    // lowpass_n's coefficients for order 1: s = (1 - a)*x + a*s, a = exp(-dt/tau).
+    let coef: Vec<[f64; 2]> = taus
+        .iter()
+        .map(|tau| {
+            let a = (-(dt / tau)).exp();
+            [1.0 - a, a]
+        })
+        .collect();
+    for (cols, coef) in out.chunks_mut(4).zip(coef.chunks(4)) {
+        match cols {
+            [a, b, c, d] => lowpass_group([a, b, c, d], coef, x, first),
+            [a, b] => lowpass_group([a, b], coef, x, first),
+            [a, b, c] => {
+                lowpass_group([a, b], &coef[..2], x, first);
+                lowpass_group([c], &coef[2..], x, first);
+            }
+            [a] => lowpass_group([a], coef, x, first),
+            _ => {}
+        }
+    }
+    out
+}
+
+#[inline(always)]
+fn lowpass_group<const N: usize>(
+    cols: [&mut Vec<f64>; N],
+    coef: &[[f64; 2]],
+    x: &[f64],
+    first: f64,
+) {
+    let mut s = [first; N];
+    let k: [[f64; 2]; N] = std::array::from_fn(|j| coef[j]);
+    let mut cols = cols.map(|c| c[..x.len()].iter_mut());
+    for &v in x {
+        for j in 0..N {
+            let mut acc = k[j][0] * v;
+            acc += k[j][1] * s[j];
+            s[j] = acc;
+            if let Some(o) = cols[j].next() {
+                *o = acc;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -179,5 +359,72 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn held_second_order_equals_one_column_at_a_time() {
+        let phi = [[0.93, 8e-5], [-310.0, 0.71]];
+        let one = |x: &mut [f64]| {
+            let (mut p, mut v) = (x[0], 0.0);
+            for u in x.iter_mut() {
+                let d = p - *u;
+                p = *u + phi[0][0] * d + phi[0][1] * v;
+                v = phi[1][0] * d + phi[1][1] * v;
+                *u = p;
+            }
+        };
+        // Seven columns (a group of four, of two, then one), the last two of other lengths.
+        let mut cols: Vec<Vec<f64>> = (0..7)
+            .map(|j| {
+                let n = if j < 5 { 1000 } else { 300 + j };
+                (0..n)
+                    .map(|k| ((k * (j + 3)) as f64 * 0.01).sin() + j as f64)
+                    .collect()
+            })
+            .collect();
+        let mut want = cols.clone();
+        for c in want.iter_mut() {
+            one(c);
+        }
+        let mut refs: Vec<&mut [f64]> = cols.iter_mut().map(Vec::as_mut_slice).collect();
+        held_second_order(&mut refs, &phi);
+        assert_eq!(cols, want);
+    }
+
+    #[test]
+    fn gram_equals_dot_by_dot() {
+        for n in [0, 1, 5, 4003] {
+            let cols: Vec<Vec<f64>> = (0..7)
+                .map(|j| {
+                    (0..n)
+                        .map(|k| ((k * (j + 2)) as f64 * 0.37).cos() * (j + 1) as f64)
+                        .collect()
+                })
+                .collect();
+            let y: Vec<f64> = (0..n).map(|k| (k as f64 * 0.11).sin()).collect();
+            let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+            let (g, xty) = gram(&refs, &y);
+            for r in 0..7 {
+                for c in 0..7 {
+                    assert_eq!(g[r * 7 + c].to_bits(), dot(&cols[r], &cols[c]).to_bits());
+                }
+                assert_eq!(xty[r].to_bits(), dot(&cols[r], &y).to_bits());
+            }
+        }
+    }
+
+    #[test]
+    fn lowpass_many_equals_lowpass() {
+        let x: Vec<f64> = (0..2001)
+            .map(|k| ((k * 7) as f64 * 0.013).sin() * 40.0 + 60.0)
+            .collect();
+        for n in 0..=8 {
+            let taus: Vec<f64> = (0..n).map(|j| 0.002 * 2f64.powi(j)).collect();
+            let got = lowpass_many(&x, &taus, 1e-4);
+            for (g, tau) in got.iter().zip(&taus) {
+                assert_eq!(g, &crate::numeric::lowpass(&x, *tau, 1e-4));
+            }
+        }
+        assert!(lowpass_many(&[], &[0.1], 1e-3)[0].is_empty());
     }
 }

@@ -12,7 +12,7 @@ use serde::Serialize;
 
 pub use super::coords::{Coords, PLAY_MAX, PLAY_MIN, TRAVEL_MAX, TRAVEL_MIN};
 use super::Signals;
-use crate::numeric::{lowpass, rmse, solve_spd};
+use crate::numeric::{rmse, solve_spd};
 
 /// A cause the base model may miss; each has one model extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
@@ -360,7 +360,13 @@ pub fn hysteresis(v: &[f64], beta: f64, gamma: f64) -> Vec<f64> {
 /// exactly for an input held over each sample (a DAC drives the stage), output at the end of
 /// the hold; starting at rest at the first sample. `wn_hz` infinite: no dynamics.
 pub fn dynamics(x: &mut [f64], wn_hz: f64, zeta: f64, dt: f64) {
-    if !wn_hz.is_finite() || x.is_empty() {
+    dynamics_all(&mut [x], wn_hz, zeta, dt);
+}
+
+/// [`dynamics`] on each of `cols`, the independent recurrences side by side
+/// ([`crate::ident::fast::held_second_order`]).
+pub fn dynamics_all(cols: &mut [&mut [f64]], wn_hz: f64, zeta: f64, dt: f64) {
+    if !wn_hz.is_finite() {
         return;
     }
     let wn = 2.0 * std::f64::consts::PI * wn_hz;
@@ -384,14 +390,7 @@ pub fn dynamics(x: &mut [f64], wn_hz: f64, zeta: f64, dt: f64) {
     if !phi.iter().flatten().all(|v| v.is_finite()) {
         return;
     }
-    // Deviation from the held input's rest point decays by phi.
-    let (mut p, mut v) = (x[0], 0.0);
-    for u in x.iter_mut() {
-        let d = p - *u;
-        p = *u + phi[0][0] * d + phi[0][1] * v;
-        v = phi[1][0] * d + phi[1][1] * v;
-        *u = p;
-    }
+    crate::ident::fast::held_second_order(cols, &phi);
 }
 
 /// Normalised input `w = (v - mid)/half` for the asymmetry polynomial.
@@ -441,8 +440,8 @@ pub fn regressors(
         } else {
             v.clone()
         };
+        cols.extend(crate::ident::fast::lowpass_many(&src, taus, dt));
         for &tau in taus {
-            cols.push(lowpass(&src, tau, dt));
             let k = CREEP_TAUS_S.iter().position(|&t| t == tau).unwrap_or(0);
             names.push(NAMES[k]);
         }
@@ -507,9 +506,8 @@ pub fn regressors(
     let mut all = vec![v, g.into_iter().map(|g| -g).collect::<Vec<_>>()];
     all.extend(cols);
     if causes.has(Cause::Dynamics) {
-        for c in all.iter_mut() {
-            dynamics(c, shape.wn_hz, shape.zeta, dt);
-        }
+        let mut cols: Vec<&mut [f64]> = all.iter_mut().map(Vec::as_mut_slice).collect();
+        dynamics_all(&mut cols, shape.wn_hz, shape.zeta, dt);
     }
     all.push(vec![1.0; data.t.len()]);
     names.push("y0");
@@ -546,10 +544,10 @@ pub fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
 /// [`least_squares`] on borrowed columns.
 pub fn least_squares_refs(cols: &[&[f64]], y: &[f64]) -> Vec<f64> {
     let p = cols.len();
-    let scale: Vec<f64> = cols
-        .iter()
-        .map(|c| {
-            let s = dot(c, c).sqrt();
+    let (gram, xty) = crate::ident::fast::gram(cols, y);
+    let scale: Vec<f64> = (0..p)
+        .map(|r| {
+            let s = gram[r * p + r].sqrt();
             if s > 0.0 && s.is_finite() {
                 1.0 / s
             } else {
@@ -561,11 +559,11 @@ pub fn least_squares_refs(cols: &[&[f64]], y: &[f64]) -> Vec<f64> {
     let mut b = vec![0.0; p];
     for r in 0..p {
         for c in 0..=r {
-            let v = dot(cols[r], cols[c]) * scale[r] * scale[c];
+            let v = gram[r * p + c] * scale[r] * scale[c];
             a[r * p + c] = v;
             a[c * p + r] = v;
         }
-        b[r] = dot(cols[r], y) * scale[r];
+        b[r] = xty[r] * scale[r];
     }
     let mut ridge = 1e-12;
     for _ in 0..8 {
@@ -579,20 +577,6 @@ pub fn least_squares_refs(cols: &[&[f64]], y: &[f64]) -> Vec<f64> {
         ridge *= 100.0;
     }
     vec![0.0; p]
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    // Four accumulators so the loop vectorises.
-    let mut acc = [0.0; 4];
-    let (ac, ar) = a.split_at(a.len() - a.len() % 4);
-    let (bc, br) = b.split_at(ac.len().min(b.len()));
-    for (x, y) in ac.chunks_exact(4).zip(bc.chunks_exact(4)) {
-        for k in 0..4 {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    let tail: f64 = ar.iter().zip(br).map(|(x, y)| x * y).sum();
-    acc[0] + acc[1] + acc[2] + acc[3] + tail
 }
 
 pub fn min_max(x: &[f64]) -> (f64, f64) {
@@ -620,6 +604,11 @@ pub fn fit_linear(
         let (n, c) = regressors(d, i, causes, shape, scales, taus);
         if k == 0 {
             (names, cols) = (n, c);
+            // Room for all records at once (no copy of the first one on growth).
+            let total: usize = data.iter().map(Signals::len).sum();
+            for a in cols.iter_mut() {
+                a.reserve_exact(total.saturating_sub(a.len()));
+            }
         } else {
             for (a, b) in cols.iter_mut().zip(c) {
                 a.extend(b);
