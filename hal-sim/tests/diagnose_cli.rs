@@ -131,3 +131,79 @@ fn malformed_csv_names_the_line() {
     assert!(err.contains("line 3"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Time windows: a training window and a scored validation window of the same record give
+/// exactly `--split` at the window's edge (the model runs through the samples before the
+/// validation window); a window that is too short, or `piezo fit` with a window, is an error.
+#[test]
+fn time_windows_select_the_samples() {
+    let dir = std::env::temp_dir().join(format!("diagnose_cli_window_{}", std::process::id()));
+    let plant = Plant::draw(7, &[Cause::Delay]);
+    let rec = plant.record(7, 0);
+    write(&dir.join("a.csv"), &rec);
+    let a = dir.join("a.csv");
+    let n = rec.len();
+    let edge = 0.5 * (rec.t[n / 2 - 1] + rec.t[n / 2]);
+    let (tw, vw) = (format!(":{edge}"), format!("{edge}:"));
+    let json = |args: &[&dyn AsRef<std::ffi::OsStr>]| -> serde_json::Value {
+        serde_json::from_slice(&cli_support::piezo(args).stdout).unwrap()
+    };
+    let windowed = json(&[
+        &"diagnose",
+        &"--json",
+        &"--train",
+        &a,
+        &"--train-window",
+        &tw,
+        &"--valid-window",
+        &vw,
+        &"--predict",
+        &dir.join("p.csv"),
+    ]);
+    let split = json(&[&"diagnose", &"--json", &"--train", &a, &"--split", &"0.5"]);
+    for k in ["base", "extended"] {
+        assert_eq!(windowed[k]["rmse_valid"], split[k]["rmse_valid"], "{k}");
+    }
+    assert_eq!(windowed["causes"], split["causes"]);
+    assert!(windowed["split"].as_str().unwrap().contains("fit on"));
+    let text = std::fs::read_to_string(dir.join("p.csv")).unwrap();
+    let ts: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(ts.len(), n - n / 2);
+    assert!(ts.iter().all(|t| *t > edge));
+    let fails = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_piezo"))
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?}");
+        String::from_utf8_lossy(&out.stderr).to_string()
+    };
+    let a = a.to_str().unwrap();
+    assert!(fails(&[
+        "diagnose",
+        "--train",
+        a,
+        "--train-window",
+        "0:0.01",
+        "--valid-window",
+        "1:"
+    ])
+    .contains("at least 50"));
+    assert!(fails(&["diagnose", "--train", a, "--train-window", "0:1"]).contains("both"));
+    assert!(fails(&["diagnose", "--train", a, "--valid-window", "2:1"]).contains("below"));
+    assert!(fails(&[
+        "fit",
+        "--model",
+        "cbw",
+        "--train",
+        a,
+        "--train-window",
+        "0:1"
+    ])
+    .contains("diagnose"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -4,12 +4,13 @@
 //! piezo diagnose --train A.csv --valid B.csv [--json] [--predict OUT.csv] [--out DIR]
 //! piezo diagnose --train A.csv --split 0.5        # one record: first half fits, second validates
 //! piezo diagnose --train A.csv --train B.csv --valid C.csv --valid D.csv   # one model for A and B
+//! piezo diagnose --train A.csv --train-window 3.26:6.26 --valid-window 6.26:   # windows of A
 //! ```
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use super::fit_args::{Columns, Records};
+use super::fit_args::{Columns, Records, Window};
 use crate::ident::diagnose::{self, Diagnosis, Options, Signals};
 
 #[derive(clap::Args, Debug)]
@@ -43,7 +44,44 @@ pub fn run(args: Args) -> Result<()> {
     let rs = &args.records;
     anyhow::ensure!(!rs.train.is_empty(), "--train is required (see --help)");
     let records = rs.train.iter().map(load).collect::<Result<Vec<_>>>()?;
-    let (train, valid, split_note) = if rs.valid.is_empty() {
+    let windowed = rs.train_window.is_some() || rs.valid_window.is_some();
+    let (train, valid, split_note) = if windowed {
+        rs.split_at(0, None)?;
+        let valid = if rs.valid.is_empty() {
+            anyhow::ensure!(
+                rs.train_window.is_some() && rs.valid_window.is_some(),
+                "without --valid, give both --train-window and --valid-window (the training records then validate too)"
+            );
+            records.clone()
+        } else {
+            rs.valid.iter().map(load).collect::<Result<Vec<_>>>()?
+        };
+        let train = match rs.train_window {
+            Some(w) => records
+                .iter()
+                .map(|r| train_window(r, w))
+                .collect::<Result<Vec<_>>>()?,
+            None => records,
+        };
+        let valid = match rs.valid_window {
+            Some(w) => valid
+                .iter()
+                .map(|r| valid_window(r, w))
+                .collect::<Result<Vec<_>>>()?,
+            None => valid,
+        };
+        let show = |w: Option<Window>| {
+            w.map_or("whole records".to_string(), |w| {
+                format!("{}..{} s", w.from_s, w.to_s)
+            })
+        };
+        let note = format!(
+            "fit on {} of the training records, scored on {} of the validation records (the model runs through the samples before the window)",
+            show(rs.train_window),
+            show(rs.valid_window)
+        );
+        (train, valid, Some(note))
+    } else if rs.valid.is_empty() {
         let mut notes = Vec::new();
         let (mut train, mut valid) = (Vec::new(), Vec::new());
         for (whole, path) in records.into_iter().zip(&rs.train) {
@@ -117,6 +155,32 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The samples of `r` inside `w`, the model starting at rest at the first.
+fn train_window(r: &Signals, w: Window) -> Result<Signals> {
+    let (a, b) = w.samples(&r.t);
+    anyhow::ensure!(
+        b - a >= 50,
+        "--train-window {}..{} s holds {} samples, at least 50 needed",
+        w.from_s,
+        w.to_s,
+        b - a
+    );
+    Ok(r.slice(a, b))
+}
+
+/// `r` up to the end of `w`, scored inside `w` only (the samples before are warm-up).
+fn valid_window(r: &Signals, w: Window) -> Result<Signals> {
+    let (a, b) = w.samples(&r.t);
+    anyhow::ensure!(
+        b - a >= 50,
+        "--valid-window {}..{} s holds {} samples, at least 50 needed",
+        w.from_s,
+        w.to_s,
+        b - a
+    );
+    Ok(r.slice(0, b).with_warmup(a))
 }
 
 /// The report for a person.

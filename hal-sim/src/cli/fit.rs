@@ -361,6 +361,7 @@ pub fn run(args: Args) -> Result<()> {
     let Some(model) = &args.model else {
         anyhow::bail!("--model and --train are required (see --help)");
     };
+    args.records.no_windows("piezo fit")?;
     if super::fit_ss::handles(model) {
         return super::fit_ss::run(&args);
     }

@@ -93,9 +93,73 @@ pub struct Records {
     /// (0.1..0.9): the first part fits, the model runs on through the rest, which validates.
     #[arg(long)]
     pub split: Option<f64>,
+    /// `diagnose`: fit only on this time window of every training record, `T0:T1` in
+    /// seconds of its time column (e.g. the first cycles after a rest). The model starts at
+    /// rest at the window's first sample: start it where the stage rests.
+    #[arg(long, value_name = "T0:T1", conflicts_with = "split")]
+    pub train_window: Option<Window>,
+    /// `diagnose`: score only this time window of every validation record (of the training
+    /// records without --valid); the model runs through the samples before it from the
+    /// record's start.
+    #[arg(long, value_name = "T0:T1", conflicts_with = "split")]
+    pub valid_window: Option<Window>,
+}
+
+/// A time window `T0:T1` (seconds, `T0 < T1`; either side may be left empty: the record's
+/// start or end).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Window {
+    pub from_s: f64,
+    pub to_s: f64,
+}
+
+impl std::str::FromStr for Window {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (a, b) = s
+            .split_once(':')
+            .ok_or_else(|| format!("window `{s}`: expected T0:T1 in seconds"))?;
+        let side = |x: &str, open: f64| -> Result<f64, String> {
+            if x.trim().is_empty() {
+                return Ok(open);
+            }
+            x.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("window `{s}`: `{x}` is not a time in seconds"))
+        };
+        let w = Window {
+            from_s: side(a, f64::NEG_INFINITY)?,
+            to_s: side(b, f64::INFINITY)?,
+        };
+        if w.from_s < w.to_s {
+            Ok(w)
+        } else {
+            Err(format!("window `{s}`: T0 must be below T1"))
+        }
+    }
+}
+
+impl Window {
+    /// The samples `[k0, k1)` of time column `t` inside the window.
+    pub fn samples(&self, t: &[f64]) -> (usize, usize) {
+        let k0 = t.partition_point(|&x| x < self.from_s);
+        let k1 = t.partition_point(|&x| x < self.to_s);
+        (k0, k1.max(k0))
+    }
 }
 
 impl Records {
+    /// For the commands that do not take time windows: an error if one is given.
+    pub fn no_windows(&self, what: &str) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.train_window.is_none() && self.valid_window.is_none(),
+            "--train-window and --valid-window are `piezo diagnose` options; {what} takes --split or --valid"
+        );
+        Ok(())
+    }
+
     /// The sample a record of `len` samples is split at (`--split`, else `default`; `None`
     /// with --valid or without either), the fraction checked.
     pub fn split_at(&self, len: usize, default: Option<f64>) -> anyhow::Result<Option<usize>> {
@@ -186,4 +250,23 @@ pub struct Args {
     /// List the models and exit.
     #[arg(long)]
     pub list: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn window_parses_and_selects() {
+        let w: Window = "1.5:2".parse().unwrap();
+        assert_eq!((w.from_s, w.to_s), (1.5, 2.0));
+        let open: Window = ":1".parse().unwrap();
+        assert_eq!(open.from_s, f64::NEG_INFINITY);
+        assert!("2:1".parse::<Window>().is_err());
+        assert!("1".parse::<Window>().is_err());
+        assert!("a:2".parse::<Window>().is_err());
+        let t: Vec<f64> = (0..10).map(|k| k as f64 * 0.5).collect();
+        assert_eq!(w.samples(&t), (3, 4));
+        assert_eq!("3:".parse::<Window>().unwrap().samples(&t), (6, 10));
+    }
 }

@@ -18,9 +18,11 @@
 //! Errors are RMSE (004 eq. 23); all parameters are fitted on the training record only.
 
 mod coords;
+mod dynamics;
 pub mod evidence;
 mod fitting;
 pub mod model;
+mod output;
 pub mod plots;
 pub mod search;
 mod signals;
@@ -33,7 +35,7 @@ use serde_json::{json, Value};
 use crate::numeric::rmse_all;
 pub use evidence::Evidence;
 pub use fitting::Fitted;
-use fitting::{ablate, extend, fit_base, reduce, switched_off, Tiers};
+use fitting::{ablate, extend, fit_base, plain_dynamics, reduce, switched_off, Tiers};
 pub use model::{Cause, Causes, OutputModel, Scales, Shape};
 pub use signals::Signals;
 pub use unexplained::Unexplained;
@@ -420,7 +422,7 @@ pub fn diagnose_records(
     for round in 1..=MAX_ROUNDS {
         let todo: Vec<Cause> = applicable(&train[0])
             .into_iter()
-            .filter(|c| !current.causes.has(*c))
+            .filter(|c| !current.causes.has(*c) && !current.causes.has(rival(*c)))
             .collect();
         if todo.is_empty() {
             break;
@@ -492,14 +494,24 @@ pub fn diagnose_records(
                 ((f, p, e), ev)
             })
             .unzip();
+        // The amplitude dependence must gain over the plain dynamics (the dynamics candidate
+        // of this round) by the rule for a gain: it includes them, so it would otherwise stand
+        // in for them on any resonance.
+        let e_plain = todo
+            .iter()
+            .position(|c| *c == Cause::Dynamics)
+            .map(|k| tried[k].2);
         let mut best: Option<usize> = None;
         for (k, (t, ev)) in tried.iter().zip(&evidence).enumerate() {
             let (rmse_train, e) = (t.0.rmse_train, t.2);
             let gain = 1.0 - e / current_valid;
+            let over_plain = todo[k] != Cause::AmplitudeDynamics
+                || e_plain.is_none_or(|p| gains_by_rule(p, e, y_span));
             let significant = gain.is_finite()
                 && gain >= MIN_GAIN
                 && current_valid - e >= MIN_ABS_GAIN * y_span
-                && ev.r2 >= MIN_R2;
+                && ev.r2 >= MIN_R2
+                && over_plain;
             candidates.push(Candidate {
                 cause: todo[k],
                 round,
@@ -587,13 +599,47 @@ pub fn diagnose_records(
             fd.confidence.swapped_gain = Some(g.0);
         }
         let mut k = 0;
-        for (gain, holds) in swapped {
+        for (gain, holds, plain) in swapped {
             if holds {
                 k += 1;
                 continue;
             }
             let fd = findings.remove(k);
             refused.push((fd.cause, gain));
+            if let Some((g, true)) = plain {
+                // The amplitude dependence does not hold up but the resonance does: named
+                // as the plain dynamics, measured afresh.
+                current = plain_dynamics(&current, &tiers, opt);
+                let without = reduce(&current, Cause::Dynamics, &tiers, opt).predict_all(valid);
+                let with = current.predict_all(valid);
+                let (before, after) = (score(&without), score(&with));
+                let off = switched_off(&current, Cause::Dynamics).predict_all(valid);
+                let mut confidence = confidence(&scored, &without, &with);
+                confidence.swapped_gain = Some(g);
+                findings.insert(
+                    k,
+                    Finding {
+                        cause: Cause::Dynamics,
+                        round: fd.round,
+                        rmse_valid_before: before,
+                        rmse_valid: after,
+                        gain: 1.0 - after / before,
+                        evidence: evidence_set(&scored, Cause::Dynamics, &off, &current),
+                        confidence,
+                        gains_per_record: if several {
+                            per_record(&scored, &without)
+                                .iter()
+                                .zip(per_record(&scored, &with))
+                                .map(|(b, a)| 1.0 - a / b)
+                                .collect()
+                        } else {
+                            Vec::new()
+                        },
+                    },
+                );
+                k += 1;
+                continue;
+            }
             current = reduce(&current, fd.cause, &tiers, opt);
         }
         if !refused.is_empty() {
@@ -637,9 +683,30 @@ pub fn diagnose_records(
     })
 }
 
+/// Whether a model with validation RMSE `after` gains over one with `before` by the rule for
+/// a gain ([`MIN_GAIN`], [`MIN_ABS_GAIN`]).
+fn gains_by_rule(before: f64, after: f64, y_span: f64) -> bool {
+    !before.is_finite()
+        || (1.0 - after / before >= MIN_GAIN && before - after >= MIN_ABS_GAIN * y_span)
+}
+
+/// The cause that excludes `cause` (the plain and the amplitude-dependent dynamics); itself
+/// for the others.
+fn rival(cause: Cause) -> Cause {
+    match cause {
+        Cause::Dynamics => Cause::AmplitudeDynamics,
+        Cause::AmplitudeDynamics => Cause::Dynamics,
+        c => c,
+    }
+}
+
+/// A swapped gain and whether it passes the rule for a gain.
+type Verdict = (f64, bool);
+
 /// For each finding: its gain with the records' roles swapped (the final model `current`
 /// refitted on `valid`, with and without the cause, scored on `train`) and whether that gain
-/// passes the rule for a gain.
+/// passes the rule for a gain. For `amplitude-dynamics` the gain is over the plain dynamics,
+/// and the plain dynamics' own gain (over none) and verdict come third.
 fn swap_gains(
     current: &Fitted,
     findings: &[Finding],
@@ -647,7 +714,7 @@ fn swap_gains(
     valid: &[Signals],
     opt: &Options,
     y_span: f64,
-) -> Vec<(f64, bool)> {
+) -> Vec<(f64, bool, Option<Verdict>)> {
     let tiers = Tiers::new(valid, opt);
     let measured = flat_outputs(train);
     let score = |f: &Fitted| rmse_all(&measured, &flat(&f.predict_all(train)));
@@ -656,10 +723,20 @@ fn swap_gains(
     findings
         .par_iter()
         .map(|fd| {
-            let e = score(&reduce(&full, fd.cause, &tiers, opt));
-            let gain = 1.0 - e_full / e;
-            let holds = !e.is_finite() || (gain >= MIN_GAIN && e - e_full >= MIN_ABS_GAIN * y_span);
-            (if gain.is_finite() { gain } else { 1.0 }, holds)
+            let e_none = score(&reduce(&full, fd.cause, &tiers, opt));
+            let finite = |g: f64| if g.is_finite() { g } else { 1.0 };
+            if fd.cause == Cause::AmplitudeDynamics {
+                let e_plain = score(&plain_dynamics(&full, &tiers, opt));
+                let plain = (
+                    finite(1.0 - e_plain / e_none),
+                    gains_by_rule(e_none, e_plain, y_span),
+                );
+                let gain = finite(1.0 - e_full / e_plain);
+                (gain, gains_by_rule(e_plain, e_full, y_span), Some(plain))
+            } else {
+                let gain = finite(1.0 - e_full / e_none);
+                (gain, gains_by_rule(e_none, e_full, y_span), None)
+            }
         })
         .collect()
 }

@@ -19,6 +19,7 @@
 //! | `startup-creep` | start-up deficit after a long rest ([`crate::scenario::StartupCreep`]) | depth 4-10 %, travel 40-150 V |
 //! | `rate-dependence` | rate-dependent hysteresis ([`crate::scenario::RateHysteresis`]) | loop 10-30 % wider, gain 3-10 % lower at high rates, half at 150-800 V/s, rate over 3-8 ms |
 //! | `sensor-nonlinearity` | nonlinear sensor ([`crate::scenario::SensorNonlinearity`]) | `+-(0.5-1.5) % e^2 +-(0.3-1) % e^3` of a 50 um half range |
+//! | `amplitude-dynamics` | resonance moving with the oscillation amplitude ([`crate::scenario::AmplitudeDynamics`]) | 60-200 Hz (log-uniform), zeta 0.03-0.1; at large amplitude the frequency 10-30 % lower and the damping 50-200 % higher, half at 0.2-1.0 um |
 //!
 //! Sensor noise is 5-20 nm RMS. [`Hidden::record`] drives the stage with a seeded
 //! excitation, a different draw for each record (`which`: 0 train, 1 valid): two sines
@@ -207,6 +208,13 @@ impl Hidden {
         let rate_tau = r.range(3e-3, 8e-3);
         let sensor_q = r.range(0.005, 0.015) * r.sign();
         let sensor_c = r.range(0.003, 0.01) * r.sign();
+        // A lightly damped mode that softens and damps with the drive level, as the fine
+        // steering mirror's (drawn after the others: their sizes stay as they were).
+        let amp_wn_hz = r.log_uniform(60.0, 200.0);
+        let amp_zeta = r.range(0.03, 0.1);
+        let amp_level = r.range(0.2, 1.0);
+        let amp_shift = -r.range(0.1, 0.3);
+        let amp_zeta_scale = r.range(0.5, 2.0);
         let mut hidden = Self {
             seed,
             causes: causes.to_vec(),
@@ -300,6 +308,21 @@ impl Hidden {
                         100.0 * sensor_q,
                         100.0 * sensor_c,
                         0.5 * STROKE_UM
+                    ));
+                }
+                Cause::AmplitudeDynamics => {
+                    st.resonance.enabled = true;
+                    st.resonance.freq_hz = amp_wn_hz;
+                    st.resonance.zeta = amp_zeta;
+                    let a = &mut st.amplitude_dynamics;
+                    a.enabled = true;
+                    a.level_um = amp_level;
+                    a.freq_shift = amp_shift;
+                    a.zeta_scale = amp_zeta_scale;
+                    sizes.push(format!(
+                        "resonance {amp_wn_hz:.0} Hz, zeta {amp_zeta:.3}, moving by {:+.0} % in frequency and {:+.0} % in damping at large amplitude, half at {amp_level:.2} um",
+                        100.0 * amp_shift,
+                        100.0 * amp_zeta_scale
                     ));
                 }
                 Cause::Drift => {

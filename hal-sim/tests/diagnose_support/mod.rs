@@ -97,6 +97,9 @@ impl Plant {
             play_um: 0.0,
             startup_travel_v: f64::INFINITY,
             rate_ref_v_per_s: f64::INFINITY,
+            amp_level_um: 1.0,
+            amp_freq_shift: 0.0,
+            amp_zeta_scale: 0.0,
         };
         let v = effective_input(&u[i], dt, &shape);
         let g = hysteresis(&v, self.beta, self.gamma);

@@ -30,7 +30,8 @@ impl Coords {
         2 + usize::from(c.has(Cause::Delay))
             + 2 * usize::from(c.has(Cause::Saturation))
             + usize::from(c.has(Cause::SlewLimit))
-            + 2 * usize::from(c.has(Cause::Dynamics))
+            + 2 * usize::from(c.has(Cause::Dynamics) || c.has(Cause::AmplitudeDynamics))
+            + 3 * usize::from(c.has(Cause::AmplitudeDynamics))
             + usize::from(c.has(Cause::Backlash))
             + usize::from(c.has(Cause::StartupCreep))
             + usize::from(c.has(Cause::RateDependence))
@@ -81,7 +82,7 @@ impl Coords {
         if c.has(Cause::SlewLimit) {
             shape.slew_v_per_s = s.rate_max * next(-8.0, 0.3).exp();
         }
-        if c.has(Cause::Dynamics) {
+        if c.has(Cause::Dynamics) || c.has(Cause::AmplitudeDynamics) {
             shape.wn_hz = next(0.2f64.ln(), s.max_wn_hz().ln()).exp();
             shape.zeta = next(-3.0, 1.6).exp();
         }
@@ -93,6 +94,11 @@ impl Coords {
         }
         if c.has(Cause::RateDependence) {
             shape.rate_ref_v_per_s = s.rate_max * next(RATE_REF_MIN.ln(), RATE_REF_MAX.ln()).exp();
+        }
+        if c.has(Cause::AmplitudeDynamics) {
+            shape.amp_level_um = s.y_span * next(LEVEL_MIN.ln(), LEVEL_MAX.ln()).exp();
+            shape.amp_freq_shift = next(-FREQ_SHIFT_MAX, FREQ_SHIFT_MAX);
+            shape.amp_zeta_scale = next(ZETA_SCALE_MIN.ln_1p(), ZETA_SCALE_MAX.ln_1p()).exp_m1();
         }
         (shape, excess)
     }
@@ -122,7 +128,7 @@ impl Coords {
         if c.has(Cause::SlewLimit) {
             x.push((shape.slew_v_per_s / s.rate_max).min(1.35).ln());
         }
-        if c.has(Cause::Dynamics) {
+        if c.has(Cause::Dynamics) || c.has(Cause::AmplitudeDynamics) {
             x.push(shape.wn_hz.min(s.max_wn_hz()).ln());
             x.push(shape.zeta.ln());
         }
@@ -151,6 +157,24 @@ impl Coords {
                 .ln(),
             );
         }
+        if c.has(Cause::AmplitudeDynamics) {
+            let f = shape.amp_level_um / s.y_span;
+            x.push(
+                if f.is_finite() {
+                    f.clamp(LEVEL_MIN, LEVEL_MAX)
+                } else {
+                    LEVEL_MAX
+                }
+                .ln(),
+            );
+            x.push(shape.amp_freq_shift.clamp(-FREQ_SHIFT_MAX, FREQ_SHIFT_MAX));
+            x.push(
+                shape
+                    .amp_zeta_scale
+                    .clamp(ZETA_SCALE_MIN, ZETA_SCALE_MAX)
+                    .ln_1p(),
+            );
+        }
         x
     }
 
@@ -167,7 +191,7 @@ impl Coords {
         if c.has(Cause::SlewLimit) {
             v.push(0.3);
         }
-        if c.has(Cause::Dynamics) {
+        if c.has(Cause::Dynamics) || c.has(Cause::AmplitudeDynamics) {
             v.extend([0.4, 0.4]);
         }
         if c.has(Cause::Backlash) {
@@ -178,6 +202,9 @@ impl Coords {
         }
         if c.has(Cause::RateDependence) {
             v.push(0.7);
+        }
+        if c.has(Cause::AmplitudeDynamics) {
+            v.extend([0.7, 0.15, 0.4]);
         }
         v
     }
@@ -193,6 +220,16 @@ pub const TRAVEL_MAX: f64 = 50.0;
 /// largest rate.
 pub const RATE_REF_MIN: f64 = 1e-3;
 pub const RATE_REF_MAX: f64 = 10.0;
+
+/// Range of the amplitude dynamics' level (half the shift acts there), as a fraction of
+/// the output span.
+pub const LEVEL_MIN: f64 = 1e-3;
+pub const LEVEL_MAX: f64 = 0.3;
+/// Largest relative shift of the natural frequency at large amplitude.
+pub const FREQ_SHIFT_MAX: f64 = 0.8;
+/// Range of the relative change of the damping ratio at large amplitude.
+pub const ZETA_SCALE_MIN: f64 = -0.8;
+pub const ZETA_SCALE_MAX: f64 = 8.0;
 
 /// Rails closer than this (fraction of the span) to the training input's extremes count as
 /// never hit.
@@ -221,7 +258,8 @@ mod tests {
             .with(Cause::Dynamics)
             .with(Cause::Backlash)
             .with(Cause::StartupCreep)
-            .with(Cause::RateDependence);
+            .with(Cause::RateDependence)
+            .with(Cause::AmplitudeDynamics);
         let c = Coords { causes, scales };
         let shape = Shape {
             beta: 0.03,
@@ -235,6 +273,9 @@ mod tests {
             play_um: 1.5,
             startup_travel_v: 250.0,
             rate_ref_v_per_s: 300.0,
+            amp_level_um: 0.8,
+            amp_freq_shift: -0.25,
+            amp_zeta_scale: 1.5,
         };
         let back = c.shape(&c.coords(&shape));
         for (a, b) in [
@@ -249,6 +290,9 @@ mod tests {
             (back.play_um, shape.play_um),
             (back.startup_travel_v, shape.startup_travel_v),
             (back.rate_ref_v_per_s, shape.rate_ref_v_per_s),
+            (back.amp_level_um, shape.amp_level_um),
+            (back.amp_freq_shift, shape.amp_freq_shift),
+            (back.amp_zeta_scale, shape.amp_zeta_scale),
         ] {
             assert!((a - b).abs() < 1e-9 * b.abs().max(1.0), "{a} vs {b}");
         }

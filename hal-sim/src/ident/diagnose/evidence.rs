@@ -121,7 +121,7 @@ pub fn signal(
     let u = &data.u[a];
     let dt = data.dt();
     match cause {
-        Some(Cause::Dynamics) | Some(Cause::SlewLimit) => {
+        Some(Cause::Dynamics) | Some(Cause::SlewLimit) | Some(Cause::AmplitudeDynamics) => {
             ("input rate du/dt [V/s]".into(), derivative(u, dt))
         }
         Some(Cause::Delay) => ("model output rate [um/s]".into(), derivative(y_model, dt)),
@@ -188,6 +188,45 @@ pub fn evidence(
                 r2,
                 text: format!(
                     "residual follows the input rate (loop rotation): corr {c_slow:+.2} with du/dt below 10 Hz, {c_fast:+.2} above; rate and acceleration of the model output explain {:.0} % of it",
+                    100.0 * r2
+                ),
+            }
+        }
+        Cause::AmplitudeDynamics => {
+            // `r` is what the amplitude dependence removes from the plain dynamics (the
+            // candidate with it switched off): the ringing's rate and acceleration weighted
+            // by the ringing's amplitude (the envelope of the acceleration over `wn^2`).
+            let yd = derivative(y_model, dt);
+            let ydd = derivative(&yd, dt);
+            let w0 = 2.0 * std::f64::consts::PI * fitted.wn_hz;
+            let (sig, big) = if w0.is_finite() && w0 > 0.0 {
+                let ring: Vec<f64> = ydd.iter().map(|a| a.abs() / (w0 * w0)).collect();
+                let env: Vec<f64> = lowpass(&ring, 2.0 / w0, dt)
+                    .iter()
+                    .map(|e| 0.5 * std::f64::consts::PI * e)
+                    .collect();
+                let level = fitted.amp_level_um.max(1e-12);
+                let rho: Vec<f64> = env.iter().map(|e| e / (e + level)).collect();
+                let sig = vec![
+                    rho.iter().zip(&yd).map(|(r, v)| r * v).collect(),
+                    rho.iter().zip(&ydd).map(|(r, a)| r * a).collect(),
+                ];
+                (sig, env)
+            } else {
+                (Vec::new(), vec![0.0; n])
+            };
+            let r2 = explained(r, &sig);
+            let at = quantile(&big, 0.9);
+            let ringing = |k: usize| big[k] > at;
+            let (e_big, e_small) = (rms_where(r, ringing), rms_where(r, |k| !ringing(k)));
+            Evidence {
+                signal: "ringing's rate and acceleration weighted by its amplitude".into(),
+                r2,
+                text: format!(
+                    "residual rms {e_big:.3} where the ringing is in its top tenth vs {e_small:.3} elsewhere; a resonance that shifts by {:+.0} % in frequency and {:+.0} % in damping at large amplitude (half at {:.3}) explains {:.0} %",
+                    100.0 * fitted.amp_freq_shift,
+                    100.0 * fitted.amp_zeta_scale,
+                    fitted.amp_level_um,
                     100.0 * r2
                 ),
             }
@@ -490,6 +529,9 @@ pub fn no_shape() -> Shape {
         play_um: 0.0,
         startup_travel_v: f64::INFINITY,
         rate_ref_v_per_s: f64::INFINITY,
+        amp_level_um: 1.0,
+        amp_freq_shift: 0.0,
+        amp_zeta_scale: 0.0,
     }
 }
 

@@ -101,9 +101,14 @@ impl Fitted {
                 if c.has(Cause::SlewLimit) {
                     put("slew_v_per_s", s.slew_v_per_s);
                 }
-                if c.has(Cause::Dynamics) {
+                if c.has(Cause::Dynamics) || c.has(Cause::AmplitudeDynamics) {
                     put("wn_hz", s.wn_hz);
                     put("zeta", s.zeta);
+                }
+                if c.has(Cause::AmplitudeDynamics) {
+                    put("amp_level", s.amp_level_um);
+                    put("amp_freq_shift", s.amp_freq_shift);
+                    put("amp_zeta_scale", s.amp_zeta_scale);
                 }
                 if c.has(Cause::Backlash) {
                     put("play_half_width", s.play_um);
@@ -207,6 +212,25 @@ fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
                 });
             }
         }
+        Some(Cause::AmplitudeDynamics) => {
+            // The plain dynamics' starts, each with a frequency falling or rising and the
+            // damping growing at large amplitude, half at three levels: the level and the
+            // damping's growth trade off at small amplitudes, so both are gridded.
+            for d in starts(Some(Cause::Dynamics), shape, scales) {
+                for shift in [-0.2, 0.2] {
+                    for level in [0.003, 0.01, 0.03] {
+                        for zs in [1.0, 3.0] {
+                            v.push(Shape {
+                                amp_level_um: level * scales.y_span,
+                                amp_freq_shift: shift,
+                                amp_zeta_scale: zs,
+                                ..d
+                            });
+                        }
+                    }
+                }
+            }
+        }
         Some(Cause::Dynamics) => {
             for hz in [3.0, 10.0, 30.0, 100.0, 300.0, 1000.0] {
                 if hz < 0.4 / scales.dt {
@@ -267,7 +291,13 @@ fn fit_output(
         }
         ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
     }
-    ranked.truncate(if dim > 2 { 2 } else { 1 });
+    ranked.truncate(if causes.has(Cause::AmplitudeDynamics) {
+        3
+    } else if dim > 2 {
+        2
+    } else {
+        1
+    });
     let steps = coords.steps();
     // Only the CBW shape to search (the extension is linear): a short search suffices.
     let global = if dim > 2 {
@@ -276,13 +306,34 @@ fn fit_output(
         opt.global_evals.0
     };
     // The starts run in parallel (the other core is idle while the control fits).
+    // The amplitude dependence's seven coordinates (CBW, resonance, its three) converge
+    // slowly: more restarts while they still gain.
+    let restarts = if causes.has(Cause::AmplitudeDynamics) {
+        4
+    } else {
+        1
+    };
     let best = ranked
         .par_iter()
         .map(|(x0, _)| {
-            let (x, _) =
+            let (mut x, mut v) =
                 super::search::nelder_mead(&mut |x| cost_on(coarse, x), x0, &steps, global, 1e-7);
             // A restart with fresh steps: a collapsed simplex is the usual Nelder-Mead failure.
-            super::search::nelder_mead(&mut |x| cost_on(coarse, x), &x, &steps, global / 3, 1e-7)
+            for _ in 0..restarts {
+                let (x1, v1) = super::search::nelder_mead(
+                    &mut |x| cost_on(coarse, x),
+                    &x,
+                    &steps,
+                    global / 3,
+                    1e-7,
+                );
+                let gained = v1 < v * (1.0 - 1e-3);
+                (x, v) = (x1, v1);
+                if !gained {
+                    break;
+                }
+            }
+            (x, v)
         })
         .min_by(|a, b| a.1.total_cmp(&b.1));
     let x = best.map_or_else(|| coords.coords(&starts[0]), |b| b.0);
@@ -391,11 +442,47 @@ pub(super) fn extend(
 
 /// `current` refitted without `cause`, from its current shapes.
 pub(super) fn reduce(current: &Fitted, cause: Cause, tiers: &Tiers, opt: &Options) -> Fitted {
-    let causes = current.causes.without(cause);
+    refit(
+        current,
+        current.causes.without(cause),
+        |s| neutral(s, cause),
+        tiers,
+        opt,
+    )
+}
+
+/// `current` (with `amplitude-dynamics`) refitted with the plain dynamics in its place, from
+/// its small-amplitude frequency and damping: the control the amplitude dependence must beat.
+pub(super) fn plain_dynamics(current: &Fitted, tiers: &Tiers, opt: &Options) -> Fitted {
+    let causes = current
+        .causes
+        .without(Cause::AmplitudeDynamics)
+        .with(Cause::Dynamics);
+    refit(
+        current,
+        causes,
+        |s| Shape {
+            amp_freq_shift: 0.0,
+            amp_zeta_scale: 0.0,
+            ..s
+        },
+        tiers,
+        opt,
+    )
+}
+
+/// `current` refitted with `causes`, every output from `start` of its current shape.
+fn refit(
+    current: &Fitted,
+    causes: Causes,
+    start: impl Fn(Shape) -> Shape + Sync,
+    tiers: &Tiers,
+    opt: &Options,
+) -> Fitted {
     let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
         .into_par_iter()
         .map(|i| {
-            let st = [neutral(current.outputs[i].shape, cause)];
+            let st = [start(current.outputs[i].shape)];
             fit_output(
                 tiers,
                 i,
@@ -425,9 +512,11 @@ pub(super) fn neutral(mut shape: Shape, cause: Cause) -> Shape {
             shape.rail_hi_v = f64::INFINITY;
         }
         Cause::SlewLimit => shape.slew_v_per_s = f64::INFINITY,
-        Cause::Dynamics => {
+        Cause::Dynamics | Cause::AmplitudeDynamics => {
             shape.wn_hz = f64::INFINITY;
             shape.zeta = 1.0;
+            shape.amp_freq_shift = 0.0;
+            shape.amp_zeta_scale = 0.0;
         }
         Cause::Backlash => shape.play_um = 0.0,
         Cause::RateDependence => shape.rate_ref_v_per_s = f64::INFINITY,
@@ -456,11 +545,20 @@ fn coef_prefix(cause: Cause) -> Option<&'static str> {
 }
 
 /// `f` with `cause` switched off and nothing refitted: its prediction shows what the cause's
-/// extension contributes.
+/// extension contributes. The amplitude dependence is switched off to the plain dynamics at
+/// its small-amplitude frequency and damping: what it adds to them.
 pub(super) fn switched_off(f: &Fitted, cause: Cause) -> Fitted {
     let mut g = f.clone();
     for m in g.outputs.iter_mut() {
-        m.shape = neutral(m.shape, cause);
+        m.shape = if cause == Cause::AmplitudeDynamics {
+            Shape {
+                amp_freq_shift: 0.0,
+                amp_zeta_scale: 0.0,
+                ..m.shape
+            }
+        } else {
+            neutral(m.shape, cause)
+        };
         if let Some(p) = coef_prefix(cause) {
             for (name, c) in m.names.iter().zip(m.coef.iter_mut()) {
                 if name.starts_with(p) {

@@ -11,6 +11,8 @@
 use serde::Serialize;
 
 pub use super::coords::{Coords, PLAY_MAX, PLAY_MIN, TRAVEL_MAX, TRAVEL_MIN};
+pub use super::dynamics::{dynamics, dynamics_all};
+use super::output::{output_side, played};
 use super::Signals;
 use crate::numeric::{rmse, solve_spd};
 
@@ -55,10 +57,15 @@ pub enum Cause {
     /// input inside the actuator) it bends the hysteresis loop's two branches by the position
     /// they reach, and acts after creep, dynamics and drift.
     SensorNonlinearity,
+    /// The dynamics `G` of `dynamics` (004 eq. 8) with a natural frequency and damping that
+    /// move with the structure's oscillation amplitude, as in the fine steering mirror
+    /// (hal-sim's `stage.amplitude_dynamics`, [`super::dynamics`]). It includes the plain
+    /// dynamics, so it is named only when it gains over them (the two exclude each other).
+    AmplitudeDynamics,
 }
 
 impl Cause {
-    pub const ALL: [Cause; 12] = [
+    pub const ALL: [Cause; 13] = [
         Cause::Dynamics,
         Cause::Asymmetry,
         Cause::Creep,
@@ -71,6 +78,7 @@ impl Cause {
         Cause::StartupCreep,
         Cause::RateDependence,
         Cause::SensorNonlinearity,
+        Cause::AmplitudeDynamics,
     ];
 
     pub fn name(self) -> &'static str {
@@ -87,6 +95,7 @@ impl Cause {
             Cause::StartupCreep => "startup-creep",
             Cause::RateDependence => "rate-dependence",
             Cause::SensorNonlinearity => "sensor-nonlinearity",
+            Cause::AmplitudeDynamics => "amplitude-dynamics",
         }
     }
 
@@ -153,6 +162,13 @@ pub struct Shape {
     pub startup_travel_v: f64,
     /// Input rate at which half the rate dependence acts (V/s); infinite: none.
     pub rate_ref_v_per_s: f64,
+    /// Oscillation amplitude at which half the amplitude dependence of `G` acts (output
+    /// units).
+    pub amp_level_um: f64,
+    /// Relative change of `G`'s natural frequency at large amplitude (0: none).
+    pub amp_freq_shift: f64,
+    /// Relative change of `G`'s damping ratio at large amplitude (0: none).
+    pub amp_zeta_scale: f64,
 }
 
 /// What the search coordinates are scaled by: the training input of this output.
@@ -354,43 +370,6 @@ pub fn hysteresis(v: &[f64], beta: f64, gamma: f64) -> Vec<f64> {
     let mut g = Vec::new();
     crate::ident::fast::cbw_unit(v, beta, gamma, &mut g);
     g
-}
-
-/// Second-order low-pass with unit DC gain (004 eq. 8 with n = 2, m = 0), discretised
-/// exactly for an input held over each sample (a DAC drives the stage), output at the end of
-/// the hold; starting at rest at the first sample. `wn_hz` infinite: no dynamics.
-pub fn dynamics(x: &mut [f64], wn_hz: f64, zeta: f64, dt: f64) {
-    dynamics_all(&mut [x], wn_hz, zeta, dt);
-}
-
-/// [`dynamics`] on each of `cols`, the independent recurrences side by side
-/// ([`crate::ident::fast::held_second_order`]).
-pub fn dynamics_all(cols: &mut [&mut [f64]], wn_hz: f64, zeta: f64, dt: f64) {
-    if !wn_hz.is_finite() {
-        return;
-    }
-    let wn = 2.0 * std::f64::consts::PI * wn_hz;
-    // exp(A h) for A = [[0, 1], [-wn^2, -2 zeta wn]]: e^(s h) (c I + sn (A - s I)), s = -zeta wn.
-    let s = -zeta * wn;
-    let q2 = wn * wn * (zeta * zeta - 1.0);
-    let (c, sn) = if q2.abs() < 1e-12 * wn * wn {
-        (1.0, dt)
-    } else if q2 > 0.0 {
-        let q = q2.sqrt();
-        ((q * dt).cosh(), (q * dt).sinh() / q)
-    } else {
-        let q = (-q2).sqrt();
-        ((q * dt).cos(), (q * dt).sin() / q)
-    };
-    let e = (s * dt).exp();
-    let phi = [
-        [e * (c - s * sn), e * sn],
-        [-e * sn * wn * wn, e * (c + sn * (-2.0 * zeta * wn - s))],
-    ];
-    if !phi.iter().flatten().all(|v| v.is_finite()) {
-        return;
-    }
-    crate::ident::fast::held_second_order(cols, &phi);
 }
 
 /// Normalised input `w = (v - mid)/half` for the asymmetry polynomial.
@@ -622,26 +601,32 @@ pub fn fit_linear(
         [one] => &one.y[i],
         _ => &joined,
     };
-    let has_play = causes.has(Cause::Backlash) && shape.play_um > 0.0;
-    let has_sensor = causes.has(Cause::SensorNonlinearity);
-    let (coef, y) = if has_play || has_sensor {
-        // The play and the sensor act on the model's output, which the coefficients make: a
-        // fixed point. Fit the coefficients to the measurement minus the play's offset of the
-        // last iterate, with the sensor polynomial of the last iterate's position as two more
-        // columns; then recompute both.
-        let lens: Vec<usize> = data.iter().map(Signals::len).collect();
+    let refs: Vec<&Signals> = data.iter().collect();
+    let side = output_side(&refs, causes, shape, scales, &names);
+    let (coef, y) = if side.play > 0.0 || side.sensor || side.amp.is_some() {
+        // The play, the sensor and the amplitude-dependent dynamics act on the model's output,
+        // which the coefficients make: a fixed point. Fit the coefficients to the measurement
+        // minus the play's offset of the last iterate, with the sensor polynomial of the last
+        // iterate's position as two more columns and the dynamics following the last
+        // iterate's course of the amplitude (at first none: the plain dynamics); then
+        // recompute all three.
         let n_lin = cols.len();
         let mut target = y_meas.to_vec();
         // First iterate: the position is about what the sensor reads.
         let mut x = y_meas.to_vec();
+        let mut rho = vec![0.0; y_meas.len()];
         let mut coef = Vec::new();
         for k in 0..=OUTPUT_ITERATIONS {
-            let mut all: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
-            let sensor = if has_sensor {
-                Some(sensor_columns(&x, scales))
-            } else {
-                None
+            let followed = side.amp.as_ref().map(|_| side.follow(&cols, &rho));
+            let mut all: Vec<&[f64]> = match &followed {
+                Some(f) => f
+                    .iter()
+                    .chain(&cols[side.n_pre..])
+                    .map(Vec::as_slice)
+                    .collect(),
+                None => cols.iter().map(Vec::as_slice).collect(),
             };
+            let sensor = side.sensor.then(|| sensor_columns(&x, scales));
             if let Some(c) = &sensor {
                 all.extend(c.iter().map(Vec::as_slice));
             }
@@ -649,9 +634,13 @@ pub fn fit_linear(
             if k == OUTPUT_ITERATIONS {
                 break;
             }
-            let m = combine(&cols, &coef[..n_lin]);
-            x = if has_play {
-                played(&m, &lens, shape.play_um)
+            // The position without the play: its offset is what the play adds.
+            let (m, r) = side.position(&cols, &coef[..n_lin], false);
+            if side.amp.is_some() {
+                rho = r;
+            }
+            x = if side.play > 0.0 {
+                played(&m, &side.lens, side.play)
             } else {
                 m.clone()
             };
@@ -659,14 +648,14 @@ pub fn fit_linear(
                 *t = y - (x - m);
             }
         }
-        let y = output(&cols, &coef, &lens, shape.play_um, has_sensor, scales);
+        let y = side.output(&cols, &coef);
         (coef, y)
     } else {
         let coef = least_squares(&cols, y_meas);
         let y = combine(&cols, &coef);
         (coef, y)
     };
-    if has_sensor {
+    if side.sensor {
         names.extend(["sensor_e2", "sensor_e3"]);
     }
     let e = rmse(&y, y_meas);
@@ -678,46 +667,9 @@ pub fn fit_linear(
     (model, if e.is_finite() { e } else { f64::INFINITY })
 }
 
-/// Fixed-point iterations of the fit of the play and the sensor polynomial.
+/// Fixed-point iterations of the fit of the play, the sensor polynomial and the
+/// amplitude-dependent dynamics.
 const OUTPUT_ITERATIONS: usize = 3;
-
-/// The model's output from its linear columns `cols` (the first coefficients) and, with
-/// `sensor`, the sensor polynomial (the last two): the position through the play (half width
-/// `play`, 0: none), then the sensor. `lens`: the records' lengths, one after the other.
-fn output(
-    cols: &[Vec<f64>],
-    coef: &[f64],
-    lens: &[usize],
-    play: f64,
-    sensor: bool,
-    scales: &Scales,
-) -> Vec<f64> {
-    let mut x = combine(cols, &coef[..cols.len().min(coef.len())]);
-    if play > 0.0 {
-        x = played(&x, lens, play);
-    }
-    if sensor && coef.len() >= cols.len() + 2 {
-        let [e2, e3] = sensor_columns(&x, scales);
-        let (s2, s3) = (coef[cols.len()], coef[cols.len() + 1]);
-        for ((x, a), b) in x.iter_mut().zip(&e2).zip(&e3) {
-            *x += s2 * a + s3 * b;
-        }
-    }
-    x
-}
-
-/// `m` (records of lengths `lens` one after the other) through a play of half width `half`,
-/// each record from rest at its first value.
-fn played(m: &[f64], lens: &[usize], half: f64) -> Vec<f64> {
-    let mut out = m.to_vec();
-    let mut at = 0;
-    for &n in lens {
-        let end = (at + n).min(out.len());
-        play(&mut out[at..end], half);
-        at = end;
-    }
-    out
-}
 
 /// Output `i` of `model` on `data`.
 pub fn predict(
@@ -728,20 +680,8 @@ pub fn predict(
     scales: &Scales,
     taus: &[f64],
 ) -> Vec<f64> {
-    let (_, cols) = regressors(data, i, causes, &model.shape, scales, taus);
-    let play = if causes.has(Cause::Backlash) {
-        model.shape.play_um
-    } else {
-        0.0
-    };
-    output(
-        &cols,
-        &model.coef,
-        &[data.len()],
-        play,
-        causes.has(Cause::SensorNonlinearity),
-        scales,
-    )
+    let (names, cols) = regressors(data, i, causes, &model.shape, scales, taus);
+    output_side(&[data], causes, &model.shape, scales, &names).output(&cols, &model.coef)
 }
 
 #[cfg(test)]

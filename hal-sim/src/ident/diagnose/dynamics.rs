@@ -1,0 +1,219 @@
+//! The diagnosis model's linear dynamics `G` (004 eq. 8, second order, unit DC gain) and its
+//! amplitude-dependent form (`amplitude-dynamics`).
+//!
+//! The amplitude-dependent form moves the natural frequency and damping with the structure's
+//! oscillation amplitude `a` (output units, its free motion about the input it follows), as
+//! in the fine steering mirror and hal-sim's `stage.amplitude_dynamics`: with
+//! `rho = a/(a + level)`, `wn = wn0*(1 + freq_shift*rho)` and
+//! `zeta = zeta0*(1 + zeta_scale*rho)`. Given the course of `rho` it is a linear
+//! time-varying filter, so the model's linear coefficients are still solved by least squares;
+//! the course itself is a fixed point, taken from the last iterate's simulation
+//! ([`super::model::fit_linear`]).
+
+use super::model::Shape;
+
+/// Exact transition matrix of `x'' + 2 zeta wn x' + wn^2 x = wn^2 u` over `dt` for an input
+/// held over the step (state: deviation from the held input, velocity); `None` when not
+/// finite.
+pub fn transition(wn_hz: f64, zeta: f64, dt: f64) -> Option<[[f64; 2]; 2]> {
+    let wn = 2.0 * std::f64::consts::PI * wn_hz;
+    // exp(A h) for A = [[0, 1], [-wn^2, -2 zeta wn]]: e^(s h) (c I + sn (A - s I)), s = -zeta wn.
+    let s = -zeta * wn;
+    let q2 = wn * wn * (zeta * zeta - 1.0);
+    let (c, sn) = if q2.abs() < 1e-12 * wn * wn {
+        (1.0, dt)
+    } else if q2 > 0.0 {
+        let q = q2.sqrt();
+        ((q * dt).cosh(), (q * dt).sinh() / q)
+    } else {
+        let q = (-q2).sqrt();
+        ((q * dt).cos(), (q * dt).sin() / q)
+    };
+    let e = (s * dt).exp();
+    let phi = [
+        [e * (c - s * sn), e * sn],
+        [-e * sn * wn * wn, e * (c + sn * (-2.0 * zeta * wn - s))],
+    ];
+    phi.iter().flatten().all(|v| v.is_finite()).then_some(phi)
+}
+
+/// One held-input step of the state `(p, v)` towards input `u`.
+#[inline]
+fn step(phi: &[[f64; 2]; 2], p: &mut f64, v: &mut f64, u: f64) {
+    let d = *p - u;
+    *p = u + phi[0][0] * d + phi[0][1] * *v;
+    *v = phi[1][0] * d + phi[1][1] * *v;
+}
+
+/// Second-order low-pass with unit DC gain (004 eq. 8 with n = 2, m = 0), discretised
+/// exactly for an input held over each sample (a DAC drives the stage), output at the end of
+/// the hold; starting at rest at the first sample. `wn_hz` infinite: no dynamics.
+pub fn dynamics(x: &mut [f64], wn_hz: f64, zeta: f64, dt: f64) {
+    dynamics_all(&mut [x], wn_hz, zeta, dt);
+}
+
+/// [`dynamics`] on each of `cols`, the independent recurrences side by side
+/// ([`crate::ident::fast::held_second_order`]: [`step`]'s arithmetic, to the bit).
+pub fn dynamics_all(cols: &mut [&mut [f64]], wn_hz: f64, zeta: f64, dt: f64) {
+    if !wn_hz.is_finite() {
+        return;
+    }
+    let Some(phi) = transition(wn_hz, zeta, dt) else {
+        return;
+    };
+    crate::ident::fast::held_second_order(cols, &phi);
+}
+
+/// Table entries over `rho` in `[0, 1]`.
+const TABLE: usize = 32;
+/// Largest damping ratio the amplitude may reach.
+const ZETA_MAX: f64 = 0.95;
+
+/// The amplitude-dependent dynamics of one record (its sample period).
+#[derive(Debug, Clone)]
+pub struct AmpFilter {
+    table: Vec<[[f64; 2]; 2]>,
+    level: f64,
+    inv_w0: f64,
+    /// Lag of the ramp response (`2 zeta0/wn0`) plus the held input's half step (s): on a
+    /// ramp the state before step `k` lags `u_k` by that much, no free motion.
+    lag: f64,
+    inv_dt: f64,
+}
+
+impl AmpFilter {
+    /// The filter of `shape` for sample period `dt`; `None` without dynamics.
+    pub fn new(shape: &Shape, dt: f64) -> Option<Self> {
+        if !shape.wn_hz.is_finite() {
+            return None;
+        }
+        let table = (0..=TABLE)
+            .map(|k| {
+                let rho = k as f64 / TABLE as f64;
+                let f = shape.wn_hz * (1.0 + shape.amp_freq_shift * rho).max(0.05);
+                let z = (shape.zeta * (1.0 + shape.amp_zeta_scale * rho)).clamp(1e-4, ZETA_MAX);
+                transition(f, z, dt)
+            })
+            .collect::<Option<Vec<_>>>()?;
+        let w0 = 2.0 * std::f64::consts::PI * shape.wn_hz;
+        Some(Self {
+            table,
+            level: shape.amp_level_um.max(1e-12),
+            inv_w0: 1.0 / w0,
+            lag: 2.0 * shape.zeta / w0 + 0.5 * dt,
+            inv_dt: 1.0 / dt,
+        })
+    }
+
+    /// The transition at `rho` (linear in the table).
+    #[inline]
+    fn at(&self, rho: f64) -> [[f64; 2]; 2] {
+        let pos = rho.clamp(0.0, 1.0) * TABLE as f64;
+        let k = (pos as usize).min(TABLE - 1);
+        let f = pos - k as f64;
+        let (a, b) = (&self.table[k], &self.table[k + 1]);
+        let mut m = [[0.0; 2]; 2];
+        for i in 0..2 {
+            for j in 0..2 {
+                m[i][j] = a[i][j] + f * (b[i][j] - a[i][j]);
+            }
+        }
+        m
+    }
+
+    /// Runs the filter on `x` in place (from rest at its first sample); returns the course of
+    /// `rho`, the weight each step's transition was taken at.
+    pub fn run(&self, x: &mut [f64]) -> Vec<f64> {
+        let mut rho = Vec::with_capacity(x.len());
+        let Some(&first) = x.first() else {
+            return rho;
+        };
+        let (mut p, mut v, mut prev) = (first, 0.0, first);
+        for u in x.iter_mut() {
+            // The free motion about the ramp the structure follows.
+            let slope = (*u - prev) * self.inv_dt;
+            prev = *u;
+            let dx = p - *u + self.lag * slope;
+            let dv = (v - slope) * self.inv_w0;
+            let a = (dx * dx + dv * dv).sqrt();
+            let r = a / (a + self.level);
+            rho.push(r);
+            step(&self.at(r), &mut p, &mut v, *u);
+            *u = p;
+        }
+        rho
+    }
+
+    /// The linear time-varying filter with a given course of `rho` (from [`AmpFilter::run`]),
+    /// on `x` in place: [`AmpFilter::run`] on the same input gives the same output.
+    pub fn follow(&self, x: &mut [f64], rho: &[f64]) {
+        let Some(&first) = x.first() else {
+            return;
+        };
+        let (mut p, mut v) = (first, 0.0);
+        for (u, &r) in x.iter_mut().zip(rho) {
+            step(&self.at(r), &mut p, &mut v, *u);
+            *u = p;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ident::diagnose::evidence::no_shape;
+
+    fn steps(n: usize, big: f64) -> Vec<f64> {
+        (0..n)
+            .map(|k| if (k / 400) % 2 == 1 { big } else { 0.0 })
+            .collect()
+    }
+
+    #[test]
+    fn amplitude_moves_the_ringing_and_follow_repeats_run() {
+        let shape = Shape {
+            wn_hz: 100.0,
+            zeta: 0.05,
+            amp_level_um: 1.0,
+            amp_freq_shift: -0.3,
+            amp_zeta_scale: 2.0,
+            ..no_shape()
+        };
+        let f = AmpFilter::new(&shape, 1e-4).unwrap();
+        // Small steps ring nearly as the plain dynamics, large ones differ.
+        for (big, close) in [(0.01, true), (20.0, false)] {
+            let mut a = steps(4000, big);
+            let rho = f.run(&mut a);
+            let mut b = steps(4000, big);
+            dynamics(&mut b, 100.0, 0.05, 1e-4);
+            let diff = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            assert_eq!(diff / big < 0.02, close, "{big}: {diff}");
+            let mut c = steps(4000, big);
+            f.follow(&mut c, &rho);
+            assert!(a.iter().zip(&c).all(|(x, y)| (x - y).abs() < 1e-12));
+        }
+        // A slow ramp is followed without free motion: rho stays near 0.
+        let mut ramp: Vec<f64> = (0..4000).map(|k| k as f64 * 1e-3).collect();
+        let rho = f.run(&mut ramp);
+        assert!(rho[2000..].iter().all(|r| *r < 1e-3), "{}", rho[3999]);
+        // Zero shifts: the plain dynamics.
+        let plain = AmpFilter::new(
+            &Shape {
+                amp_freq_shift: 0.0,
+                amp_zeta_scale: 0.0,
+                ..shape
+            },
+            1e-4,
+        )
+        .unwrap();
+        let mut a = steps(2000, 5.0);
+        plain.run(&mut a);
+        let mut b = steps(2000, 5.0);
+        dynamics(&mut b, 100.0, 0.05, 1e-4);
+        assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9));
+    }
+}
