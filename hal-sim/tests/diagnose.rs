@@ -145,9 +145,9 @@ fn finds_sensor_nonlinearity() {
 /// A resonance whose frequency and damping move with the ringing's amplitude is named
 /// `amplitude-dynamics` alone (not `dynamics`, nor both); plain `dynamics` cases
 /// (`finds_dynamics`) must stay `dynamics`. Known failure: on seed 5 of 5 a
-/// `rate-dependence` (gain 0.107) is named beside it (README, issue 18 additions), so the
-/// test is run on request: `DIAGNOSE_SEEDS=5 cargo test --release -p hal-sim --test diagnose
-/// amplitude_dynamics -- --ignored`.
+/// `rate-dependence` (gain 0.133 forward) is named beside it (README, issue 18 additions), so
+/// the test is run on request: `DIAGNOSE_SEEDS=5 cargo test --release -p hal-sim --test
+/// diagnose amplitude_dynamics -- --ignored`.
 #[test]
 #[ignore = "seed 5 of 5 also names rate-dependence"]
 fn finds_amplitude_dynamics() {

@@ -216,6 +216,17 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
         );
     }
     for f in &d.findings {
+        if let Some(u) = &f.upgrades {
+            let _ = writeln!(
+                s,
+                "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %), upgraded below",
+                u.cause.name(),
+                u.round,
+                u.rmse_valid_before,
+                u.rmse_valid,
+                100.0 * u.gain
+            );
+        }
         let swapped = f.confidence.swapped_gain.map_or_else(String::new, |g| {
             format!(", {:.1} % with the records swapped", 100.0 * g)
         });

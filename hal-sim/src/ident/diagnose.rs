@@ -111,6 +111,10 @@ pub struct Finding {
     /// With several validation records: the gain on each (empty with one record).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub gains_per_record: Vec<f64>,
+    /// The finding this one upgrades (`amplitude-dynamics` upgrades `dynamics`: its gain is
+    /// over them, theirs over the model before).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub upgrades: Option<Box<Finding>>,
 }
 
 /// How well a named cause's gain holds up: its gain on blocks of the validation records
@@ -419,10 +423,23 @@ pub fn diagnose_records(
     let mut current_pred = base_pred.clone();
     let mut findings = Vec::new();
     let mut candidates = Vec::new();
+    let mut refused = Vec::new();
     for round in 1..=MAX_ROUNDS {
         let todo: Vec<Cause> = applicable(&train[0])
             .into_iter()
-            .filter(|c| !current.causes.has(*c) && !current.causes.has(rival(*c)))
+            .filter(|c| match c {
+                // An upgrade of the plain dynamics, once they are found: searched only where
+                // a resonance is, and from its fitted frequency and damping.
+                Cause::AmplitudeDynamics => {
+                    current.causes.has(Cause::Dynamics)
+                        && !current.causes.has(Cause::AmplitudeDynamics)
+                }
+                Cause::Dynamics => {
+                    !current.causes.has(Cause::Dynamics)
+                        && !current.causes.has(Cause::AmplitudeDynamics)
+                }
+                c => !current.causes.has(*c),
+            })
             .collect();
         if todo.is_empty() {
             break;
@@ -494,24 +511,14 @@ pub fn diagnose_records(
                 ((f, p, e), ev)
             })
             .unzip();
-        // The amplitude dependence must gain over the plain dynamics (the dynamics candidate
-        // of this round) by the rule for a gain: it includes them, so it would otherwise stand
-        // in for them on any resonance.
-        let e_plain = todo
-            .iter()
-            .position(|c| *c == Cause::Dynamics)
-            .map(|k| tried[k].2);
-        let mut best: Option<usize> = None;
+        let mut significant_ones = Vec::new();
         for (k, (t, ev)) in tried.iter().zip(&evidence).enumerate() {
             let (rmse_train, e) = (t.0.rmse_train, t.2);
             let gain = 1.0 - e / current_valid;
-            let over_plain = todo[k] != Cause::AmplitudeDynamics
-                || e_plain.is_none_or(|p| gains_by_rule(p, e, y_span));
             let significant = gain.is_finite()
                 && gain >= MIN_GAIN
                 && current_valid - e >= MIN_ABS_GAIN * y_span
-                && ev.r2 >= MIN_R2
-                && over_plain;
+                && ev.r2 >= MIN_R2;
             candidates.push(Candidate {
                 cause: todo[k],
                 round,
@@ -521,24 +528,45 @@ pub fn diagnose_records(
                 evidence: ev.clone(),
                 significant,
             });
-            // Among the significant candidates, the one that removes most of the residual on
-            // both records (the product of its error ratios on train and valid): a cause that
-            // gains on the validation record by standing in for another, while explaining
-            // little of the training record, loses to the one that explains both.
-            let both = |e: f64, t: f64| (e / current_valid) * (t / current.rmse_train);
-            if significant
-                && best.is_none_or(|b: usize| {
-                    both(e, rmse_train) < both(tried[b].2, tried[b].0.rmse_train)
-                })
-            {
-                best = Some(k);
+            if significant {
+                significant_ones.push(k);
             }
         }
+        // Among the significant candidates, the one that removes most of the residual on
+        // both records (the product of its error ratios on train and valid): a cause that
+        // gains on the validation record by standing in for another, while explaining
+        // little of the training record, loses to the one that explains both.
+        let both =
+            |k: usize| (tried[k].2 / current_valid) * (tried[k].0.rmse_train / current.rmse_train);
+        significant_ones.sort_by(|a, b| both(*a).total_cmp(&both(*b)));
+        // The amplitude dependence must hold up over the plain dynamics with the records'
+        // roles swapped before it is taken: a model carrying a spurious one is slow to search
+        // and lets other causes stand in for what it distorts.
+        let swappable = valid.iter().all(|v| v.warmup == 0);
+        let best = significant_ones.into_iter().find(|&k| {
+            if todo[k] != Cause::AmplitudeDynamics || !swappable {
+                return true;
+            }
+            let (gain, holds) = upgrade_swapped(&tried[k].0, train, &scored, opt, y_span);
+            if !holds {
+                refused.push((Cause::AmplitudeDynamics, gain));
+            }
+            holds
+        });
         let Some(b) = best else { break };
         let Some((f, p, e)) = tried.into_iter().nth(b) else {
             break;
         };
         let ev = evidence.swap_remove(b);
+        // The upgrade replaces the plain dynamics' finding (kept inside it).
+        let upgrades = if todo[b] == Cause::AmplitudeDynamics {
+            findings
+                .iter()
+                .position(|f: &Finding| f.cause == Cause::Dynamics)
+                .map(|k| Box::new(findings.remove(k)))
+        } else {
+            None
+        };
         let gains_per_record = if several {
             per_record(&scored, &current_pred)
                 .iter()
@@ -557,6 +585,7 @@ pub fn diagnose_records(
             evidence: ev,
             confidence: confidence(&scored, &current_pred, &p),
             gains_per_record,
+            upgrades,
         });
         current = f;
         current_pred = p;
@@ -592,7 +621,6 @@ pub fn diagnose_records(
     // Swap check: a named cause must hold up whichever record trains. The final model is
     // refitted on the validation records, with and without each cause, and scored on the
     // training records; a cause that does not then gain by the rule for a gain is refused.
-    let mut refused = Vec::new();
     if !findings.is_empty() && valid.iter().all(|v| v.warmup == 0) {
         let swapped = swap_gains(&current, &findings, train, &scored, opt, y_span);
         for (fd, g) in findings.iter_mut().zip(&swapped) {
@@ -635,6 +663,7 @@ pub fn diagnose_records(
                         } else {
                             Vec::new()
                         },
+                        upgrades: None,
                     },
                 );
                 k += 1;
@@ -690,14 +719,27 @@ fn gains_by_rule(before: f64, after: f64, y_span: f64) -> bool {
         || (1.0 - after / before >= MIN_GAIN && before - after >= MIN_ABS_GAIN * y_span)
 }
 
-/// The cause that excludes `cause` (the plain and the amplitude-dependent dynamics); itself
-/// for the others.
-fn rival(cause: Cause) -> Cause {
-    match cause {
-        Cause::Dynamics => Cause::AmplitudeDynamics,
-        Cause::AmplitudeDynamics => Cause::Dynamics,
-        c => c,
-    }
+/// The gain of `upgraded` (a model with `amplitude-dynamics`) over the plain dynamics with the
+/// records' roles swapped (both refitted on `valid`, scored on `train`), and whether it passes
+/// the rule for a gain.
+fn upgrade_swapped(
+    upgraded: &Fitted,
+    train: &[Signals],
+    valid: &[Signals],
+    opt: &Options,
+    y_span: f64,
+) -> Verdict {
+    let tiers = Tiers::new(valid, opt);
+    let measured = flat_outputs(train);
+    let score = |f: &Fitted| rmse_all(&measured, &flat(&f.predict_all(train)));
+    let full = extend(upgraded, None, &tiers, opt);
+    let e_plain = score(&plain_dynamics(&full, &tiers, opt));
+    let e_full = score(&full);
+    let gain = 1.0 - e_full / e_plain;
+    (
+        if gain.is_finite() { gain } else { 1.0 },
+        gains_by_rule(e_plain, e_full, y_span),
+    )
 }
 
 /// A swapped gain and whether it passes the rule for a gain.

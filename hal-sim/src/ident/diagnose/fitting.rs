@@ -213,18 +213,30 @@ fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
             }
         }
         Some(Cause::AmplitudeDynamics) => {
-            // The plain dynamics' starts, each with a frequency falling or rising and the
-            // damping growing at large amplitude, half at three levels: the level and the
-            // damping's growth trade off at small amplitudes, so both are gridded.
-            for d in starts(Some(Cause::Dynamics), shape, scales) {
+            // An upgrade of the fitted plain dynamics: from them exactly (no shift, so never
+            // worse than them), and with a frequency falling or rising and the damping
+            // growing at large amplitude, from three levels (the level and the damping's
+            // growth trade off at small amplitudes, so both are gridded). The plain fit
+            // averages over the amplitudes: the shifted starts take its frequency and
+            // damping as the small-amplitude ones, and as those half way up.
+            for level in [0.003, 0.01, 0.03] {
+                let amp_level_um = level * scales.y_span;
+                v.push(Shape {
+                    amp_level_um,
+                    amp_freq_shift: 0.0,
+                    amp_zeta_scale: 0.0,
+                    ..*shape
+                });
                 for shift in [-0.2, 0.2] {
-                    for level in [0.003, 0.01, 0.03] {
-                        for zs in [1.0, 3.0] {
+                    for zs in [1.0, 3.0] {
+                        for mid in [0.0, 0.5] {
                             v.push(Shape {
-                                amp_level_um: level * scales.y_span,
+                                amp_level_um,
                                 amp_freq_shift: shift,
                                 amp_zeta_scale: zs,
-                                ..d
+                                wn_hz: shape.wn_hz / (1.0 + mid * shift),
+                                zeta: shape.zeta / (1.0 + mid * zs),
+                                ..*shape
                             });
                         }
                     }
@@ -414,7 +426,15 @@ pub(super) fn extend(
     tiers: &Tiers,
     opt: &Options,
 ) -> Fitted {
-    let causes = cause.map_or(current.causes, |c| current.causes.with(c));
+    let causes = match cause {
+        // The amplitude dependence upgrades the plain dynamics (it includes them).
+        Some(Cause::AmplitudeDynamics) => current
+            .causes
+            .without(Cause::Dynamics)
+            .with(Cause::AmplitudeDynamics),
+        Some(c) => current.causes.with(c),
+        None => current.causes,
+    };
     let mut scales = current.scales.clone();
     if cause == Some(Cause::Creep) {
         // Creep of the current model's static displacement `d*v - alpha*g`.
@@ -544,21 +564,27 @@ fn coef_prefix(cause: Cause) -> Option<&'static str> {
     }
 }
 
-/// `f` with `cause` switched off and nothing refitted: its prediction shows what the cause's
-/// extension contributes. The amplitude dependence is switched off to the plain dynamics at
-/// its small-amplitude frequency and damping: what it adds to them.
+/// `shape` with `cause` switched off: [`neutral`], except that the amplitude dependence
+/// falls back to the plain dynamics at its small-amplitude frequency and damping (what it
+/// upgrades).
+fn off(shape: Shape, cause: Cause) -> Shape {
+    if cause == Cause::AmplitudeDynamics {
+        Shape {
+            amp_freq_shift: 0.0,
+            amp_zeta_scale: 0.0,
+            ..shape
+        }
+    } else {
+        neutral(shape, cause)
+    }
+}
+
+/// `f` with `cause` switched off ([`off`]) and nothing refitted: its prediction shows what
+/// the cause's extension contributes.
 pub(super) fn switched_off(f: &Fitted, cause: Cause) -> Fitted {
     let mut g = f.clone();
     for m in g.outputs.iter_mut() {
-        m.shape = if cause == Cause::AmplitudeDynamics {
-            Shape {
-                amp_freq_shift: 0.0,
-                amp_zeta_scale: 0.0,
-                ..m.shape
-            }
-        } else {
-            neutral(m.shape, cause)
-        };
+        m.shape = off(m.shape, cause);
         if let Some(p) = coef_prefix(cause) {
             for (name, c) in m.names.iter().zip(m.coef.iter_mut()) {
                 if name.starts_with(p) {
@@ -570,12 +596,12 @@ pub(super) fn switched_off(f: &Fitted, cause: Cause) -> Fitted {
     g
 }
 
-/// `f` (fitted with `causes` plus `cause`) with `cause` switched off and the linear part
-/// refitted on the training record.
+/// `f` (fitted with `causes` extended by `cause`) with `cause` switched off ([`off`]) and the
+/// linear part refitted on the training record.
 pub(super) fn ablate(f: &Fitted, causes: Causes, cause: Cause, tiers: &Tiers) -> Fitted {
     let outputs: Vec<(OutputModel, f64)> = (0..f.outputs.len())
         .map(|i| {
-            let shape = neutral(f.outputs[i].shape, cause);
+            let shape = off(f.outputs[i].shape, cause);
             fit_linear(tiers.full, i, causes, &shape, &f.scales[i], &f.taus)
         })
         .collect();

@@ -38,19 +38,21 @@ impl OutputSide<'_> {
     /// The columns before `y0` through the dynamics with the course `rho`.
     pub(super) fn follow(&self, cols: &[Vec<f64>], rho: &[f64]) -> Vec<Vec<f64>> {
         let f = self.amp.as_deref().unwrap_or_default();
-        cols[..self.n_pre]
-            .iter()
-            .map(|c| {
-                let mut c = c.clone();
-                let mut at = 0;
-                for (n, f) in self.lens.iter().zip(f) {
-                    let end = (at + n).min(c.len());
-                    f.follow(&mut c[at..end], &rho[at..end]);
-                    at = end;
-                }
-                c
-            })
-            .collect()
+        let mut out: Vec<Vec<f64>> = cols[..self.n_pre].to_vec();
+        let mut at = 0;
+        for (n, f) in self.lens.iter().zip(f) {
+            let end = (at + n).min(rho.len());
+            let mut part: Vec<&mut [f64]> = out
+                .iter_mut()
+                .map(|c| {
+                    let e = end.min(c.len());
+                    &mut c[at.min(e)..e]
+                })
+                .collect();
+            f.follow_all(&mut part, &rho[at..end]);
+            at = end;
+        }
+        out
     }
 
     /// The model's position from its linear columns `cols` (the first coefficients): the
