@@ -54,8 +54,11 @@ pub const MAX_ROUNDS: usize = 4;
 /// Search effort.
 #[derive(Debug, Clone, Copy)]
 pub struct Options {
-    /// At most this many samples in the global stage (decimated training record).
+    /// At most this many samples in the global stage (decimated training record), but never
+    /// below [`Options::coarse_rate_hz`] (unless the record is slower): a resonance must stay
+    /// below the decimated record's Nyquist frequency to be found.
     pub coarse_samples: usize,
+    pub coarse_rate_hz: f64,
     /// The polish runs on the training record decimated to at most this many samples, but
     /// never below [`Options::medium_rate_hz`] (unless the record is slower).
     pub medium_samples: usize,
@@ -70,6 +73,7 @@ impl Default for Options {
     fn default() -> Self {
         Self {
             coarse_samples: 5_000,
+            coarse_rate_hz: 1_000.0,
             medium_samples: 25_000,
             medium_rate_hz: 2_000.0,
             global_evals: (30, 20),
@@ -127,7 +131,7 @@ pub struct Confidence {
     pub share_gaining: f64,
     /// The cause's gain with the records' roles swapped (the final model fitted on the
     /// validation records with and without it, scored on the training records); `None` when
-    /// not checked (validation records that continue the training ones, `--split`).
+    /// not checked (validation records with warm-up samples: `--split`, time windows).
     pub swapped_gain: Option<f64>,
 }
 
@@ -394,6 +398,7 @@ pub fn diagnose_records(
     let measured = flat_outputs(&scored);
     let score = |pred: &[Vec<Vec<f64>>]| rmse_all(&measured, &flat(pred));
     let several = valid.len() > 1;
+    let swappable = valid.iter().all(|v| v.warmup == 0);
     let tiers = Tiers::new(train, opt);
     let mut base = fit_base(&tiers, opt);
     let mut base_pred = base.predict_all(valid);
@@ -542,7 +547,6 @@ pub fn diagnose_records(
         // The amplitude dependence must hold up over the plain dynamics with the records'
         // roles swapped before it is taken: a model carrying a spurious one is slow to search
         // and lets other causes stand in for what it distorts.
-        let swappable = valid.iter().all(|v| v.warmup == 0);
         let best = significant_ones.into_iter().find(|&k| {
             if todo[k] != Cause::AmplitudeDynamics || !swappable {
                 return true;
@@ -621,7 +625,10 @@ pub fn diagnose_records(
     // Swap check: a named cause must hold up whichever record trains. The final model is
     // refitted on the validation records, with and without each cause, and scored on the
     // training records; a cause that does not then gain by the rule for a gain is refused.
-    if !findings.is_empty() && valid.iter().all(|v| v.warmup == 0) {
+    // Not with warm-up samples (`--split`, time windows): the training records would then be
+    // scored from their first sample, without the history (a rest, say) the validation
+    // records ran through, which on SmartHysteresis refuses an 80 % creep.
+    if !findings.is_empty() && swappable {
         let swapped = swap_gains(&current, &findings, train, &scored, opt, y_span);
         for (fd, g) in findings.iter_mut().zip(&swapped) {
             fd.confidence.swapped_gain = Some(g.0);

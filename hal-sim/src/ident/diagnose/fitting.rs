@@ -22,16 +22,17 @@ impl<'a> Tiers<'a> {
         let n: usize = full.iter().map(Signals::len).sum();
         let coarse = n.div_ceil(opt.coarse_samples.max(100)).max(1);
         let medium = n.div_ceil(opt.medium_samples.max(100));
+        let by_rate = |r: &Signals, hz: f64| (1.0 / (r.dt() * hz)).floor().max(1.0) as usize;
         Self {
             full,
             medium: full
                 .iter()
-                .map(|r| {
-                    let by_rate = (1.0 / (r.dt() * opt.medium_rate_hz)).floor().max(1.0) as usize;
-                    r.decimate(medium.clamp(1, by_rate))
-                })
+                .map(|r| r.decimate(medium.clamp(1, by_rate(r, opt.medium_rate_hz))))
                 .collect(),
-            coarse: full.iter().map(|r| r.decimate(coarse)).collect(),
+            coarse: full
+                .iter()
+                .map(|r| r.decimate(coarse.clamp(1, by_rate(r, opt.coarse_rate_hz))))
+                .collect(),
         }
     }
 }
