@@ -8,9 +8,7 @@
 //! `zeta = zeta0*(1 + zeta_scale*rho)`. Given the course of `rho` it is a linear
 //! time-varying filter, so the model's linear coefficients are still solved by least squares;
 //! the course itself is a fixed point, taken from the last iterate's simulation
-//! ([`super::model::fit_linear`]).
-
-use super::model::Shape;
+//! ([`super::output::fit_linear`]).
 
 /// Exact transition matrix of `x'' + 2 zeta wn x' + wn^2 x = wn^2 u` over `dt` for an input
 /// held over the step (state: deviation from the held input, velocity); `None` when not
@@ -82,25 +80,34 @@ pub struct AmpFilter {
 }
 
 impl AmpFilter {
-    /// The filter of `shape` for sample period `dt`; `None` without dynamics.
-    pub fn new(shape: &Shape, dt: f64) -> Option<Self> {
-        if !shape.wn_hz.is_finite() {
+    /// The filter for sample period `dt` of small-amplitude natural frequency `wn_hz` and
+    /// damping `zeta`, moving by `freq_shift` and `zeta_scale` (relative) at large amplitude,
+    /// half of it at `level` (output units); `None` without dynamics (`wn_hz` infinite).
+    pub fn new(
+        wn_hz: f64,
+        zeta: f64,
+        level: f64,
+        freq_shift: f64,
+        zeta_scale: f64,
+        dt: f64,
+    ) -> Option<Self> {
+        if !wn_hz.is_finite() {
             return None;
         }
         let table = (0..=TABLE)
             .map(|k| {
                 let rho = k as f64 / TABLE as f64;
-                let f = shape.wn_hz * (1.0 + shape.amp_freq_shift * rho).max(0.05);
-                let z = (shape.zeta * (1.0 + shape.amp_zeta_scale * rho)).clamp(1e-4, ZETA_MAX);
+                let f = wn_hz * (1.0 + freq_shift * rho).max(0.05);
+                let z = (zeta * (1.0 + zeta_scale * rho)).clamp(1e-4, ZETA_MAX);
                 transition(f, z, dt)
             })
             .collect::<Option<Vec<_>>>()?;
-        let w0 = 2.0 * std::f64::consts::PI * shape.wn_hz;
+        let w0 = 2.0 * std::f64::consts::PI * wn_hz;
         Some(Self {
             table,
-            level: shape.amp_level_um.max(1e-12),
+            level: level.max(1e-12),
             inv_w0: 1.0 / w0,
-            lag: 2.0 * shape.zeta / w0 + 0.5 * dt,
+            lag: 2.0 * zeta / w0 + 0.5 * dt,
             inv_dt: 1.0 / dt,
         })
     }
@@ -178,7 +185,6 @@ impl AmpFilter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ident::diagnose::evidence::no_shape;
 
     fn steps(n: usize, big: f64) -> Vec<f64> {
         (0..n)
@@ -188,15 +194,7 @@ mod tests {
 
     #[test]
     fn amplitude_moves_the_ringing_and_follow_repeats_run() {
-        let shape = Shape {
-            wn_hz: 100.0,
-            zeta: 0.05,
-            amp_level_um: 1.0,
-            amp_freq_shift: -0.3,
-            amp_zeta_scale: 2.0,
-            ..no_shape()
-        };
-        let f = AmpFilter::new(&shape, 1e-4).unwrap();
+        let f = AmpFilter::new(100.0, 0.05, 1.0, -0.3, 2.0, 1e-4).unwrap();
         // Small steps ring nearly as the plain dynamics, large ones differ.
         for (big, close) in [(0.01, true), (20.0, false)] {
             let mut a = steps(4000, big);
@@ -226,15 +224,7 @@ mod tests {
         let rho = f.run(&mut ramp);
         assert!(rho[2000..].iter().all(|r| *r < 1e-3), "{}", rho[3999]);
         // Zero shifts: the plain dynamics.
-        let plain = AmpFilter::new(
-            &Shape {
-                amp_freq_shift: 0.0,
-                amp_zeta_scale: 0.0,
-                ..shape
-            },
-            1e-4,
-        )
-        .unwrap();
+        let plain = AmpFilter::new(100.0, 0.05, 1.0, 0.0, 0.0, 1e-4).unwrap();
         let mut a = steps(2000, 5.0);
         plain.run(&mut a);
         let mut b = steps(2000, 5.0);

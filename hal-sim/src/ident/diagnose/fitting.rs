@@ -5,7 +5,8 @@
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use super::model::{self, creep_taus, fit_linear, Coords};
+use super::model::{self, creep_taus, Coords};
+use super::output::{fit_linear, predict};
 use super::{Cause, Causes, Options, OutputModel, Scales, Shape, Signals};
 
 /// The training records at three resolutions: global search, polish, final least squares.
@@ -54,7 +55,7 @@ impl Fitted {
         (0..self.outputs.len())
             .into_par_iter()
             .map(|i| {
-                let mut y = model::predict(
+                let mut y = predict(
                     data,
                     i,
                     self.causes,

@@ -1,10 +1,14 @@
 //! The output side of the diagnosis model: the pieces that act on the model's output and so
 //! are not linear in its coefficients (the amplitude-dependent dynamics, the play, the sensor
-//! polynomial), fitted as a fixed point by [`super::model::fit_linear`].
+//! polynomial), fitted as a fixed point by [`fit_linear`]; and the model's prediction.
 
 use super::dynamics::AmpFilter;
-use super::model::{combine, play, sensor_columns, Cause, Causes, Scales, Shape};
+use super::model::{
+    combine, least_squares, least_squares_refs, play, regressors, sensor_columns, Cause, Causes,
+    OutputModel, Scales, Shape,
+};
 use super::Signals;
+use crate::numeric::rmse;
 
 /// The output-side pieces of a model that are not linear in its coefficients: the
 /// amplitude-dependent dynamics (per record), the play and the sensor polynomial.
@@ -113,7 +117,18 @@ pub(super) fn output_side<'a>(
         lens: data.iter().map(|d| d.len()).collect(),
         n_pre: names.iter().position(|n| *n == "y0").unwrap_or(names.len()),
         amp: if causes.has(Cause::AmplitudeDynamics) {
-            data.iter().map(|d| AmpFilter::new(shape, d.dt())).collect()
+            data.iter()
+                .map(|d| {
+                    AmpFilter::new(
+                        shape.wn_hz,
+                        shape.zeta,
+                        shape.amp_level_um,
+                        shape.amp_freq_shift,
+                        shape.amp_zeta_scale,
+                        d.dt(),
+                    )
+                })
+                .collect()
         } else {
             None
         },
@@ -138,4 +153,123 @@ pub(super) fn played(m: &[f64], lens: &[usize], half: f64) -> Vec<f64> {
         at = end;
     }
     out
+}
+
+/// Fits the linear coefficients of output `i` for a given shape on all of `data` (one
+/// model for every record, each record's model state starting from its own first sample);
+/// returns the model and its training RMSE over all samples.
+pub fn fit_linear(
+    data: &[Signals],
+    i: usize,
+    causes: Causes,
+    shape: &Shape,
+    scales: &Scales,
+    taus: &[f64],
+) -> (OutputModel, f64) {
+    let mut names = Vec::new();
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut joined = Vec::new();
+    for (k, d) in data.iter().enumerate() {
+        let (n, c) = regressors(d, i, causes, shape, scales, taus);
+        if k == 0 {
+            (names, cols) = (n, c);
+            // Room for all records at once (no copy of the first one on growth).
+            let total: usize = data.iter().map(Signals::len).sum();
+            for a in cols.iter_mut() {
+                a.reserve_exact(total.saturating_sub(a.len()));
+            }
+        } else {
+            for (a, b) in cols.iter_mut().zip(c) {
+                a.extend(b);
+            }
+        }
+        if data.len() > 1 {
+            joined.extend_from_slice(&d.y[i]);
+        }
+    }
+    let y_meas: &[f64] = match data {
+        [one] => &one.y[i],
+        _ => &joined,
+    };
+    let refs: Vec<&Signals> = data.iter().collect();
+    let side = output_side(&refs, causes, shape, scales, &names);
+    let (coef, y) = if side.play > 0.0 || side.sensor || side.amp.is_some() {
+        // The play, the sensor and the amplitude-dependent dynamics act on the model's output,
+        // which the coefficients make: a fixed point. Fit the coefficients to the measurement
+        // minus the play's offset of the last iterate, with the sensor polynomial of the last
+        // iterate's position as two more columns and the dynamics following the last
+        // iterate's course of the amplitude (at first none: the plain dynamics); then
+        // recompute all three.
+        let n_lin = cols.len();
+        let mut target = y_meas.to_vec();
+        // First iterate: the position is about what the sensor reads.
+        let mut x = y_meas.to_vec();
+        let mut rho = vec![0.0; y_meas.len()];
+        let mut coef = Vec::new();
+        for k in 0..=OUTPUT_ITERATIONS {
+            let followed = side.amp.as_ref().map(|_| side.follow(&cols, &rho));
+            let mut all: Vec<&[f64]> = match &followed {
+                Some(f) => f
+                    .iter()
+                    .chain(&cols[side.n_pre..])
+                    .map(Vec::as_slice)
+                    .collect(),
+                None => cols.iter().map(Vec::as_slice).collect(),
+            };
+            let sensor = side.sensor.then(|| sensor_columns(&x, scales));
+            if let Some(c) = &sensor {
+                all.extend(c.iter().map(Vec::as_slice));
+            }
+            coef = least_squares_refs(&all, &target);
+            if k == OUTPUT_ITERATIONS {
+                break;
+            }
+            // The position without the play: its offset is what the play adds.
+            let (m, r) = side.position(&cols, &coef[..n_lin], false);
+            if side.amp.is_some() {
+                rho = r;
+            }
+            x = if side.play > 0.0 {
+                played(&m, &side.lens, side.play)
+            } else {
+                m.clone()
+            };
+            for ((t, y), (x, m)) in target.iter_mut().zip(y_meas).zip(x.iter().zip(&m)) {
+                *t = y - (x - m);
+            }
+        }
+        let y = side.output(&cols, &coef);
+        (coef, y)
+    } else {
+        let coef = least_squares(&cols, y_meas);
+        let y = combine(&cols, &coef);
+        (coef, y)
+    };
+    if side.sensor {
+        names.extend(["sensor_e2", "sensor_e3"]);
+    }
+    let e = rmse(&y, y_meas);
+    let model = OutputModel {
+        shape: *shape,
+        names: names.into_iter().map(String::from).collect(),
+        coef,
+    };
+    (model, if e.is_finite() { e } else { f64::INFINITY })
+}
+
+/// Fixed-point iterations of the fit of the play, the sensor polynomial and the
+/// amplitude-dependent dynamics.
+const OUTPUT_ITERATIONS: usize = 3;
+
+/// Output `i` of `model` on `data`.
+pub fn predict(
+    data: &Signals,
+    i: usize,
+    causes: Causes,
+    model: &OutputModel,
+    scales: &Scales,
+    taus: &[f64],
+) -> Vec<f64> {
+    let (names, cols) = regressors(data, i, causes, &model.shape, scales, taus);
+    output_side(&[data], causes, &model.shape, scales, &names).output(&cols, &model.coef)
 }
