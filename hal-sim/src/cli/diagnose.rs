@@ -11,7 +11,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::fit_args::{Columns, Records, Window};
-use crate::ident::diagnose::{self, Diagnosis, Options, Signals};
+use crate::ident::diagnose::{self, Diagnosis, Finding, Options, Signals};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -215,29 +215,28 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
             "cause: none (no extension gains on the validation record)"
         );
     }
+    // What a finding gained: `cause: <name> (round <k>): valid rmse <before> -> <after> (<gain> %`.
+    let head = |f: &Finding| {
+        format!(
+            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %",
+            f.cause.name(),
+            f.round,
+            f.rmse_valid_before,
+            f.rmse_valid,
+            100.0 * f.gain
+        )
+    };
     for f in &d.findings {
         if let Some(u) = &f.upgrades {
-            let _ = writeln!(
-                s,
-                "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %), upgraded below",
-                u.cause.name(),
-                u.round,
-                u.rmse_valid_before,
-                u.rmse_valid,
-                100.0 * u.gain
-            );
+            let _ = writeln!(s, "{}), upgraded below", head(u));
         }
         let swapped = f.confidence.swapped_gain.map_or_else(String::new, |g| {
             format!(", {:.1} % with the records swapped", 100.0 * g)
         });
         let _ = writeln!(
             s,
-            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %; gains on {:.0} % of the validation blocks, worst block {:+.1} %{swapped}); {}",
-            f.cause.name(),
-            f.round,
-            f.rmse_valid_before,
-            f.rmse_valid,
-            100.0 * f.gain,
+            "{}; gains on {:.0} % of the validation blocks, worst block {:+.1} %{swapped}); {}",
+            head(f),
             100.0 * f.confidence.share_gaining,
             100.0 * f.confidence.min_gain,
             f.evidence.text
