@@ -70,7 +70,10 @@ const ZETA_MAX: f64 = 0.95;
 /// The amplitude-dependent dynamics of one record (its sample period).
 #[derive(Debug, Clone)]
 pub struct AmpFilter {
-    table: Vec<[[f64; 2]; 2]>,
+    /// The transitions at `rho = k/TABLE` and their steps to the next entry: fixed-size, so
+    /// the per-sample lookup has no bounds check (the recurrence is the diagnosis' hot loop).
+    table: [[[f64; 2]; 2]; TABLE],
+    delta: [[[f64; 2]; 2]; TABLE],
     level: f64,
     inv_w0: f64,
     /// Lag of the ramp response (`2 zeta0/wn0`) plus the held input's half step (s): on a
@@ -94,7 +97,7 @@ impl AmpFilter {
         if !wn_hz.is_finite() {
             return None;
         }
-        let table = (0..=TABLE)
+        let entries = (0..=TABLE)
             .map(|k| {
                 let rho = k as f64 / TABLE as f64;
                 let f = wn_hz * (1.0 + freq_shift * rho).max(0.05);
@@ -102,9 +105,21 @@ impl AmpFilter {
                 transition(f, z, dt)
             })
             .collect::<Option<Vec<_>>>()?;
+        let mut table = [[[0.0; 2]; 2]; TABLE];
+        let mut delta = [[[0.0; 2]; 2]; TABLE];
+        for (k, (t, d)) in table.iter_mut().zip(delta.iter_mut()).enumerate() {
+            let (a, b) = (&entries[k], &entries[k + 1]);
+            for i in 0..2 {
+                for j in 0..2 {
+                    t[i][j] = a[i][j];
+                    d[i][j] = b[i][j] - a[i][j];
+                }
+            }
+        }
         let w0 = 2.0 * std::f64::consts::PI * wn_hz;
         Some(Self {
             table,
+            delta,
             level: level.max(1e-12),
             inv_w0: 1.0 / w0,
             lag: 2.0 * zeta / w0 + 0.5 * dt,
@@ -118,11 +133,11 @@ impl AmpFilter {
         let pos = rho.clamp(0.0, 1.0) * TABLE as f64;
         let k = (pos as usize).min(TABLE - 1);
         let f = pos - k as f64;
-        let (a, b) = (&self.table[k], &self.table[k + 1]);
+        let (a, d) = (&self.table[k], &self.delta[k]);
         let mut m = [[0.0; 2]; 2];
         for i in 0..2 {
             for j in 0..2 {
-                m[i][j] = a[i][j] + f * (b[i][j] - a[i][j]);
+                m[i][j] = a[i][j] + f * d[i][j];
             }
         }
         m
@@ -131,12 +146,12 @@ impl AmpFilter {
     /// Runs the filter on `x` in place (from rest at its first sample); returns the course of
     /// `rho`, the weight each step's transition was taken at.
     pub fn run(&self, x: &mut [f64]) -> Vec<f64> {
-        let mut rho = Vec::with_capacity(x.len());
+        let mut rho = vec![0.0; x.len()];
         let Some(&first) = x.first() else {
             return rho;
         };
         let (mut p, mut v, mut prev) = (first, 0.0, first);
-        for u in x.iter_mut() {
+        for (u, rho) in x.iter_mut().zip(rho.iter_mut()) {
             // The free motion about the ramp the structure follows.
             let slope = (*u - prev) * self.inv_dt;
             prev = *u;
@@ -144,7 +159,7 @@ impl AmpFilter {
             let dv = (v - slope) * self.inv_w0;
             let a = (dx * dx + dv * dv).sqrt();
             let r = a / (a + self.level);
-            rho.push(r);
+            *rho = r;
             step(&self.at(r), &mut p, &mut v, *u);
             *u = p;
         }
