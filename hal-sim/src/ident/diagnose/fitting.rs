@@ -262,6 +262,19 @@ fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
     v
 }
 
+/// Starts kept, and restarts while they gain, in the search of the upgrade.
+const UPGRADE_STARTS: usize = 3;
+const UPGRADE_RESTARTS: usize = 4;
+
+/// How hard [`fit_output`] searches.
+#[derive(Clone, Copy, PartialEq)]
+enum Effort {
+    Normal,
+    /// The `amplitude-dynamics` upgrade: seven coordinates, three of them new, that converge
+    /// slowly; more starts and restarts (later fits of a model that has it start from its fit).
+    Upgrade,
+}
+
 /// Fits output `i` with `causes`, from the best of `starts`.
 #[allow(clippy::too_many_arguments)]
 fn fit_output(
@@ -272,6 +285,7 @@ fn fit_output(
     scales: &Scales,
     taus: &[f64],
     opt: &Options,
+    effort: Effort,
 ) -> (OutputModel, f64) {
     let coords = Coords {
         causes,
@@ -305,8 +319,8 @@ fn fit_output(
         }
         ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
     }
-    ranked.truncate(if causes.has(Cause::AmplitudeDynamics) {
-        3
+    ranked.truncate(if effort == Effort::Upgrade {
+        UPGRADE_STARTS
     } else if dim > 2 {
         2
     } else {
@@ -320,10 +334,8 @@ fn fit_output(
         opt.global_evals.0
     };
     // The starts run in parallel (the other core is idle while the control fits).
-    // The amplitude dependence's seven coordinates (CBW, resonance, its three) converge
-    // slowly: more restarts while they still gain.
-    let restarts = if causes.has(Cause::AmplitudeDynamics) {
-        4
+    let restarts = if effort == Effort::Upgrade {
+        UPGRADE_RESTARTS
     } else {
         1
     };
@@ -396,7 +408,16 @@ pub(super) fn fit_base(tiers: &Tiers, opt: &Options) -> Fitted {
                     grid.push(coords.shape(&[a, r]));
                 }
             }
-            fit_output(tiers, i, Causes::default(), &grid, &scales[i], &taus, opt)
+            fit_output(
+                tiers,
+                i,
+                Causes::default(),
+                &grid,
+                &scales[i],
+                &taus,
+                opt,
+                Effort::Normal,
+            )
         })
         .collect();
     assemble(Causes::default(), outputs, scales, taus, full)
@@ -456,7 +477,21 @@ pub(super) fn extend(
         .into_par_iter()
         .map(|i| {
             let st = starts(cause, &current.outputs[i].shape, &scales[i]);
-            fit_output(tiers, i, causes, &st, &scales[i], &current.taus, opt)
+            let effort = if cause == Some(Cause::AmplitudeDynamics) {
+                Effort::Upgrade
+            } else {
+                Effort::Normal
+            };
+            fit_output(
+                tiers,
+                i,
+                causes,
+                &st,
+                &scales[i],
+                &current.taus,
+                opt,
+                effort,
+            )
         })
         .collect();
     assemble(causes, outputs, scales, current.taus.clone(), tiers.full)
@@ -513,6 +548,7 @@ fn refit(
                 &current.scales[i],
                 &current.taus,
                 opt,
+                Effort::Normal,
             )
         })
         .collect();
