@@ -143,13 +143,9 @@ fn finds_sensor_nonlinearity() {
 }
 
 /// A resonance whose frequency and damping move with the ringing's amplitude is named
-/// `amplitude-dynamics` alone (not `dynamics`, nor both); plain `dynamics` cases
-/// (`finds_dynamics`) must stay `dynamics`. Known failure: on seed 5 of 5 a
-/// `rate-dependence` (gain 0.133 forward) is named beside it (README, issue 18 additions), so
-/// the test is run on request: `DIAGNOSE_SEEDS=5 cargo test --release -p hal-sim --test
-/// diagnose amplitude_dynamics -- --ignored`.
+/// `amplitude-dynamics` alone (not `dynamics`, nor both, nor with `rate-dependence`); plain
+/// `dynamics` cases (`finds_dynamics`) must stay `dynamics`.
 #[test]
-#[ignore = "seed 5 of 5 also names rate-dependence"]
 fn finds_amplitude_dynamics() {
     seeds(&[Cause::AmplitudeDynamics]);
 }
@@ -162,43 +158,8 @@ fn new_causes_hold_up_when_train_and_valid_swap() {
         Cause::StartupCreep,
         Cause::RateDependence,
         Cause::SensorNonlinearity,
+        Cause::AmplitudeDynamics,
     ]);
-}
-
-/// What holds on every seed while the exact test above does not: the amplitude-dependent
-/// resonance is named `amplitude-dynamics` (never `dynamics`) and gains, forward and with
-/// train and valid swapped; the extra cause of seed 5 is not checked here.
-#[test]
-fn amplitude_dynamics_is_named_on_every_seed() {
-    let mut failed = Vec::new();
-    for seed in 1..=seed_count() {
-        let h = Hidden::draw(seed, &[Cause::AmplitudeDynamics]);
-        for (dir, train, valid) in [("forward", 0, 1), ("swapped", 1, 0)] {
-            let d = diagnose(&h.record(train), &h.record(valid), &Options::default()).unwrap();
-            let found: Vec<Cause> = d.findings.iter().map(|f| f.cause).collect();
-            eprintln!(
-                "amplitude-dynamics seed {seed} {dir}: found {found:?} gain {:.3}",
-                d.gain()
-            );
-            let named =
-                found.contains(&Cause::AmplitudeDynamics) && !found.contains(&Cause::Dynamics);
-            if !named || d.gain().is_nan() || d.gain() <= 0.5 {
-                failed.push(format!(
-                    "seed {seed} {dir}: found {found:?} gain {:.3}",
-                    d.gain()
-                ));
-            }
-        }
-    }
-    assert!(failed.is_empty(), "{}", failed.join("\n"));
-}
-
-/// `amplitude-dynamics` with train and valid swapped; the same known failure as
-/// [`finds_amplitude_dynamics`] (seed 5 adds `rate-dependence`).
-#[test]
-#[ignore = "seed 5 of 5 also names rate-dependence"]
-fn amplitude_dynamics_holds_up_when_train_and_valid_swap() {
-    swapped(&[Cause::AmplitudeDynamics]);
 }
 
 /// Every seed of every cause in `causes`, diagnosed with the valid record training.
