@@ -451,18 +451,23 @@ pub fn diagnose_records(
         }
         // The current causes refitted by the same search are the control: a cause must gain
         // more than what a longer search alone gives.
-        let runs: Vec<Option<Cause>> = std::iter::once(None)
+        // The upgrade's long search starts first, so the short ones fill the other core.
+        let mut runs: Vec<(usize, Option<Cause>)> = std::iter::once(None)
             .chain(todo.iter().copied().map(Some))
+            .enumerate()
             .collect();
-        let mut tried: Vec<Tried> = runs
+        runs.sort_by_key(|(_, c)| *c != Some(Cause::AmplitudeDynamics));
+        let mut tried: Vec<(usize, Tried)> = runs
             .par_iter()
-            .map(|&c| {
+            .map(|&(k, c)| {
                 let f = extend(&current, c, &tiers, opt);
                 let pred = f.predict_all(valid);
                 let e = score(&pred);
-                (f, pred, e)
+                (k, (f, pred, e))
             })
             .collect();
+        tried.sort_by_key(|(k, _)| *k);
+        let mut tried: Vec<Tried> = tried.into_iter().map(|(_, t)| t).collect();
         let control = tried.remove(0);
         // Each candidate without its cause (its refitted CBW shape, the cause's extension
         // switched off, linear part refitted on train): a better fit of the current model that

@@ -64,6 +64,8 @@ pub fn dynamics_all(cols: &mut [&mut [f64]], wn_hz: f64, zeta: f64, dt: f64) {
 
 /// Table entries over `rho` in `[0, 1]`.
 const TABLE: usize = 32;
+/// Smallest amplitude level (output units): `rho` stays below 1 for a finite amplitude.
+pub const AMP_LEVEL_MIN: f64 = 1e-12;
 /// Largest damping ratio the amplitude may reach.
 const ZETA_MAX: f64 = 0.95;
 
@@ -115,7 +117,7 @@ impl AmpFilter {
         Some(Self {
             table,
             delta,
-            level: level.max(1e-12),
+            level: level.max(AMP_LEVEL_MIN),
             inv_w0: 1.0 / (2.0 * std::f64::consts::PI * wn_hz),
         })
     }

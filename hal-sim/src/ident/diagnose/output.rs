@@ -2,7 +2,7 @@
 //! are not linear in its coefficients (the amplitude-dependent dynamics, the play, the sensor
 //! polynomial), fitted as a fixed point by [`fit_linear`]; and the model's prediction.
 
-use super::dynamics::AmpFilter;
+use super::dynamics::{AmpFilter, AMP_LEVEL_MIN};
 use super::model::{
     combine, least_squares, least_squares_refs, play, regressors, sensor_columns, Cause, Causes,
     OutputModel, Scales, Shape,
@@ -18,6 +18,9 @@ pub(super) struct OutputSide<'a> {
     /// Columns before `y0` (the ones the dynamics act on).
     pub(super) n_pre: usize,
     pub(super) amp: Option<Vec<AmpFilter>>,
+    /// A fixed course of `rho` for the amplitude-dependent dynamics (records one after the
+    /// other): they are then a linear time-varying filter, no fixed point to find.
+    course: Option<&'a [f64]>,
     pub(super) play: f64,
     pub(super) sensor: bool,
     scales: &'a Scales,
@@ -41,12 +44,18 @@ impl OutputSide<'_> {
 
     /// The columns before `y0` through the dynamics with the course `rho`.
     pub(super) fn follow(&self, cols: &[Vec<f64>], rho: &[f64]) -> Vec<Vec<f64>> {
-        let f = self.amp.as_deref().unwrap_or_default();
         let mut out: Vec<Vec<f64>> = cols[..self.n_pre].to_vec();
+        self.follow_in_place(&mut out, rho);
+        out
+    }
+
+    /// `cols` (records one after the other) through the dynamics with the course `rho`.
+    fn follow_in_place(&self, cols: &mut [Vec<f64>], rho: &[f64]) {
+        let f = self.amp.as_deref().unwrap_or_default();
         let mut at = 0;
         for (n, f) in self.lens.iter().zip(f) {
             let end = (at + n).min(rho.len());
-            let mut part: Vec<&mut [f64]> = out
+            let mut part: Vec<&mut [f64]> = cols
                 .iter_mut()
                 .map(|c| {
                     let e = end.min(c.len());
@@ -56,7 +65,6 @@ impl OutputSide<'_> {
             f.follow_all(&mut part, &rho[at..end]);
             at = end;
         }
-        out
     }
 
     /// The model's position from its linear columns `cols` (the first coefficients): the
@@ -79,7 +87,15 @@ impl OutputSide<'_> {
         }
         let pre = self.n_pre.min(n);
         let mut x = combine(&cols[..pre], &coef[..pre]);
-        let rho = self.run_amp(&mut x);
+        let rho = match self.course {
+            Some(c) => {
+                let mut one = [x];
+                self.follow_in_place(&mut one, c);
+                [x] = one;
+                c.to_vec()
+            }
+            None => self.run_amp(&mut x),
+        };
         let post = combine(&cols[pre..n], &coef[pre..n]);
         for (x, p) in x.iter_mut().zip(post) {
             *x += p;
@@ -93,7 +109,12 @@ impl OutputSide<'_> {
     /// The model's output: its position read by the sensor (its polynomial's coefficients
     /// after the linear columns').
     pub(super) fn output(&self, cols: &[Vec<f64>], coef: &[f64]) -> Vec<f64> {
-        let (mut x, _) = self.position(cols, coef, true);
+        self.output_and_course(cols, coef).0
+    }
+
+    /// [`OutputSide::output`] and the dynamics' course of `rho` (empty without them).
+    fn output_and_course(&self, cols: &[Vec<f64>], coef: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let (mut x, rho) = self.position(cols, coef, true);
         if self.sensor && coef.len() >= cols.len() + 2 {
             let [e2, e3] = sensor_columns(&x, self.scales);
             let (s2, s3) = (coef[cols.len()], coef[cols.len() + 1]);
@@ -101,7 +122,7 @@ impl OutputSide<'_> {
                 *x += s2 * a + s3 * b;
             }
         }
-        x
+        (x, rho)
     }
 }
 
@@ -132,6 +153,7 @@ pub(super) fn output_side<'a>(
         } else {
             None
         },
+        course: None,
         play: if causes.has(Cause::Backlash) {
             shape.play_um
         } else {
@@ -166,6 +188,36 @@ pub fn fit_linear(
     scales: &Scales,
     taus: &[f64],
 ) -> (OutputModel, f64) {
+    let (model, e, _) = fit_linear_with(data, i, causes, shape, scales, taus, Iterate::Full);
+    (model, e)
+}
+
+/// How [`fit_linear_with`] treats the output-side pieces' fixed point.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Iterate<'a> {
+    /// [`OUTPUT_ITERATIONS`]: the final fits.
+    Full,
+    /// One iteration: the search's cost (its result is refitted in full), half the work.
+    Rough,
+    /// The amplitude-dependent dynamics along a given course of the amplitude (output
+    /// units): with it `rho` is known, and they are a linear time-varying filter (no
+    /// iteration for them, no serial square root per sample). The search of a model that
+    /// already has them, from the course of its fit.
+    Course(&'a [f64]),
+}
+
+/// [`fit_linear`] with the fixed point as `how` says; also returns the amplitude-dependent
+/// dynamics' course of the amplitude in the model's output (empty without them).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fit_linear_with(
+    data: &[Signals],
+    i: usize,
+    causes: Causes,
+    shape: &Shape,
+    scales: &Scales,
+    taus: &[f64],
+    how: Iterate,
+) -> (OutputModel, f64, Vec<f64>) {
     let mut names = Vec::new();
     let mut cols: Vec<Vec<f64>> = Vec::new();
     let mut joined = Vec::new();
@@ -192,8 +244,19 @@ pub fn fit_linear(
         _ => &joined,
     };
     let refs: Vec<&Signals> = data.iter().collect();
-    let side = output_side(&refs, causes, shape, scales, &names);
-    let (coef, y) = if side.play > 0.0 || side.sensor || side.amp.is_some() {
+    let level = shape.amp_level_um.max(AMP_LEVEL_MIN);
+    let given: Option<Vec<f64>> = match how {
+        Iterate::Course(a) => Some(a.iter().map(|a| a / (a + level)).collect()),
+        _ => None,
+    };
+    let mut side = output_side(&refs, causes, shape, scales, &names);
+    side.course = given.as_deref();
+    let iterations = match how {
+        Iterate::Full => OUTPUT_ITERATIONS,
+        Iterate::Rough => 1,
+        Iterate::Course(_) => usize::from(side.play > 0.0 || side.sensor),
+    };
+    let (coef, y, course) = if side.play > 0.0 || side.sensor || side.amp.is_some() {
         // The play, the sensor and the amplitude-dependent dynamics act on the model's output,
         // which the coefficients make: a fixed point. Fit the coefficients to the measurement
         // minus the play's offset of the last iterate, with the sensor polynomial of the last
@@ -204,9 +267,11 @@ pub fn fit_linear(
         let mut target = y_meas.to_vec();
         // First iterate: the position is about what the sensor reads.
         let mut x = y_meas.to_vec();
-        let mut rho = vec![0.0; y_meas.len()];
+        let mut rho = side
+            .course
+            .map_or_else(|| vec![0.0; y_meas.len()], <[f64]>::to_vec);
         let mut coef = Vec::new();
-        for k in 0..=OUTPUT_ITERATIONS {
+        for k in 0..=iterations {
             let followed = side.amp.as_ref().map(|_| side.follow(&cols, &rho));
             let mut all: Vec<&[f64]> = match &followed {
                 Some(f) => f
@@ -221,12 +286,12 @@ pub fn fit_linear(
                 all.extend(c.iter().map(Vec::as_slice));
             }
             coef = least_squares_refs(&all, &target);
-            if k == OUTPUT_ITERATIONS {
+            if k == iterations {
                 break;
             }
             // The position without the play: its offset is what the play adds.
             let (m, r) = side.position(&cols, &coef[..n_lin], false);
-            if side.amp.is_some() {
+            if side.amp.is_some() && side.course.is_none() {
                 rho = r;
             }
             x = if side.play > 0.0 {
@@ -238,12 +303,13 @@ pub fn fit_linear(
                 *t = y - (x - m);
             }
         }
-        let y = side.output(&cols, &coef);
-        (coef, y)
+        let (y, rho) = side.output_and_course(&cols, &coef);
+        let course = rho.iter().map(|r| level * r / (1.0 - r)).collect();
+        (coef, y, course)
     } else {
         let coef = least_squares(&cols, y_meas);
         let y = combine(&cols, &coef);
-        (coef, y)
+        (coef, y, Vec::new())
     };
     if side.sensor {
         names.extend(["sensor_e2", "sensor_e3"]);
@@ -254,7 +320,7 @@ pub fn fit_linear(
         names: names.into_iter().map(String::from).collect(),
         coef,
     };
-    (model, if e.is_finite() { e } else { f64::INFINITY })
+    (model, if e.is_finite() { e } else { f64::INFINITY }, course)
 }
 
 /// Fixed-point iterations of the fit of the play, the sensor polynomial and the
@@ -272,4 +338,54 @@ pub fn predict(
 ) -> Vec<f64> {
     let (names, cols) = regressors(data, i, causes, &model.shape, scales, taus);
     output_side(&[data], causes, &model.shape, scales, &names).output(&cols, &model.coef)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ident::diagnose::evidence::no_shape;
+    use crate::ident::diagnose::model::min_max;
+    use crate::ident::generate::Hidden;
+
+    /// The search of a model with the amplitude dependence runs along the course of its
+    /// fit: along it the fit is the full fit again, and along no amplitude the plain
+    /// dynamics'.
+    #[test]
+    fn fit_along_a_course() {
+        let r = Hidden::draw(1, &[Cause::AmplitudeDynamics]).record(0);
+        let mut scales = Scales::of(&r.t, &r.u[0]);
+        let (lo, hi) = min_max(&r.y[0]);
+        (scales.y_span, scales.y_mid) = (hi - lo, 0.5 * (hi + lo));
+        // The drawn stage: 110 Hz, zeta 0.093, -23 % and +69 % at large amplitude, half at
+        // 0.35 um.
+        let shape = Shape {
+            beta: 0.012,
+            gamma: 0.004,
+            wn_hz: 110.0,
+            zeta: 0.093,
+            amp_level_um: 0.35,
+            amp_freq_shift: -0.23,
+            amp_zeta_scale: 0.69,
+            ..no_shape()
+        };
+        let amp = Causes::default().with(Cause::AmplitudeDynamics);
+        let data = std::slice::from_ref(&r);
+        let fit = |causes, how| fit_linear_with(data, 0, causes, &shape, &scales, &[], how);
+        let (_, e_full, course) = fit(amp, Iterate::Full);
+        assert_eq!(course.len(), r.len());
+        assert!(course.iter().all(|a| a.is_finite() && *a >= 0.0));
+        let (_, e_along, _) = fit(amp, Iterate::Course(&course));
+        assert!((e_along / e_full - 1.0).abs() < 1e-3, "{e_along} {e_full}");
+        let (_, e_rough, _) = fit(amp, Iterate::Rough);
+        assert!((e_rough / e_full - 1.0).abs() < 0.05, "{e_rough} {e_full}");
+        let still = vec![0.0; r.len()];
+        let (_, e_still, _) = fit(amp, Iterate::Course(&still));
+        let plain = Causes::default().with(Cause::Dynamics);
+        let (_, e_plain, _) = fit(plain, Iterate::Full);
+        assert!(
+            (e_still / e_plain - 1.0).abs() < 1e-9,
+            "{e_still} {e_plain}"
+        );
+        assert!(e_full < 0.8 * e_plain, "{e_full} {e_plain}");
+    }
 }
