@@ -552,16 +552,18 @@ pub fn diagnose_records(
         // The amplitude dependence must hold up over the plain dynamics with the records'
         // roles swapped before it is taken: a model carrying a spurious one is slow to search
         // and lets other causes stand in for what it distorts.
-        let best = significant_ones.into_iter().find(|&k| {
-            if todo[k] != Cause::AmplitudeDynamics || !swappable {
-                return true;
+        let mut best = None;
+        for k in significant_ones {
+            if todo[k] == Cause::AmplitudeDynamics && swappable {
+                let (gain, holds) = upgrade_swapped(&tried[k].0, train, &scored, opt, y_span);
+                if !holds {
+                    refused.push((Cause::AmplitudeDynamics, gain));
+                    continue;
+                }
             }
-            let (gain, holds) = upgrade_swapped(&tried[k].0, train, &scored, opt, y_span);
-            if !holds {
-                refused.push((Cause::AmplitudeDynamics, gain));
-            }
-            holds
-        });
+            best = Some(k);
+            break;
+        }
         let Some(b) = best else { break };
         let Some((f, p, e)) = tried.into_iter().nth(b) else {
             break;
@@ -741,21 +743,55 @@ fn upgrade_swapped(
     opt: &Options,
     y_span: f64,
 ) -> Verdict {
-    let tiers = Tiers::new(valid, opt);
-    let measured = flat_outputs(train);
-    let score = |f: &Fitted| rmse_all(&measured, &flat(&f.predict_all(train)));
-    let full = extend(upgraded, None, &tiers, opt);
-    let e_plain = score(&plain_dynamics(&full, &tiers, opt));
-    let e_full = score(&full);
-    let gain = 1.0 - e_full / e_plain;
-    (
-        if gain.is_finite() { gain } else { 1.0 },
-        gains_by_rule(e_plain, e_full, y_span),
-    )
+    let swapped = Swapped::new(train, valid, opt);
+    let full = swapped.refit(upgraded);
+    swapped.over_plain(&full, swapped.score(&full), y_span).1
 }
 
 /// A swapped gain and whether it passes the rule for a gain.
 type Verdict = (f64, bool);
+
+/// The records' roles swapped: models refitted on `valid`, scored on `train`.
+struct Swapped<'a> {
+    tiers: Tiers<'a>,
+    train: &'a [Signals],
+    measured: Vec<Vec<f64>>,
+    opt: &'a Options,
+}
+
+impl<'a> Swapped<'a> {
+    fn new(train: &'a [Signals], valid: &'a [Signals], opt: &'a Options) -> Self {
+        Self {
+            tiers: Tiers::new(valid, opt),
+            train,
+            measured: flat_outputs(train),
+            opt,
+        }
+    }
+
+    fn score(&self, f: &Fitted) -> f64 {
+        rmse_all(&self.measured, &flat(&f.predict_all(self.train)))
+    }
+
+    /// `current`'s causes refitted (from its shapes).
+    fn refit(&self, current: &Fitted) -> Fitted {
+        extend(current, None, &self.tiers, self.opt)
+    }
+
+    /// `full` (refitted, with `amplitude-dynamics`, scoring `e_full`) over its plain dynamics:
+    /// their score and the upgrade's verdict.
+    fn over_plain(&self, full: &Fitted, e_full: f64, y_span: f64) -> (f64, Verdict) {
+        let e_plain = self.score(&plain_dynamics(full, &self.tiers, self.opt));
+        let gain = 1.0 - e_full / e_plain;
+        (
+            e_plain,
+            (
+                if gain.is_finite() { gain } else { 1.0 },
+                gains_by_rule(e_plain, e_full, y_span),
+            ),
+        )
+    }
+}
 
 /// For each finding: its gain with the records' roles swapped (the final model `current`
 /// refitted on `valid`, with and without the cause, scored on `train`) and whether that gain
@@ -769,24 +805,21 @@ fn swap_gains(
     opt: &Options,
     y_span: f64,
 ) -> Vec<(f64, bool, Option<Verdict>)> {
-    let tiers = Tiers::new(valid, opt);
-    let measured = flat_outputs(train);
-    let score = |f: &Fitted| rmse_all(&measured, &flat(&f.predict_all(train)));
-    let full = extend(current, None, &tiers, opt);
-    let e_full = score(&full);
+    let swapped = Swapped::new(train, valid, opt);
+    let full = swapped.refit(current);
+    let e_full = swapped.score(&full);
     findings
         .par_iter()
         .map(|fd| {
-            let e_none = score(&reduce(&full, fd.cause, &tiers, opt));
+            let e_none = swapped.score(&reduce(&full, fd.cause, &swapped.tiers, opt));
             let finite = |g: f64| if g.is_finite() { g } else { 1.0 };
             if fd.cause == Cause::AmplitudeDynamics {
-                let e_plain = score(&plain_dynamics(&full, &tiers, opt));
+                let (e_plain, (gain, holds)) = swapped.over_plain(&full, e_full, y_span);
                 let plain = (
                     finite(1.0 - e_plain / e_none),
                     gains_by_rule(e_none, e_plain, y_span),
                 );
-                let gain = finite(1.0 - e_full / e_plain);
-                (gain, gains_by_rule(e_plain, e_full, y_span), Some(plain))
+                (gain, holds, Some(plain))
             } else {
                 let gain = finite(1.0 - e_full / e_none);
                 (gain, gains_by_rule(e_none, e_full, y_span), None)

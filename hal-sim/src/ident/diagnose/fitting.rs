@@ -262,8 +262,9 @@ fn starts(cause: Option<Cause>, shape: &Shape, scales: &Scales) -> Vec<Shape> {
     v
 }
 
-/// Starts kept, and restarts while they gain, in the search of the upgrade.
-const UPGRADE_STARTS: usize = 2;
+/// Starts kept, and restarts while they gain, in the search of the upgrade (two starts end short
+/// on one hidden amplitude case, and another cause then stands in for the rest).
+const UPGRADE_STARTS: usize = 3;
 const UPGRADE_RESTARTS: usize = 4;
 
 /// How hard [`fit_output`] searches.
