@@ -44,7 +44,8 @@ if s load-fit "$work/refused.json" >"$work/refused.txt" 2>&1; then fail "refused
 cat "$work/refused.txt"
 grep -q "refused.json: the firmware refused the CBW model of parts\[0\]: .*error 8" "$work/refused.txt" ||
   fail "refusal does not name the file and the firmware error"
-s -- "get cbw_d" | grep -qx 'ok cbw_d 0.21' || fail "a refused model changed the firmware"
-s -- "fault" | grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' || fail "fault after the changes"
+# Here-strings, not pipes: `grep -q` may stop reading before the writer is done (pipefail).
+grep -qx 'ok cbw_d 0.21' <<< "$(s -- "get cbw_d")" || fail "a refused model changed the firmware"
+grep -qx 'ok fault none sensor 0 nonfinite 0 dac 0' <<< "$(s -- "fault")" || fail "fault after the changes"
 qemu_stop
 echo "37-load-fit: ok"

@@ -39,7 +39,9 @@ out=$(target/release/piezo sim --json --scenario gbw-asymmetric-10hz --scenario 
 checked=$(check_runs "$out" 2)
 for sc in gbw-asymmetric-10hz dahl-10hz; do
   for c in nmpc-gbw fts-gbw adrc ff+adrc hgo-robust fts nmpc; do
-    echo "$checked" | grep -q "^$sc/$c " || { echo "$sc: no $c run"; exit 1; }
+    # A here-string, not a pipe: `grep -q` stops reading at the first match, and under
+    # pipefail the writer's SIGPIPE then failed this check on a busy machine.
+    grep -q "^$sc/$c " <<< "$checked" || { echo "$sc: no $c run"; exit 1; }
   done
 done
 echo "GBW/Dahl sim: $(echo "$checked" | wc -l) runs, all voltages inside 0..150 V"
