@@ -290,8 +290,8 @@ fn fit_output(
 ) -> (OutputModel, f64) {
     let (coarse, medium) = (&tiers.coarse, &tiers.medium);
     // A model that already has the amplitude dependence is searched along the course of
-    // the amplitude of its fit on each tier: a linear time-varying filter, a third of the
-    // work per evaluation (the final fit runs the full fixed point).
+    // the amplitude of its fit on each tier: a linear time-varying filter, no fixed point
+    // and no serial square root per sample (the final fit runs the full fixed point).
     let kept = (effort == Effort::Normal && causes.has(Cause::AmplitudeDynamics)).then(|| {
         let s = &starts[0];
         let course =
