@@ -9,11 +9,11 @@ pub mod faults;
 pub mod ident;
 pub mod manipulation;
 pub mod mock;
-pub mod numeric;
 pub mod object;
-pub mod plot;
-pub mod record;
 pub mod scenario;
 pub mod serial;
 pub mod sim;
 pub mod stage;
+
+// The identification library's records, numerics and plots, where hal-sim's modules use them.
+pub use piezo_ident::{numeric, plot, record};

@@ -11,7 +11,7 @@ pub mod saved;
 pub mod scheduled;
 pub mod subspace;
 
-use crate::ident::fit::models::ModelDef;
+use crate::fit::models::ModelDef;
 use crate::record::Record;
 use frf::{FrfData, PeriodicSpectra};
 use hammerstein::{Hammerstein, Periodic};

@@ -1,12 +1,12 @@
 //! The saved model: what `piezo fit --out DIR` writes to `DIR/fit.json` (format
 //! [`FORMAT`]) and `piezo predict` / `piezo sim --stage` read back, for every model kind.
-use crate::ident::fit::resample::Edge;
-use crate::ident::fit::{models, Fitted};
-use crate::ident::multibw::MultiBwFit;
-use crate::ident::ss::frf::detect_period;
-use crate::ident::ss::saved::SsJson;
+use crate::fit::resample::Edge;
+use crate::fit::{models, Fitted};
+use crate::multibw::MultiBwFit;
 use crate::numeric::rmse;
 use crate::record::{Quantity, Record};
+use crate::ss::frf::detect_period;
+use crate::ss::saved::SsJson;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use serde_json::Value;

@@ -6,7 +6,7 @@
 use super::frf::{bin_weight, period_spectra, PeriodicSpectra};
 use super::model::{Modal, C64};
 use super::pem::{self, LineStats, PemConfig};
-use crate::ident::fit::models::{self, ModelDef, Scales};
+use crate::fit::models::{self, ModelDef, Scales};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 

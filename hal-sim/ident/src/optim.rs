@@ -19,7 +19,8 @@ pub mod pso;
 pub use pso::{particle_swarm, PsoConfig};
 
 /// The global search of a fit (`piezo fit --optimizer`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Optimizer {
     /// Differential evolution ([`differential_evolution`]).

@@ -27,10 +27,10 @@
 //! whole record simulated as one `MultiBw` (`A_ij = 0` kept for `i != j`), kept only if it
 //! lowers the RMSE.
 
-use crate::ident::fit::resample::Edge;
-use crate::ident::fit::{fit_siso, metrics, models, FitOptions, Fitted};
-use crate::ident::optim::{levenberg_marquardt, LmConfig};
+use crate::fit::resample::Edge;
+use crate::fit::{fit_siso, metrics, models, FitOptions, Fitted};
 use crate::numeric;
+use crate::optim::{levenberg_marquardt, LmConfig};
 use crate::record::Record;
 use anyhow::{bail, ensure, Context, Result};
 use nalgebra::{DMatrix, DVector};

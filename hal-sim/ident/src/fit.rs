@@ -19,7 +19,7 @@
 pub mod models;
 pub mod resample;
 
-use crate::ident::optim::{global_search, levenberg_marquardt, LmConfig, Optimizer, SearchConfig};
+use crate::optim::{global_search, levenberg_marquardt, LmConfig, Optimizer, SearchConfig};
 use models::{ModelDef, ParamSpec, Scales};
 use piezo_core::hysteresis::ParamError;
 use resample::{upsample, Edge};

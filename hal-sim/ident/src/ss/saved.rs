@@ -3,7 +3,7 @@
 use super::hammerstein::{Front, Hammerstein};
 use super::model::{Modal, ModalJson};
 use super::scheduled::Schedule;
-use crate::ident::fit::models::{self, Scales};
+use crate::fit::models::{self, Scales};
 use serde::{Deserialize, Serialize};
 
 /// One actuator's hysteresis in `fit.json`.
@@ -59,7 +59,7 @@ impl SsJson {
         report: serde_json::Value,
     ) -> Self {
         Self {
-            format: crate::ident::FORMAT.into(),
+            format: crate::FORMAT.into(),
             model: if model.fronts.is_empty() {
                 "ss"
             } else {

@@ -343,21 +343,52 @@ pub fn predict(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ident::diagnose::evidence::no_shape;
-    use crate::ident::diagnose::model::min_max;
-    use crate::ident::generate::Hidden;
+    use crate::diagnose::evidence::no_shape;
+    use crate::diagnose::model::min_max;
+    use crate::diagnose::signals::Signals;
+    use piezo_core::hysteresis::{BwState, Cbw};
+
+    /// A stage whose resonance softens and damps with its oscillation amplitude, simulated
+    /// here (this crate has no simulator): CBW (000 eq. (6)) of a sine with steps on it,
+    /// then a resonance at 110 Hz, zeta 0.093, -23 % and +69 % at large amplitude, half at
+    /// 0.35 um of free motion about the held input; sub-stepped semi-implicit Euler.
+    fn amplitude_record() -> Signals {
+        let (fs, n, sub) = (10_000.0, 40_000, 20);
+        let cbw = Cbw::new(0.9, 0.3, 0.012, 0.004, 1.0).expect("valid CBW");
+        let mut h = BwState::default();
+        let (wn0, z0, shift, scale, level) =
+            (2.0 * std::f64::consts::PI * 110.0, 0.093, -0.23, 0.69, 0.35);
+        let (mut x, mut v) = (0.0, 0.0);
+        let (mut t, mut u, mut y) = (Vec::new(), Vec::new(), Vec::new());
+        for k in 0..n {
+            let tk = k as f64 / fs;
+            let step = if (tk * 4.0).fract() < 0.5 { 8.0 } else { -8.0 };
+            let uk = 60.0 + 45.0 * (2.0 * std::f64::consts::PI * 1.5 * tk).sin() + step;
+            let xin = cbw.step_n1(&mut h, uk);
+            let dt = 1.0 / (fs * sub as f64);
+            for _ in 0..sub {
+                let a = ((x - xin).powi(2) + (v / wn0).powi(2)).sqrt();
+                let rho = a / (a + level);
+                let (wn, z) = (wn0 * (1.0 + shift * rho), z0 * (1.0 + scale * rho));
+                v += dt * (wn * wn * (xin - x) - 2.0 * z * wn * v);
+                x += dt * v;
+            }
+            t.push(tk);
+            u.push(uk);
+            y.push(x);
+        }
+        Signals::new(t, vec![u], vec![y]).expect("valid record")
+    }
 
     /// The search of a model with the amplitude dependence runs along the course of its
     /// fit: along it the fit is the full fit again, and along no amplitude the plain
     /// dynamics'.
     #[test]
     fn fit_along_a_course() {
-        let r = Hidden::draw(1, &[Cause::AmplitudeDynamics]).record(0);
+        let r = amplitude_record();
         let mut scales = Scales::of(&r.t, &r.u[0]);
         let (lo, hi) = min_max(&r.y[0]);
         (scales.y_span, scales.y_mid) = (hi - lo, 0.5 * (hi + lo));
-        // The drawn stage: 110 Hz, zeta 0.093, -23 % and +69 % at large amplitude, half at
-        // 0.35 um.
         let shape = Shape {
             beta: 0.012,
             gamma: 0.004,

@@ -739,7 +739,7 @@ pub fn data_dir() -> std::path::PathBuf {
     std::env::var_os("PIEZO_DATA")
         .map(Into::into)
         .unwrap_or_else(|| {
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
         })
 }
 

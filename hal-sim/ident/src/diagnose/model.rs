@@ -368,7 +368,7 @@ pub fn effective_input(u: &[f64], dt: f64, shape: &Shape) -> Vec<f64> {
 /// (`Cbw::with_n1(0, 1, beta, gamma)`, through its f64 fast path.)
 pub fn hysteresis(v: &[f64], beta: f64, gamma: f64) -> Vec<f64> {
     let mut g = Vec::new();
-    crate::ident::fast::cbw_unit(v, beta, gamma, &mut g);
+    crate::fast::cbw_unit(v, beta, gamma, &mut g);
     g
 }
 
@@ -419,7 +419,7 @@ pub fn regressors(
         } else {
             v.clone()
         };
-        cols.extend(crate::ident::fast::lowpass_many(&src, taus, dt));
+        cols.extend(crate::fast::lowpass_many(&src, taus, dt));
         for &tau in taus {
             let k = CREEP_TAUS_S.iter().position(|&t| t == tau).unwrap_or(0);
             names.push(NAMES[k]);
@@ -523,7 +523,7 @@ pub fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
 /// [`least_squares`] on borrowed columns.
 pub fn least_squares_refs(cols: &[&[f64]], y: &[f64]) -> Vec<f64> {
     let p = cols.len();
-    let (gram, xty) = crate::ident::fast::gram(cols, y);
+    let (gram, xty) = crate::fast::gram(cols, y);
     let scale: Vec<f64> = (0..p)
         .map(|r| {
             let s = gram[r * p + r].sqrt();
