@@ -173,15 +173,8 @@ fn wpmbw_comp(zpetc: bool) -> Comp {
         )
     };
     Comp::Wpmbw(
-        WpmbwInverse::with_dynamics(
-            &wpmbw(),
-            dynamics,
-            Some(prefilter),
-            VOLTS.0,
-            VOLTS.1,
-            DT,
-        )
-        .unwrap(),
+        WpmbwInverse::with_dynamics(&wpmbw(), dynamics, Some(prefilter), VOLTS.0, VOLTS.1, DT)
+            .unwrap(),
     )
 }
 
@@ -189,9 +182,13 @@ fn wpmbw_comp(zpetc: bool) -> Comp {
 fn table3_cbw_abw_and_wpmbw_compensation_on_004s_plant() {
     type Row = (&'static str, fn() -> Comp);
     let rows: [Row; 6] = [
-        ("CBW, eq. (25), delayed (as 004)", || cbw_comp(ImsLoop::Delayed)),
+        ("CBW, eq. (25), delayed (as 004)", || {
+            cbw_comp(ImsLoop::Delayed)
+        }),
         ("CBW, eq. (25), solved", || cbw_comp(ImsLoop::Solved)),
-        ("[36], eq. (26), delayed (as 004)", || abw_comp(ImsLoop::Delayed)),
+        ("[36], eq. (26), delayed (as 004)", || {
+            abw_comp(ImsLoop::Delayed)
+        }),
         ("[36], eq. (26), solved", || abw_comp(ImsLoop::Solved)),
         ("WPMBW, eq. (27), a0..a2 (as 004)", || wpmbw_comp(false)),
         ("WPMBW, eq. (27), ZPETC", || wpmbw_comp(true)),

@@ -14,8 +14,8 @@
 
 use super::creep::CreepInverse;
 use super::solve::solve_increasing_hinted;
-use super::FfError;
 use super::wpmbw::LinearPart;
+use super::FfError;
 use crate::hysteresis::{AbwU, BwState, Cbw, Hysteresis};
 use crate::real::Real;
 use crate::signals::Setpoint;
@@ -965,7 +965,10 @@ mod eq26_tests {
             let sp = sine(i as f64 * dt, 5.0);
             let expect = ((m * sp.ddy + b * sp.dy + k * sp.y_um) / k + st.h) / model.d();
             let u = ff.compensate(&sp);
-            assert!((u - expect.clamp(0.0, 10.0)).abs() < 1e-12, "{i}: {u} vs {expect}");
+            assert!(
+                (u - expect.clamp(0.0, 10.0)).abs() < 1e-12,
+                "{i}: {u} vs {expect}"
+            );
             model.step(&mut st, u, dt);
         }
     }
