@@ -154,11 +154,34 @@ fn sim_cbw_n(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamEr
     Ok(())
 }
 
+/// The GBW the laws predict with (`fts-gbw`, `nmpc-gbw`): 000 eq. (3) with its CBW term
+/// ([`Gbw::with_beta_h`]), `alpha = n = 1`. `G = g*B_h` with `g` in CBW's `gamma/beta` box and
+/// `B = b*(B_h + G)`, `|b| < 1`, keep both equilibria bounded. `A, B_h, G` are the firmware's
+/// `cbw_alpha, cbw_beta, cbw_gamma`, `B` its `gbw_b`.
 fn gbw_specs(s: &Scales) -> Vec<ParamSpec> {
-    bw_specs(s, "A", "G", ParamSpec::lin("B/G", -0.99, 0.99))
+    let mut v = bw_specs(s, "A", "B_h", ParamSpec::lin("G/B_h", -1.0, 1.0));
+    v.push(ParamSpec::lin("B/(B_h+G)", -0.99, 0.99));
+    v
+}
+
+/// [`gbw_specs`]' vector as the model.
+pub fn gbw(p: &[f64]) -> Result<Gbw<f64>, ParamError> {
+    let g = p[3] * p[2];
+    Gbw::with_beta_h(p[0], 1.0, p[1], p[2], p[4] * (p[2] + g), g, 1.0)
 }
 
 fn sim_gbw(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+    run(&gbw(p)?, u, dt, y);
+    Ok(())
+}
+
+/// 000 eq. (3) as printed ([`Gbw::new`], `B_h = 0`): it keeps no loop under a periodic input
+/// (see `Gbw`), so it is not the model of the laws.
+fn gbw_printed_specs(s: &Scales) -> Vec<ParamSpec> {
+    bw_specs(s, "A", "G", ParamSpec::lin("B/G", -0.99, 0.99))
+}
+
+fn sim_gbw_printed(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
     // alpha is redundant with A, B, G for a fit; fixed at 1.
     run(
         &Gbw::new(p[0], 1.0, p[1], p[3] * p[2], p[2], 1.0)?,
@@ -447,9 +470,16 @@ pub static MODELS: &[ModelDef] = &[
     },
     ModelDef {
         name: "gbw",
-        about: "generalized Bouc-Wen, n = 1 (000 eq. 3)",
+        about: "generalized Bouc-Wen with its CBW term B_h, n = 1 (000 eq. 3; the model of fts-gbw, nmpc-gbw)",
         params: gbw_specs,
         simulate: sim_gbw,
+        dynamic: false,
+    },
+    ModelDef {
+        name: "gbw-printed",
+        about: "generalized Bouc-Wen as 000 eq. (3) prints it (no B_h term; keeps no loop), n = 1",
+        params: gbw_printed_specs,
+        simulate: sim_gbw_printed,
         dynamic: false,
     },
     ModelDef {
