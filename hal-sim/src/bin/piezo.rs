@@ -7,7 +7,7 @@ use clap::{Parser, Subcommand};
     version,
     about = "Simulate, identify and diagnose piezoelectric stages"
 )]
-struct Cli {
+pub(crate) struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
 }
