@@ -208,7 +208,7 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', default_value = "cubic")]
     pub lfr_basis: Vec<String>,
     /// `lfr`: Levenberg-Marquardt iterations on the simulation error.
-    #[arg(long, default_value_t = 15)]
+    #[arg(long, default_value_t = 4)]
     pub lfr_iterations: usize,
     /// Columns and units of the records.
     #[command(flatten)]

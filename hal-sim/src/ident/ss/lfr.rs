@@ -692,7 +692,7 @@ impl Default for LfrOptions {
     fn default() -> Self {
         Self {
             basis: vec![Basis::Cubic],
-            iterations: 15,
+            iterations: 4,
             stride: 2,
             ftol: 1e-6,
             progress: false,
