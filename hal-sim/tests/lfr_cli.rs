@@ -47,7 +47,9 @@ fn record(path: &Path, amp: f64, seed: u64) {
             .wrapping_add(1442695040888963407);
         (rng >> 11) as f64 / (1u64 << 53) as f64
     };
-    let phases: Vec<f64> = (1..period / 3).map(|_| next() * std::f64::consts::TAU).collect();
+    let phases: Vec<f64> = (1..period / 3)
+        .map(|_| next() * std::f64::consts::TAU)
+        .collect();
     let one: Vec<f64> = (0..period)
         .map(|k| {
             phases
@@ -60,8 +62,12 @@ fn record(path: &Path, amp: f64, seed: u64) {
         })
         .collect();
     let rms = (one.iter().map(|v| v * v).sum::<f64>() / period as f64).sqrt();
-    let u: Vec<f64> = (0..2 * period).map(|k| amp * one[k % period] / rms).collect();
-    let y = truth().simulate(&with_warmup(&[u.clone()], period)).unwrap();
+    let u: Vec<f64> = (0..2 * period)
+        .map(|k| amp * one[k % period] / rms)
+        .collect();
+    let y = truth()
+        .simulate(&with_warmup(&[u.clone()], period))
+        .unwrap();
     let t = (0..2 * period).map(|k| k as f64 / fs).collect();
     Record::new(t, vec![u], vec![y[0][period..].to_vec()])
         .unwrap()

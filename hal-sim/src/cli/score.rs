@@ -41,19 +41,17 @@ pub fn run(args: Args) -> Result<()> {
         let n = period_of(rec)?;
         levels.push(record_level(rec, n));
         let s = match &model {
-            Some(m) => {
-                Some(score::official(rec, |u| {
-                    let r = crate::record::Record {
-                        t: (0..u[0].len()).map(|k| k as f64 * rec.dt()).collect(),
-                        u: u.to_vec(),
-                        y: Vec::new(),
-                        comments: Vec::new(),
-                        extra: Vec::new(),
-                        unit_note: None,
-                    };
-                    m.simulate(&r)
-                })?)
-            }
+            Some(m) => Some(score::official(rec, |u| {
+                let r = crate::record::Record {
+                    t: (0..u[0].len()).map(|k| k as f64 * rec.dt()).collect(),
+                    u: u.to_vec(),
+                    y: Vec::new(),
+                    comments: Vec::new(),
+                    extra: Vec::new(),
+                    unit_note: None,
+                };
+                m.simulate(&r)
+            })?),
             None => None,
         };
         let floor = score::noise_floor(rec);

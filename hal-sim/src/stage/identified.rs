@@ -72,9 +72,7 @@ impl IdentifiedPlant {
         let model = saved
             .to_model()
             .with_context(|| path.display().to_string())?;
-        let lfr = saved
-            .to_lfr()
-            .with_context(|| path.display().to_string())?;
+        let lfr = saved.to_lfr().with_context(|| path.display().to_string())?;
         let (m, p) = (model.linear.inputs(), model.linear.outputs());
         anyhow::ensure!(
             axes <= m.min(p),

@@ -466,9 +466,9 @@ fn solve_cd(mdl: &mut Lfr, g: &Gram) -> anyhow::Result<f64> {
     for i in 0..nphi {
         r[(i, i)] += 1e-12 * tr.max(f64::MIN_POSITIVE);
     }
-    let ch = r
-        .cholesky()
-        .ok_or_else(|| anyhow::anyhow!("the LFR's states are degenerate (no least-squares C, D)"))?;
+    let ch = r.cholesky().ok_or_else(|| {
+        anyhow::anyhow!("the LFR's states are degenerate (no least-squares C, D)")
+    })?;
     let theta = ch.solve(&g.q); // nphi x p
     let cost = g.syy - 2.0 * theta.dot(&g.q) + (theta.transpose() * &g.r * &theta).trace();
     for o in 0..theta.ncols() {
@@ -484,7 +484,10 @@ fn solve_cd(mdl: &mut Lfr, g: &Gram) -> anyhow::Result<f64> {
 
 /// Sets `C, D` by least squares over `recs` and returns the cost.
 fn project(mdl: &mut Lfr, recs: &[Scored]) -> anyhow::Result<f64> {
-    let (nphi, p) = (mdl.linear.order() + mdl.linear.inputs(), mdl.linear.outputs());
+    let (nphi, p) = (
+        mdl.linear.order() + mdl.linear.inputs(),
+        mdl.linear.outputs(),
+    );
     let m: &Lfr = mdl;
     let g = recs
         .par_iter()
@@ -531,7 +534,9 @@ fn normal_record(
     let nw = nz * nb;
     let np = params.len();
     // Row-major copies for contiguous dots / column-major E for axpys.
-    let f_rows: Vec<Vec<f64>> = (0..nz).map(|i| mdl.f.row(i).iter().copied().collect()).collect();
+    let f_rows: Vec<Vec<f64>> = (0..nz)
+        .map(|i| mdl.f.row(i).iter().copied().collect())
+        .collect();
     let c_rows: Vec<Vec<f64>> = (0..p)
         .map(|o| mdl.linear.c.row(o).iter().copied().collect())
         .collect();
@@ -628,7 +633,8 @@ fn normal_record(
         }
         if scored {
             for o in 0..p {
-                let yhat = dot(&c_rows[o], &x) + (0..m).map(|j| mdl.linear.d[(o, j)] * uk[j]).sum::<f64>();
+                let yhat =
+                    dot(&c_rows[o], &x) + (0..m).map(|j| mdl.linear.d[(o, j)] * uk[j]).sum::<f64>();
                 let e = rec.y[o][k] - yhat;
                 let row = &ys[o * np..(o + 1) * np];
                 for (gc, r) in g.iter_mut().zip(row) {
@@ -783,7 +789,12 @@ pub fn identify(
             .par_iter()
             .map(|r| normal_record(&mdl, &params, r, stride))
             .try_reduce(
-                || (DMatrix::zeros(params.len(), params.len()), DVector::zeros(params.len())),
+                || {
+                    (
+                        DMatrix::zeros(params.len(), params.len()),
+                        DVector::zeros(params.len()),
+                    )
+                },
                 |a, b| Ok((a.0 + b.0, a.1 + b.1)),
             )?;
         let z0 = pack(&mdl);
@@ -850,7 +861,9 @@ mod tests {
         let mut rng = seed;
         let phases: Vec<f64> = (1..period / 4)
             .map(|_| {
-                rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (rng >> 11) as f64 / (1u64 << 53) as f64 * std::f64::consts::TAU
             })
             .collect();

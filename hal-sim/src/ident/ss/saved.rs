@@ -190,7 +190,11 @@ impl SsJson {
             self.lfr.is_some() == (self.model == "lfr"),
             "fit.json: model `{}` {} an `lfr` section",
             self.model,
-            if self.lfr.is_some() { "with" } else { "without" }
+            if self.lfr.is_some() {
+                "with"
+            } else {
+                "without"
+            }
         );
         if let Some(j) = &self.lfr {
             Lfr::from_json(linear.clone(), j)?;
