@@ -26,7 +26,7 @@ pub struct Part {
 
 /// True for the model names `piezo fit` fits as state-space models (`crate::cli::fit_ss`).
 pub fn handles(model: &str) -> bool {
-    matches!(model, "ss" | "hammerstein-ss" | "scheduled-ss")
+    matches!(model, "ss" | "hammerstein-ss" | "scheduled-ss" | "lfr")
 }
 
 /// Simulates every output of `rec` with the identified parts (summed per output).

@@ -5,10 +5,12 @@
 
 pub mod frf;
 pub mod hammerstein;
+pub mod lfr;
 pub mod model;
 pub mod pem;
 pub mod saved;
 pub mod scheduled;
+pub mod score;
 pub mod subspace;
 
 use crate::fit::models::ModelDef;

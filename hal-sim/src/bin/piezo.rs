@@ -22,6 +22,8 @@ enum Cmd {
     Fit(hal_sim::cli::fit::Args),
     /// Simulate a saved model (`fit.json`) from rest on an input record.
     Predict(hal_sim::cli::predict::Args),
+    /// Score a saved model on periodic records by the FSM benchmark's official rule; noise floor and BLA distortion per level.
+    Score(hal_sim::cli::score::Args),
     /// Find what the base model gets wrong, name the cause, extend the model, measure the gain.
     Diagnose(hal_sim::cli::diagnose::Args),
     /// Fault campaign over every controller mode.
@@ -37,6 +39,7 @@ fn main() {
         Cmd::Sim(a) => hal_sim::cli::sim::run(a),
         Cmd::Fit(a) => hal_sim::cli::fit::run(a),
         Cmd::Predict(a) => hal_sim::cli::predict::run(a),
+        Cmd::Score(a) => hal_sim::cli::score::run(a),
         Cmd::Diagnose(a) => hal_sim::cli::diagnose::run(a),
         Cmd::Faults(a) => hal_sim::cli::faults::run(a),
         Cmd::Serial(a) => hal_sim::cli::serial::run(a),

@@ -6,5 +6,6 @@ pub mod fit;
 pub mod fit_args;
 pub mod fit_ss;
 pub mod predict;
+pub mod score;
 pub mod serial;
 pub mod sim;

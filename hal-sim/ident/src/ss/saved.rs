@@ -1,6 +1,7 @@
 //! `fit.json` of the state-space models: everything needed to simulate them.
 
 use super::hammerstein::{Front, Hammerstein};
+use super::lfr::{Lfr, LfrJson};
 use super::model::{Modal, ModalJson};
 use super::scheduled::Schedule;
 use crate::fit::models::{self, Scales};
@@ -20,7 +21,7 @@ pub struct FrontJson {
 pub struct SsJson {
     /// `piezo-fit/1`.
     pub format: String,
-    /// `ss`, `hammerstein-ss` or `scheduled-ss`.
+    /// `ss`, `hammerstein-ss`, `scheduled-ss` or `lfr`.
     pub model: String,
     /// The linear block is discrete time at this rate; inputs must be sampled at it.
     pub sample_rate_hz: f64,
@@ -37,6 +38,10 @@ pub struct SsJson {
     /// (`linear` is then the model of all records, used by `piezo sim --stage`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub schedule: Option<Schedule>,
+    /// `lfr`: the nonlinearity in feedback around `linear` (`x+ = A x + B u + E w`,
+    /// `z = F x + G u`, `w = N(z)`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lfr: Option<LfrJson>,
     /// Training range `[min, max]` of each input and output (model units): what
     /// `piezo sim --stage` scales the converters to.
     #[serde(default)]
@@ -85,6 +90,7 @@ impl SsJson {
                 .collect(),
             linear: model.linear.to_json(),
             schedule: None,
+            lfr: None,
             input_range: Vec::new(),
             output_range: Vec::new(),
             modes_hz: model.linear.modes_hz(fs_hz),
@@ -101,8 +107,28 @@ impl SsJson {
         self
     }
 
+    /// With a nonlinearity in feedback (`lfr`).
+    pub fn with_lfr(mut self, lfr: &Lfr) -> Self {
+        self.model = "lfr".into();
+        self.linear = lfr.linear.to_json();
+        self.modes_hz = lfr.linear.modes_hz(self.sample_rate_hz);
+        self.lfr = Some(lfr.to_json());
+        self
+    }
+
+    /// The LFR, checked (`None` for the other kinds).
+    pub fn to_lfr(&self) -> anyhow::Result<Option<Lfr>> {
+        match &self.lfr {
+            None => Ok(None),
+            Some(j) => Ok(Some(Lfr::from_json(self.to_model()?.linear, j)?)),
+        }
+    }
+
     /// Simulates the saved model from rest on inputs `u` sampled every `dt` s.
     pub fn simulate(&self, u: &[Vec<f64>], dt: f64) -> anyhow::Result<Vec<Vec<f64>>> {
+        if let Some(l) = self.to_lfr()? {
+            return l.simulate(u);
+        }
         let model = self.to_model()?;
         match &self.schedule {
             Some(s) => s.simulate(&model.linear, u, dt),
@@ -156,6 +182,23 @@ impl SsJson {
                 })
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
+        anyhow::ensure!(
+            self.lfr.is_none() || (fronts.is_empty() && self.schedule.is_none()),
+            "fit.json: an LFR is not combined with a schedule or hysteresis fronts"
+        );
+        anyhow::ensure!(
+            self.lfr.is_some() == (self.model == "lfr"),
+            "fit.json: model `{}` {} an `lfr` section",
+            self.model,
+            if self.lfr.is_some() {
+                "with"
+            } else {
+                "without"
+            }
+        );
+        if let Some(j) = &self.lfr {
+            Lfr::from_json(linear.clone(), j)?;
+        }
         if let Some(s) = &self.schedule {
             anyhow::ensure!(
                 fronts.is_empty(),
