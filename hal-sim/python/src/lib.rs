@@ -227,18 +227,23 @@ fn fit<'py>(
     Ok(d)
 }
 
-/// `piezo predict`: simulates the saved model (`fit.json` text, `name` for errors) from rest
-/// on the input record; with measured outputs, their RMSE over the last period.
+/// `piezo predict`: simulates the saved model (the text of a `fit.json`, or without it the
+/// file `name`) from rest on the input record; with measured outputs, their RMSE over the
+/// last period.
 #[pyfunction]
+#[pyo3(signature = (model_json, name, input))]
 fn predict<'py>(
     py: Python<'py>,
-    model_json: String,
+    model_json: Option<String>,
     name: String,
     input: RecordIn<'py>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (_, rec) = record(&input, true).map_err(|e| raise(py, e))?;
     let run = move || -> anyhow::Result<_> {
-        let model = Loaded::parse(&model_json, &name)?;
+        let model = match model_json {
+            Some(text) => Loaded::parse(&text, &name)?,
+            None => Loaded::read(&PathBuf::from(&name))?,
+        };
         let sim = model.simulate(&rec)?;
         let score = if rec.y.is_empty() {
             None

@@ -87,6 +87,7 @@ def read_record(path, *, t_col=None, u_col=(), y_col=(), input_unit="V", output_
 def _channels(a, n: int, what: str) -> np.ndarray:
     """`a` as a C-contiguous float64 array of shape (channels, n)."""
     a = np.asarray(a, dtype=np.float64)
+    given = a.shape
     if a.ndim == 1:
         a = a[np.newaxis, :]
     elif a.ndim == 2:
@@ -99,7 +100,7 @@ def _channels(a, n: int, what: str) -> np.ndarray:
     else:
         raise InputError(f"{what} has {a.ndim} dimensions; expected 1 or 2")
     if a.shape[1] != n:
-        raise InputError(f"{what} has shape {a.shape}; t has {n} samples")
+        raise InputError(f"{what} has shape {given}; t has {n} samples")
     return np.ascontiguousarray(a)
 
 
@@ -234,14 +235,7 @@ def predict(model, input: RecordLike, *, columns: Optional[dict] = None) -> Pred
         text, name = model, "<fit.json text>"
     else:
         p = pathlib.Path(model)
-        if p.is_dir():
-            p = p / "fit.json"
-        name = os.fspath(p)
-        try:
-            text = p.read_text()
-        except OSError as e:
-            from .errors import FileError
-            raise FileError(f"cannot read {name}: {e.strerror or e}") from e
+        text, name = None, os.fspath(p / "fit.json" if p.is_dir() else p)
     rec = as_record(input, outputs_optional=True, columns=columns)
     d = _lib().predict(text, name, rec._native())
     return Prediction(rec.t, d["y"], d["rmse_last_period"], d["rmse_mean"],
