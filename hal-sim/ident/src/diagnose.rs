@@ -24,6 +24,7 @@ mod fitting;
 pub mod model;
 mod output;
 pub mod plots;
+pub mod report;
 pub mod search;
 mod signals;
 pub mod unexplained;
@@ -375,6 +376,27 @@ fn per_record(scored: &[Signals], pred: &[Vec<Vec<f64>>]) -> Vec<f64> {
 /// Runs the discovery on a training and a validation record.
 ///
 /// `valid` may start with warm-up samples (see [`Signals::warmup`]); only the rest is scored.
+///
+/// ```
+/// # fn main() -> anyhow::Result<()> {
+/// use piezo_ident::diagnose::{diagnose, Options, Signals};
+/// use piezo_ident::fit::{models, resample::Edge, Fitted};
+///
+/// // A classical Bouc-Wen stage (000 eq. 1-2), nothing else: the answer is `none`.
+/// let stage = Fitted::from_params(models::find("cbw")?, &[1.0, 0.4, 0.02, 0.3], 1.0, 0.0, 1)?;
+/// let record = |f_hz: f64| -> anyhow::Result<Signals> {
+///     let t: Vec<f64> = (0..800).map(|k| k as f64 * 1e-3).collect();
+///     let u: Vec<f64> = t.iter().map(|t| 50.0 * (1.0 - (2.0 * std::f64::consts::PI * f_hz * t).cos())).collect();
+///     let y = stage.simulate(&u, 1e-3, Edge::Hold)?;
+///     Signals::new(t, vec![u], vec![y])
+/// };
+/// let d = diagnose(&record(2.5)?, &record(5.0)?, &Options::default())?;
+/// assert_eq!(d.cause(), "none");
+/// assert!(d.base_valid < 0.01, "{}", d.base_valid); // um
+/// println!("{}", piezo_ident::diagnose::report::summary(&d, None));
+/// # Ok(())
+/// # }
+/// ```
 pub fn diagnose(train: &Signals, valid: &Signals, opt: &Options) -> anyhow::Result<Diagnosis> {
     diagnose_records(
         std::slice::from_ref(train),

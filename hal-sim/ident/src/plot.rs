@@ -1,7 +1,7 @@
 //! Minimal SVG line plots: no fonts, no system libraries, readable in any browser.
 //!
 //! ```no_run
-//! use hal_sim::plot::Plot;
+//! use piezo_ident::plot::Plot;
 //! let x = [0.0, 1.0, 2.0];
 //! Plot::new("loop", "u [V]", "y [um]").line("model", &x, &[0.0, 1.0, 4.0]).write_svg("out/loop.svg").unwrap();
 //! ```

@@ -44,6 +44,7 @@
 mod units;
 pub use units::{split_unit, Quantity};
 
+use anyhow::Context as _;
 use std::fmt::{self, Write as _};
 use std::path::Path;
 
@@ -252,7 +253,19 @@ struct Header {
 }
 
 impl Record {
-    /// A single- or multi-channel record from columns; checks it like a parsed file.
+    /// A single- or multi-channel record from columns (s, V, um; `u[k][i]` is input `k` at
+    /// sample `i`); checks it like a parsed file.
+    ///
+    /// ```
+    /// use piezo_ident::record::Record;
+    /// let t = vec![0.0, 1e-3, 2e-3];
+    /// let r = Record::new(t.clone(), vec![vec![0.0, 1.0, 2.0]], vec![vec![0.0, 0.5, 1.1]]).unwrap();
+    /// assert_eq!((r.len(), r.sample_rate_hz().round()), (3, 1000.0));
+    /// assert!(r.to_csv().starts_with("t,u,y\n"));
+    /// // A gap in time is refused, as in a file.
+    /// let err = Record::new(vec![0.0, 1e-3, 5e-3], r.u.clone(), r.y.clone()).unwrap_err();
+    /// assert!(err.to_string().contains("uniform"), "{err}");
+    /// ```
     pub fn new(t: Vec<f64>, u: Vec<Vec<f64>>, y: Vec<Vec<f64>>) -> Result<Self, RecordError> {
         let r = Self {
             comments: Vec::new(),
@@ -262,7 +275,22 @@ impl Record {
             extra: Vec::new(),
             unit_note: None,
         };
-        r.check()?;
+        r.check(false)?;
+        Ok(r)
+    }
+
+    /// A record of inputs only (`y` empty: what a model is simulated on), checked like
+    /// [`Record::new`].
+    pub fn inputs(t: Vec<f64>, u: Vec<Vec<f64>>) -> Result<Self, RecordError> {
+        let r = Self {
+            comments: Vec::new(),
+            t,
+            u,
+            y: Vec::new(),
+            extra: Vec::new(),
+            unit_note: None,
+        };
+        r.check(true)?;
         Ok(r)
     }
 
@@ -276,7 +304,7 @@ impl Record {
     pub fn read_with(path: impl AsRef<Path>, layout: &Layout) -> anyhow::Result<Self> {
         let path = path.as_ref();
         let text = std::fs::read(path)
-            .map_err(|e| anyhow::anyhow!("cannot read record {}: {e}", path.display()))?;
+            .with_context(|| format!("cannot read record {}", path.display()))?;
         let text = String::from_utf8(text).map_err(|e| {
             anyhow::anyhow!(
                 "record {}: not UTF-8 text (byte {})",
@@ -297,7 +325,7 @@ impl Record {
     /// outputs are converted to s, V and um.
     ///
     /// ```
-    /// use hal_sim::record::{Layout, Record};
+    /// use piezo_ident::record::{Layout, Record};
     /// let r = Record::parse("t_ms,u_mV,y_nm\n0,1500,2500\n1,1600,2600\n").unwrap();
     /// assert_eq!((r.t[1], r.u[0][0], r.y[0][0], r.unit_note), (1e-3, 1.5, 2.5, None));
     /// let text = "time [s],drive (V),pos_um\n0,1,2\n0.5,1,2\n";
@@ -535,8 +563,8 @@ impl Record {
     }
 
     /// Structure and time checks for records built in code.
-    fn check(&self) -> Result<(), RecordError> {
-        if self.u.is_empty() || self.y.is_empty() {
+    fn check(&self, outputs_optional: bool) -> Result<(), RecordError> {
+        if self.u.is_empty() || (self.y.is_empty() && !outputs_optional) {
             return err(
                 0,
                 "a record needs at least one input and one output channel",

@@ -1,7 +1,7 @@
 //! The saved model: what `piezo fit --out DIR` writes to `DIR/fit.json` (format
 //! [`FORMAT`]) and `piezo predict` / `piezo sim --stage` read back, for every model kind.
 use crate::fit::resample::Edge;
-use crate::fit::{models, Fitted};
+use crate::fit::{models, Fitted, Metrics};
 use crate::multibw::MultiBwFit;
 use crate::numeric::rmse;
 use crate::record::{Quantity, Record};
@@ -22,6 +22,59 @@ pub struct Part {
     pub input: usize,
     pub output: usize,
     pub fit: Fitted,
+}
+
+/// The fit quality of one output.
+#[derive(Debug, Serialize)]
+pub struct ChannelMetrics {
+    pub output: usize,
+    pub metrics: Metrics,
+}
+
+/// What `piezo fit` reports.
+#[derive(Debug, Serialize)]
+pub struct Report {
+    /// `piezo-fit/1`: what `piezo predict` reads.
+    pub format: &'static str,
+    pub model: String,
+    /// Sample rate of the training record (dynamic models are simulated at the rate of
+    /// the record they are given).
+    pub sample_rate_hz: f64,
+    pub inputs: usize,
+    pub outputs: usize,
+    pub input_unit: String,
+    pub output_unit: String,
+    pub train: String,
+    pub valid: Option<String>,
+    /// Two-step Hammerstein: the linear part identified first.
+    pub linear_step: Option<Fitted>,
+    pub parts: Vec<Part>,
+    /// `--model cbw` on a multi-axis record: the multivariable Bouc-Wen of 003 (its direct
+    /// transfers are also in `parts`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub multibw: Option<MultiBwFit>,
+    pub train_metrics: Vec<ChannelMetrics>,
+    pub valid_metrics: Vec<ChannelMetrics>,
+    /// With `--valid-periodic`: the same validation record simulated from rest, for
+    /// comparison (scored over the same samples).
+    pub valid_from_rest_metrics: Vec<ChannelMetrics>,
+    pub seconds: f64,
+}
+
+impl Report {
+    /// The text of `fit.json`.
+    pub fn to_json(&self) -> Result<String> {
+        Ok(serde_json::to_string_pretty(self)?)
+    }
+}
+
+/// Writes `dir/fit.json` (what `piezo predict` and `piezo serial load-fit` read); its path.
+pub fn write_fit_json(dir: &Path, report: &Report) -> Result<std::path::PathBuf> {
+    let path = dir.join("fit.json");
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    std::fs::write(&path, report.to_json()?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
 }
 
 /// True for the model names `piezo fit` fits as state-space models (`crate::cli::fit_ss`).
@@ -166,12 +219,23 @@ fn part(v: &Value, path: &str) -> Result<Part> {
 }
 
 impl Loaded {
+    /// Reads a `fit.json`.
     pub fn read(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read {}", path.display()))?;
-        let v: Value =
-            serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-        let p = path.display().to_string();
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses the text of a `fit.json`; `name` says where it came from in errors.
+    ///
+    /// ```
+    /// use piezo_ident::saved::Loaded;
+    /// let err = Loaded::parse(r#"{"model": "cbw", "output_unit": "nm"}"#, "fit.json").unwrap_err();
+    /// assert!(format!("{err:#}").contains("`output_unit` is nm; models are simulated in um"));
+    /// ```
+    pub fn parse(text: &str, name: &str) -> Result<Self> {
+        let v: Value = serde_json::from_str(text).with_context(|| format!("{name}: not JSON"))?;
+        let p = name.to_string();
         check_units(&v, &p)?;
         let model = field(&v, "model", &p)?.as_str().unwrap_or_default();
         if handles(model) {

@@ -173,11 +173,7 @@ impl Records {
         let Some(f) = self.split.or(default) else {
             return Ok(None);
         };
-        anyhow::ensure!(
-            f.is_finite() && (0.1..=0.9).contains(&f),
-            "--split must be within 0.1..0.9, got {f}"
-        );
-        Ok(Some((len as f64 * f) as usize))
+        crate::ident::identify::split_sample(len, f).map(Some)
     }
 }
 

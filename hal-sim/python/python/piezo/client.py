@@ -1,4 +1,4 @@
-"""piezo_client: the controller's command protocol (src/command.rs) from Python.
+"""piezo.client: the controller's command protocol (src/command.rs) from Python.
 
 A lab script talks to the firmware (the Nucleo's ST-LINK serial port, or the QEMU board's
 UART on TCP) with `Piezo`; a refused command raises the exception of its numbered error
@@ -6,7 +6,7 @@ UART on TCP) with `Piezo`; a refused command raises the exception of its numbere
 framed binary transfer (`rec bin`: COBS packets, each checked by its CRC-32; a damaged packet
 is asked for again, never taken as data) or, with `binary=False`, as text (`rec read`).
 
-    from piezo_client import Piezo, OutOfRange
+    from piezo.client import Piezo, OutOfRange
     with Piezo(port="/dev/ttyACM0") as p:          # or Piezo(tcp="127.0.0.1:4000")
         p.mode("ff+hgo-robust", ff="ims-cbw")
         p.command("wave sine 5 100 10")            # 5 um, 100 Hz, around 10 um

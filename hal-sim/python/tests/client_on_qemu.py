@@ -1,6 +1,8 @@
-"""The Python client against the QEMU firmware (issue 17 item 7): run by
-.ci/test.d/38-python-client.sh with the QEMU board's UART on TCP:
-`python3 test_piezo_client.py 127.0.0.1:<port>`. Fails (exit 1) on any mismatch."""
+"""The Python client (`piezo.client`) against the QEMU firmware: run by
+.ci/test.d/38-python-client.sh with the QEMU board's UART on TCP,
+`PYTHONPATH=hal-sim/python/python python3 hal-sim/python/tests/client_on_qemu.py
+127.0.0.1:<port>` (the client needs no build; pytest does not collect this file). Fails
+(exit 1) on any mismatch."""
 import pathlib
 import re
 import struct
@@ -10,11 +12,11 @@ import zlib
 
 import numpy as np
 
-import piezo_client as pc
+import piezo.client as pc
 
 
 def errors_match_the_firmware():
-    src = pathlib.Path(__file__).resolve().parents[2] / "src" / "command" / "error.rs"
+    src = pathlib.Path(__file__).resolve().parents[3] / "src" / "command" / "error.rs"
     # The rows of the `errors!` table: `Variant = code => "message",`.
     rows = re.findall(r"^\s+(\w+) = (\d+) => \"", src.read_text(), re.M)
     codes = dict((int(c), n) for n, c in rows)
