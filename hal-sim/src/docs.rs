@@ -140,7 +140,11 @@ fn command_section(out: &mut String, cmd: &clap::Command, parents: &[&str]) {
     let usage = usage.trim().trim_start_matches("Usage:").trim();
     let _ = writeln!(out, "```text\n{usage}\n```\n");
 
-    let subs: Vec<&clap::Command> = cmd.get_subcommands().filter(|s| !s.is_hide_set()).collect();
+    // clap's own `help` subcommand only repeats this page.
+    let subs: Vec<&clap::Command> = cmd
+        .get_subcommands()
+        .filter(|s| !s.is_hide_set() && s.get_name() != "help")
+        .collect();
     if !subs.is_empty() {
         out.push_str("| command | what |\n|---|---|\n");
         for s in &subs {
