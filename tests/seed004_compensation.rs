@@ -81,6 +81,8 @@ fn setpoint(r: fn(f64) -> f64, t: f64) -> Setpoint<f64> {
 }
 
 /// One compensator: the voltage for the prefiltered setpoint `(y_d, y_d', y_d'')`.
+// One per run, never moved: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
 enum Comp {
     Cbw(Ims<f64, Cbw<f64>>),
     Abw(ImsDynamics<f64, AbwU<f64>>),
@@ -193,7 +195,8 @@ fn table3_cbw_abw_and_wpmbw_compensation_on_004s_plant() {
         ("WPMBW, eq. (27), a0..a2 (as 004)", || wpmbw_comp(false)),
         ("WPMBW, eq. (27), ZPETC", || wpmbw_comp(true)),
     ];
-    let refs: [(&str, fn(f64) -> f64); 2] = [("(29)", y_r1), ("(30)", y_r2)];
+    type Reference = (&'static str, fn(f64) -> f64);
+    let refs: [Reference; 2] = [("(29)", y_r1), ("(30)", y_r2)];
     let mut table = vec![];
     for (rname, r) in refs {
         let errs: Vec<Errors> = rows.iter().map(|(_, c)| run(c(), r)).collect();

@@ -82,3 +82,26 @@ fn fit_gbw_recovers_the_asymmetric_stage_and_the_gbw_laws_run_on_it() {
         }
     }
 }
+
+/// `piezo sim` builds the GBW laws on every built-in scenario from its own open-loop
+/// record, also where the reference holds still (the force scenarios) or two axes move.
+#[test]
+fn the_gbw_laws_build_on_every_builtin_scenario() {
+    for sc in default_scenarios(None, None) {
+        let linear = calibrate(&sc).unwrap();
+        let info = StageInfo {
+            scenario: &sc,
+            linear,
+        };
+        let m = identified_gbw(&info);
+        eprintln!("{}: {m:?}", sc.name);
+        assert!(m.is_ok(), "{}: {m:?}", sc.name);
+        if sc.name == "force-37pct" {
+            let r = run_calibrated(&sc, &find("fts-gbw").unwrap(), &linear, false)
+                .unwrap()
+                .0;
+            assert_eq!(r.nonfinite_commands, 0);
+            assert!(r.volts_min >= 0.0 && r.volts_max <= 150.0, "{r:?}");
+        }
+    }
+}
