@@ -248,7 +248,11 @@ fn consistency_over_splits_and_swap() {
             .find(|e| e["cause"] == *cause)
             .unwrap_or_else(|| panic!("{cause} missing in {c:#}"));
         let confident = entry["status"] == "confident";
-        assert_eq!(confident, entry["not_in"].as_array().unwrap().is_empty(), "{c:#}");
+        assert_eq!(
+            confident,
+            entry["not_in"].as_array().unwrap().is_empty(),
+            "{c:#}"
+        );
     }
     assert_eq!(c["confident"], serde_json::json!(["delay"]), "{c:#}");
     let out = cli_support::piezo(&[&"diagnose", &"--train", &a, &"--valid", &b]);

@@ -102,8 +102,16 @@ fn fresh_seeds() {
         let d = diagnose(&h.record(0), &h.record(1), &Options::default()).unwrap();
         secs.push(t0.elapsed().as_secs_f64());
         let found: Vec<Cause> = d.findings.iter().map(|f| f.cause).collect();
-        let miss: Vec<Cause> = hidden.iter().copied().filter(|c| !found.contains(c)).collect();
-        let more: Vec<Cause> = found.iter().copied().filter(|c| !hidden.contains(c)).collect();
+        let miss: Vec<Cause> = hidden
+            .iter()
+            .copied()
+            .filter(|c| !found.contains(c))
+            .collect();
+        let more: Vec<Cause> = found
+            .iter()
+            .copied()
+            .filter(|c| !hidden.contains(c))
+            .collect();
         for c in &miss {
             *missing.entry(c.name()).or_default() += 1;
         }

@@ -700,8 +700,13 @@ impl<'a> Setup<'a> {
         ok.sort_by(|a, b| both(*a).total_cmp(&both(*b)));
         for k in ok {
             if todo[k] == Cause::AmplitudeDynamics && self.swappable {
-                let (gain, holds) =
-                    upgrade_swapped(&tried[k].fit, self.train, &self.scored, self.opt, self.y_span);
+                let (gain, holds) = upgrade_swapped(
+                    &tried[k].fit,
+                    self.train,
+                    &self.scored,
+                    self.opt,
+                    self.y_span,
+                );
                 if !holds {
                     refused.push((Cause::AmplitudeDynamics, gain));
                     continue;
@@ -713,7 +718,14 @@ impl<'a> Setup<'a> {
     }
 
     /// A finding: `cause` took the model from `before` to `after`.
-    fn finding(&self, cause: Cause, round: usize, before: &Scored, after: &Scored, ev: Evidence) -> Finding {
+    fn finding(
+        &self,
+        cause: Cause,
+        round: usize,
+        before: &Scored,
+        after: &Scored,
+        ev: Evidence,
+    ) -> Finding {
         let gains_per_record = if self.several {
             per_record(&self.scored, &before.pred)
                 .iter()
@@ -758,9 +770,16 @@ impl<'a> Setup<'a> {
                 .findings
                 .par_iter()
                 .enumerate()
-                .map(|(k, fd)| (k, self.scored(reduce(&current.fit, fd.cause, &self.tiers, self.opt))))
+                .map(|(k, fd)| {
+                    (
+                        k,
+                        self.scored(reduce(&current.fit, fd.cause, &self.tiers, self.opt)),
+                    )
+                })
                 .collect();
-            let Some((k, without)) = tried.into_iter().min_by(|a, b| a.1.valid.total_cmp(&b.1.valid))
+            let Some((k, without)) = tried
+                .into_iter()
+                .min_by(|a, b| a.1.valid.total_cmp(&b.1.valid))
             else {
                 break;
             };
@@ -807,8 +826,7 @@ impl<'a> Setup<'a> {
                 // The amplitude dependence does not hold up but the resonance does: named
                 // as the plain dynamics, measured afresh.
                 let fit = plain_dynamics(&state.current.fit, &self.tiers, self.opt);
-                let without =
-                    self.scored(reduce(&fit, Cause::Dynamics, &self.tiers, self.opt));
+                let without = self.scored(reduce(&fit, Cause::Dynamics, &self.tiers, self.opt));
                 let with = self.scored(fit);
                 let off = switched_off(&with.fit, Cause::Dynamics).predict_all(self.valid);
                 let ev = evidence_set(&self.scored, Cause::Dynamics, &off, &with.fit);
@@ -819,7 +837,8 @@ impl<'a> Setup<'a> {
                 k += 1;
                 continue;
             }
-            state.current = self.scored(reduce(&state.current.fit, fd.cause, &self.tiers, self.opt));
+            state.current =
+                self.scored(reduce(&state.current.fit, fd.cause, &self.tiers, self.opt));
         }
     }
 

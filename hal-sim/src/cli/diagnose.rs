@@ -61,7 +61,10 @@ pub fn run(args: Args) -> Result<()> {
     let (label, others): (String, Vec<Arrangement>) = if windowed {
         (
             "windows".into(),
-            SPLITS.iter().map(|&f| Arrangement::split(&wholes, f)).collect(),
+            SPLITS
+                .iter()
+                .map(|&f| Arrangement::split(&wholes, f))
+                .collect(),
         )
     } else if rs.valid.is_empty() {
         let f = rs.split.unwrap_or(0.5);

@@ -93,7 +93,13 @@ impl Consistency {
         all.dedup();
         // The first arrangement's causes first, in the order it named them.
         if let Some(first) = named.first() {
-            all.sort_by_key(|c| first.causes.iter().position(|x| x == c).unwrap_or(usize::MAX));
+            all.sort_by_key(|c| {
+                first
+                    .causes
+                    .iter()
+                    .position(|x| x == c)
+                    .unwrap_or(usize::MAX)
+            });
         }
         let causes = all
             .into_iter()
@@ -220,7 +226,9 @@ mod tests {
         let drift = &c.causes[1];
         assert_eq!(drift.named_in, ["split 0.5"]);
         assert_eq!(drift.not_in, ["split 0.65", "split 0.8"]);
-        assert!(c.text().contains("confident creep; uncertain drift (named in split 0.5"));
+        assert!(c
+            .text()
+            .contains("confident creep; uncertain drift (named in split 0.5"));
         let none = Consistency::of(vec![Named {
             label: "a".into(),
             causes: vec![],

@@ -216,7 +216,9 @@ struct Sig<'a> {
 }
 
 fn dynamics(s: &Sig) -> Evidence {
-    let Sig { u, dt, r, y_model, .. } = *s;
+    let Sig {
+        u, dt, r, y_model, ..
+    } = *s;
     let yd = derivative(y_model, dt);
     let ydd = derivative(&yd, dt);
     let r2 = explained(r, &[yd, ydd]);
@@ -235,7 +237,14 @@ fn dynamics(s: &Sig) -> Evidence {
 }
 
 fn amplitude_dynamics(s: &Sig) -> Evidence {
-    let Sig { dt, n, r, y_model, fitted, .. } = *s;
+    let Sig {
+        dt,
+        n,
+        r,
+        y_model,
+        fitted,
+        ..
+    } = *s;
     // `r` is what the amplitude dependence removes from the plain dynamics (the
     // candidate with it switched off): the ringing's rate and acceleration weighted
     // by the ringing's amplitude (the envelope of the acceleration over `wn^2`).
@@ -341,7 +350,9 @@ fn saturation(s: &Sig) -> Evidence {
 }
 
 fn slew_limit(s: &Sig) -> Evidence {
-    let Sig { u, dt, r, fitted, .. } = *s;
+    let Sig {
+        u, dt, r, fitted, ..
+    } = *s;
     let rate = derivative(u, dt);
     let abs: Vec<f64> = rate.iter().map(|v| v.abs()).collect();
     // Limits at quantiles of the rate, and the candidate's fitted limit: the limit
@@ -426,7 +437,15 @@ fn cross_coupling(s: &Sig) -> Evidence {
 }
 
 fn backlash(s: &Sig) -> Evidence {
-    let Sig { u, dt, n, r, y_model, fitted, .. } = *s;
+    let Sig {
+        u,
+        dt,
+        n,
+        r,
+        y_model,
+        fitted,
+        ..
+    } = *s;
     let (lo, hi) = (quantile(u, 0.0), quantile(u, 1.0));
     let span = (hi - lo).max(1e-12);
     // The lag of a played input behind the input, for play widths around the fitted one.
@@ -500,7 +519,9 @@ fn startup_creep(s: &Sig) -> Evidence {
 }
 
 fn rate_dependence(s: &Sig) -> Evidence {
-    let Sig { u, dt, r, fitted, .. } = *s;
+    let Sig {
+        u, dt, r, fitted, ..
+    } = *s;
     let g = hysteresis(u, fitted.beta, fitted.gamma);
     let abs: Vec<f64> = derivative(u, dt).iter().map(|v| v.abs()).collect();
     let moving: Vec<f64> = abs.iter().copied().filter(|v| *v > 0.0).collect();

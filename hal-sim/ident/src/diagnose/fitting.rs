@@ -736,9 +736,16 @@ fn refine_starts(causes: Causes, shape: &Shape) -> Vec<Shape> {
         }
     }
     v.retain(|s| {
-        [s.wn_hz, s.delay_s, s.slew_v_per_s, s.play_um, s.startup_travel_v, s.rate_ref_v_per_s]
-            .iter()
-            .all(|x| !x.is_nan())
+        [
+            s.wn_hz,
+            s.delay_s,
+            s.slew_v_per_s,
+            s.play_um,
+            s.startup_travel_v,
+            s.rate_ref_v_per_s,
+        ]
+        .iter()
+        .all(|x| !x.is_nan())
     });
     v
 }
