@@ -1,23 +1,33 @@
-//! Model discovery (`piezo diagnose`): base CBW fit, candidate causes, residual signatures, iterative extension.
+//! Model discovery (`piezo diagnose`): which causes does the classical Bouc-Wen model miss?
 //!
-//! 1. Fit the base model, the classical Bouc-Wen `y = d*u - h + y0` (000 eq. 1-2), one per
-//!    output, each driven by its own input, on the training record.
-//! 2. For every cause not yet in the model, fit the model extended by that cause (starting
-//!    from the current fit, global stage on decimated data, then a local polish on all of
-//!    it), and measure it on the validation record, which had a different excitation.
-//! 3. A cause's gain is real if it is at least [`MIN_GAIN`] of the current validation RMSE
-//!    and the cause's signature (what the residual correlates with, [`evidence`]) explains at
-//!    least [`MIN_R2`] of the residual. Of the real ones, accept the cause that removes most
-//!    of the residual on both records (the product of its train and valid error ratios).
-//! 4. Repeat from 2 with the extended model until nothing passes: two causes present at
-//!    once are both found, and clean data answers `none`.
-//! 5. A backward check drops causes a later one made redundant; a swap check refuses a cause
-//!    that does not gain with the records' roles swapped (fitted on the validation records,
-//!    scored on the training ones).
+//! The rule runs as stages, each a function below, in this order:
 //!
-//! Errors are RMSE (004 eq. 23); all parameters are fitted on the training record only.
+//! 1. **Base** ([`Setup::base`]): the classical Bouc-Wen `y = d*u - h + y0` (000 eq. 1-2), one
+//!    per output, each driven by its own input, fitted on the training records.
+//! 2. **Candidates** ([`candidates`]): every cause of the catalogue not yet in the model
+//!    (`amplitude-dynamics` only as the upgrade of found `dynamics`).
+//! 3. **Fitting** ([`Setup::fit_round`]): the model extended by each candidate, and the
+//!    controls a candidate must beat: the named causes refitted by the same search, refined
+//!    (each named cause's nonlinear coordinates searched again from either side) and each
+//!    candidate's fit with its cause switched off. The best control becomes the model.
+//! 4. **Selection** ([`Setup::weigh`], [`Setup::select`]): a candidate counts when it gains
+//!    at least [`MIN_GAIN`] of the validation RMSE and its signature explains at least
+//!    [`MIN_R2`] of the residual its extension removes ([`evidence`]); whether its gain is
+//!    worth its extra parameters in the residual's effective number of independent samples
+//!    ([`criterion`]) is reported with it. Of those, the one that removes most of the
+//!    residual on both records is taken. Rounds repeat until nothing counts or the residual is at the noise floor the
+//!    record shows ([`NOISE_FLOOR`]). Then a backward check drops causes a later one made
+//!    redundant ([`Setup::backward`]), and a swap check refuses causes that do not gain with
+//!    the records' roles swapped ([`Setup::swap_check`]).
+//! 5. **Consistency** ([`consistency`], run by the caller): the same rule on other
+//!    arrangements of the data; causes named in every one are `confident`.
+//! 6. **Report** ([`Setup::report`]): the [`Diagnosis`] and its JSON.
+//!
+//! Errors are RMSE (004 eq. 23); all parameters are fitted on the training records only.
 
+pub mod consistency;
 mod coords;
+pub mod criterion;
 mod dynamics;
 pub mod evidence;
 mod fitting;
@@ -34,9 +44,10 @@ use serde::Serialize;
 use serde_json::{json, Value};
 
 use crate::numeric::rmse_all;
+pub use consistency::Consistency;
 pub use evidence::Evidence;
 pub use fitting::Fitted;
-use fitting::{ablate, extend, fit_base, plain_dynamics, reduce, switched_off, Tiers};
+use fitting::{ablate, extend, fit_base, plain_dynamics, reduce, refine, switched_off, Tiers};
 pub use model::{Cause, Causes, OutputModel, Scales, Shape};
 pub use signals::Signals;
 pub use unexplained::Unexplained;
@@ -51,6 +62,10 @@ pub const MIN_R2: f64 = 0.02;
 pub const MIN_ABS_GAIN: f64 = 2e-5;
 /// At most this many causes are added.
 pub const MAX_ROUNDS: usize = 4;
+/// No further cause is searched once the validation RMSE is within this factor of the
+/// sensor noise the records show (second differences, [`evidence::noise_rms`]): what is
+/// left is noise.
+pub const NOISE_FLOOR: f64 = 1.05;
 
 /// Search effort.
 #[derive(Debug, Clone, Copy)]
@@ -86,9 +101,6 @@ impl Default for Options {
 /// Predictions on several records: per record, per output.
 type Preds = Vec<Vec<Vec<f64>>>;
 
-/// A fitted extension, its validation predictions and RMSE.
-type Tried = (Fitted, Preds, f64);
-
 /// One tried extension.
 #[derive(Debug, Clone, Serialize)]
 pub struct Candidate {
@@ -99,6 +111,13 @@ pub struct Candidate {
     /// `1 - rmse_valid / (current model's rmse_valid)`.
     pub gain: f64,
     pub evidence: Evidence,
+    /// Independent samples in the validation residual the candidate leaves
+    /// ([`criterion::effective_samples`]).
+    pub effective_samples: f64,
+    /// Parameters the cause adds (all outputs).
+    pub extra_params: usize,
+    /// [`criterion::penalised_gain`]: positive when the gain is worth the parameters.
+    pub criterion: f64,
     pub significant: bool,
 }
 
@@ -243,6 +262,9 @@ impl Diagnosis {
                 "rmse_train": c.rmse_train,
                 "gain": c.gain,
                 "evidence_r2": c.evidence.r2,
+                "effective_samples": c.effective_samples,
+                "extra_params": c.extra_params,
+                "criterion": c.criterion,
                 "significant": c.significant,
             })).collect::<Vec<_>>(),
             "findings": self.findings,
@@ -250,7 +272,13 @@ impl Diagnosis {
             "dropped": self.dropped.iter().map(|c| c.name()).collect::<Vec<_>>(),
             "refused": self.refused.iter().map(|(c, g)| json!({"cause": c.name(), "swapped_gain": g})).collect::<Vec<_>>(),
             "unexplained": self.unexplained,
-            "rule": {"min_gain": MIN_GAIN, "min_abs_gain_of_span": MIN_ABS_GAIN, "min_evidence_r2": MIN_R2},
+            "rule": {
+                "min_gain": MIN_GAIN,
+                "min_abs_gain_of_span": MIN_ABS_GAIN,
+                "min_evidence_r2": MIN_R2,
+                "criterion": "N_eff*ln(rmse_before/rmse_after) > extra_params*ln(N_eff)/2",
+                "noise_floor": NOISE_FLOOR,
+            },
         })
     }
 }
@@ -416,250 +444,385 @@ pub fn diagnose_records(
     opt: &Options,
 ) -> anyhow::Result<Diagnosis> {
     check_records(train, valid)?;
-    let scored: Vec<Signals> = valid.iter().map(Signals::scored).collect();
-    let measured = flat_outputs(&scored);
-    let score = |pred: &[Vec<Vec<f64>>]| rmse_all(&measured, &flat(pred));
-    let several = valid.len() > 1;
-    let swappable = valid.iter().all(|v| v.warmup == 0);
-    let tiers = Tiers::new(train, opt);
-    let mut base = fit_base(&tiers, opt);
-    let mut base_pred = base.predict_all(valid);
-    let mut base_valid = score(&base_pred);
-    anyhow::ensure!(
-        base_valid.is_finite(),
-        "base model diverged on the validation record"
-    );
-    let noise_rms = {
-        let (s, n) = scored
-            .iter()
-            .flat_map(|r| r.y.iter())
-            .map(|y| evidence::noise_rms(y).powi(2))
-            .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-        (s / n as f64).sqrt()
-    };
-    let y_span = scored
-        .iter()
-        .flat_map(|r| r.y.iter())
-        .map(|y| {
-            let (lo, hi) = model::min_max(y);
-            hi - lo
-        })
-        .fold(0.0, f64::max);
-    let mut current = base.clone();
-    let mut current_valid = base_valid;
-    let mut current_pred = base_pred.clone();
-    let mut findings = Vec::new();
-    let mut candidates = Vec::new();
-    let mut refused = Vec::new();
+    let setup = Setup::new(train, valid, opt);
+    let base = setup.base()?;
+    let mut state = State::new(base);
     for round in 1..=MAX_ROUNDS {
-        let todo: Vec<Cause> = applicable(&train[0])
-            .into_iter()
-            .filter(|c| match c {
-                // An upgrade of the plain dynamics, once they are found: searched only where
-                // a resonance is, and from its fitted frequency and damping.
-                Cause::AmplitudeDynamics => {
-                    current.causes.has(Cause::Dynamics)
-                        && !current.causes.has(Cause::AmplitudeDynamics)
-                }
-                Cause::Dynamics => {
-                    !current.causes.has(Cause::Dynamics)
-                        && !current.causes.has(Cause::AmplitudeDynamics)
-                }
-                c => !current.causes.has(*c),
-            })
-            .collect();
+        if state.current.valid <= NOISE_FLOOR * setup.noise_rms {
+            break;
+        }
+        let todo = candidates(&state.current.fit, &train[0]);
         if todo.is_empty() {
             break;
         }
-        // The current causes refitted by the same search are the control: a cause must gain
-        // more than what a longer search alone gives.
+        let tried = setup.fit_round(&mut state, &todo);
+        let weighed = setup.weigh(round, &state.current, &todo, &tried);
+        let chosen = setup.select(&state.current, &todo, &tried, &weighed, &mut state.refused);
+        let evidence = chosen.map(|k| weighed[k].evidence.clone());
+        state.candidates.extend(weighed);
+        let (Some(k), Some(evidence)) = (chosen, evidence) else {
+            break;
+        };
+        let Some(next) = tried.into_iter().nth(k) else {
+            break;
+        };
+        state.accept(&setup, todo[k], round, next, evidence);
+    }
+    setup.backward(&mut state);
+    setup.swap_check(&mut state);
+    Ok(setup.report(state))
+}
+
+/// A model, its predictions on the validation records' scored samples and its RMSE there.
+#[derive(Clone)]
+struct Scored {
+    fit: Fitted,
+    pred: Preds,
+    valid: f64,
+}
+
+/// What the rounds build up.
+struct State {
+    /// The base model (replaced by a better converged one while no cause is named).
+    base: Scored,
+    current: Scored,
+    findings: Vec<Finding>,
+    candidates: Vec<Candidate>,
+    dropped: Vec<Cause>,
+    refused: Vec<(Cause, f64)>,
+}
+
+impl State {
+    fn new(base: Scored) -> Self {
+        Self {
+            current: base.clone(),
+            base,
+            findings: Vec::new(),
+            candidates: Vec::new(),
+            dropped: Vec::new(),
+            refused: Vec::new(),
+        }
+    }
+
+    /// Takes `cause` (its extension `next`) into the model.
+    fn accept(&mut self, setup: &Setup, cause: Cause, round: usize, next: Scored, ev: Evidence) {
+        // The upgrade replaces the plain dynamics' finding (kept inside it).
+        let upgrades = if cause == Cause::AmplitudeDynamics {
+            self.findings
+                .iter()
+                .position(|f| f.cause == Cause::Dynamics)
+                .map(|k| Box::new(self.findings.remove(k)))
+        } else {
+            None
+        };
+        let mut finding = setup.finding(cause, round, &self.current, &next, ev);
+        finding.upgrades = upgrades;
+        self.findings.push(finding);
+        self.current = next;
+    }
+}
+
+/// The records and what every stage measures on them.
+struct Setup<'a> {
+    train: &'a [Signals],
+    valid: &'a [Signals],
+    /// The validation records' scored samples.
+    scored: Vec<Signals>,
+    measured: Vec<Vec<f64>>,
+    tiers: Tiers<'a>,
+    opt: &'a Options,
+    noise_rms: f64,
+    y_span: f64,
+    several: bool,
+    /// Whether the swap check can run: no validation record continues a training record.
+    swappable: bool,
+}
+
+impl<'a> Setup<'a> {
+    fn new(train: &'a [Signals], valid: &'a [Signals], opt: &'a Options) -> Self {
+        let scored: Vec<Signals> = valid.iter().map(Signals::scored).collect();
+        let noise_rms = {
+            let (s, n) = scored
+                .iter()
+                .flat_map(|r| r.y.iter())
+                .map(|y| evidence::noise_rms(y).powi(2))
+                .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+            (s / n as f64).sqrt()
+        };
+        let y_span = scored
+            .iter()
+            .flat_map(|r| r.y.iter())
+            .map(|y| {
+                let (lo, hi) = model::min_max(y);
+                hi - lo
+            })
+            .fold(0.0, f64::max);
+        Self {
+            train,
+            valid,
+            measured: flat_outputs(&scored),
+            scored,
+            tiers: Tiers::new(train, opt),
+            opt,
+            noise_rms,
+            y_span,
+            several: valid.len() > 1,
+            swappable: valid.iter().all(|v| v.warmup == 0),
+        }
+    }
+
+    fn scored(&self, fit: Fitted) -> Scored {
+        let pred = fit.predict_all(self.valid);
+        let valid = rmse_all(&self.measured, &flat(&pred));
+        Scored { fit, pred, valid }
+    }
+
+    /// Residuals `y - pred` of every validation record and output.
+    fn residuals(&self, pred: &Preds) -> Vec<Vec<f64>> {
+        self.measured
+            .iter()
+            .zip(flat(pred))
+            .map(|(y, p)| y.iter().zip(&p).map(|(a, b)| a - b).collect())
+            .collect()
+    }
+
+    /// Stage 1: the base model.
+    fn base(&self) -> anyhow::Result<Scored> {
+        let base = self.scored(fit_base(&self.tiers, self.opt));
+        anyhow::ensure!(
+            base.valid.is_finite(),
+            "base model diverged on the validation record"
+        );
+        Ok(base)
+    }
+
+    /// Stage 3: every candidate fitted, and the best control (the named causes refitted,
+    /// refined, or a candidate's fit with its cause switched off) made the model, so a cause
+    /// never takes credit for a better converged fit of the causes already named.
+    fn fit_round(&self, state: &mut State, todo: &[Cause]) -> Vec<Scored> {
+        let current = &state.current.fit;
         // The upgrade's long search starts first, so the short ones fill the other core.
         let mut runs: Vec<(usize, Option<Cause>)> = std::iter::once(None)
             .chain(todo.iter().copied().map(Some))
             .enumerate()
             .collect();
         runs.sort_by_key(|(_, c)| *c != Some(Cause::AmplitudeDynamics));
-        let mut tried: Vec<(usize, Tried)> = runs
-            .par_iter()
-            .map(|&(k, c)| {
-                let f = extend(&current, c, &tiers, opt);
-                let pred = f.predict_all(valid);
-                let e = score(&pred);
-                (k, (f, pred, e))
-            })
-            .collect();
+        let (mut tried, refined) = rayon::join(
+            || {
+                runs.par_iter()
+                    .map(|&(k, c)| (k, self.scored(extend(current, c, &self.tiers, self.opt))))
+                    .collect::<Vec<_>>()
+            },
+            || refine(current, &self.tiers, self.opt),
+        );
         tried.sort_by_key(|(k, _)| *k);
-        let mut tried: Vec<Tried> = tried.into_iter().map(|(_, t)| t).collect();
+        let mut tried: Vec<Scored> = tried.into_iter().map(|(_, t)| t).collect();
         let control = tried.remove(0);
-        // Each candidate without its cause (its refitted CBW shape, the cause's extension
-        // switched off, linear part refitted on train): a better fit of the current model that
-        // the candidate's search found. Gains are then measured against the best of these, so
-        // a cause never takes credit for a better converged hysteresis.
         let ablated: Vec<Fitted> = tried
             .par_iter()
-            .zip(&todo)
-            .map(|((f, _, _), &c)| ablate(f, current.causes, c, &tiers))
+            .zip(todo)
+            .map(|(t, &c)| ablate(&t.fit, current.causes, c, &self.tiers))
             .collect();
-        let best_same = std::iter::once(control.0.clone())
+        let best_same = std::iter::once(control.fit.clone())
+            .chain(refined)
             .chain(ablated)
             .min_by(|a, b| a.rmse_train.total_cmp(&b.rmse_train))
             .expect("control is always there");
-        let control = if best_same.rmse_train < control.0.rmse_train {
-            let pred = best_same.predict_all(valid);
-            let e = score(&pred);
-            (best_same, pred, e)
+        let control = if best_same.rmse_train < control.fit.rmse_train {
+            self.scored(best_same)
         } else {
             control
         };
-        if control.0.rmse_train < current.rmse_train && control.2.is_finite() {
-            (current, current_pred, current_valid) = control;
-            if findings.is_empty() {
+        if control.fit.rmse_train < current.rmse_train && control.valid.is_finite() {
+            if state.findings.is_empty() {
                 // Still the base model, only better converged.
-                base = current.clone();
-                base_pred = current_pred.clone();
-                base_valid = current_valid;
+                state.base = control.clone();
             }
+            state.current = control;
         }
-        // Every candidate is fitted: its evidence is measured in its own frame (below), and
-        // a cause can show in the training record only.
-        // In parallel: each candidate's evidence runs its own predictions on both records.
-        let (tried, mut evidence): (Vec<Tried>, Vec<Evidence>) = tried
-            .into_par_iter()
-            .zip(&todo)
-            .map(|((f, p, e), &c)| {
-                // The residual the candidate's own extension removes: the candidate with
-                // its cause switched off (everything else as fitted). On both records: a
-                // cause can distort the training fit (and so the validation) while showing
-                // little in the validation record itself.
-                let off = switched_off(&f, c);
-                let ev_valid = evidence_set(&scored, c, &off.predict_all(valid), &f);
-                let mut ev_train = evidence_set(train, c, &off.predict_all(train), &f);
-                let ev = if ev_train.r2 > ev_valid.r2 {
-                    ev_train.text.push_str(" (training record)");
-                    ev_train
-                } else {
-                    ev_valid
-                };
-                ((f, p, e), ev)
+        tried
+    }
+
+    /// Stage 4a: each candidate's gain, evidence and criterion, and whether it counts.
+    fn weigh(
+        &self,
+        round: usize,
+        current: &Scored,
+        todo: &[Cause],
+        tried: &[Scored],
+    ) -> Vec<Candidate> {
+        let inputs = self.train[0].u.len();
+        let outputs = self.train[0].y.len();
+        tried
+            .par_iter()
+            .zip(todo)
+            .map(|(t, &c)| {
+                let ev = self.candidate_evidence(t, c);
+                let e = t.valid;
+                let gain = 1.0 - e / current.valid;
+                let n_eff = criterion::effective_samples(&self.residuals(&t.pred));
+                let k = outputs * criterion::extra_params(c, inputs, t.fit.taus.len());
+                let worth = criterion::penalised_gain(current.valid, e, n_eff, k);
+                // The criterion is reported, not decisive: deciding by it named fewer true
+                // causes on fresh records (see docs/src/diagnose.md).
+                let significant = gain.is_finite()
+                    && gain >= MIN_GAIN
+                    && current.valid - e >= MIN_ABS_GAIN * self.y_span
+                    && ev.r2 >= MIN_R2;
+                Candidate {
+                    cause: c,
+                    round,
+                    rmse_train: t.fit.rmse_train,
+                    rmse_valid: e,
+                    gain,
+                    evidence: ev,
+                    effective_samples: n_eff,
+                    extra_params: k,
+                    criterion: worth,
+                    significant,
+                }
             })
-            .unzip();
-        let mut significant_ones = Vec::new();
-        for (k, (t, ev)) in tried.iter().zip(&evidence).enumerate() {
-            let (rmse_train, e) = (t.0.rmse_train, t.2);
-            let gain = 1.0 - e / current_valid;
-            let significant = gain.is_finite()
-                && gain >= MIN_GAIN
-                && current_valid - e >= MIN_ABS_GAIN * y_span
-                && ev.r2 >= MIN_R2;
-            candidates.push(Candidate {
-                cause: todo[k],
-                round,
-                rmse_train,
-                rmse_valid: e,
-                gain,
-                evidence: ev.clone(),
-                significant,
-            });
-            if significant {
-                significant_ones.push(k);
-            }
+            .collect()
+    }
+
+    /// The residual the candidate's own extension removes: the candidate with its cause
+    /// switched off (everything else as fitted), on both records: a cause can distort the
+    /// training fit (and so the validation) while showing little in the validation record.
+    fn candidate_evidence(&self, t: &Scored, c: Cause) -> Evidence {
+        let off = switched_off(&t.fit, c);
+        let ev_valid = evidence_set(&self.scored, c, &off.predict_all(self.valid), &t.fit);
+        let mut ev_train = evidence_set(self.train, c, &off.predict_all(self.train), &t.fit);
+        if ev_train.r2 > ev_valid.r2 {
+            ev_train.text.push_str(" (training record)");
+            ev_train
+        } else {
+            ev_valid
         }
-        // Among the significant candidates, the one that removes most of the residual on
-        // both records (the product of its error ratios on train and valid): a cause that
-        // gains on the validation record by standing in for another, while explaining
-        // little of the training record, loses to the one that explains both.
-        let both =
-            |k: usize| (tried[k].2 / current_valid) * (tried[k].0.rmse_train / current.rmse_train);
-        significant_ones.sort_by(|a, b| both(*a).total_cmp(&both(*b)));
-        // The amplitude dependence must hold up over the plain dynamics with the records'
-        // roles swapped before it is taken: a model carrying a spurious one is slow to search
-        // and lets other causes stand in for what it distorts.
-        let mut best = None;
-        for k in significant_ones {
-            if todo[k] == Cause::AmplitudeDynamics && swappable {
-                let (gain, holds) = upgrade_swapped(&tried[k].0, train, &scored, opt, y_span);
+    }
+
+    /// Stage 4b: among the candidates that count, the one that removes most of the residual on
+    /// both records (the product of its error ratios on train and valid): a cause that gains
+    /// on the validation record by standing in for another, while explaining little of the
+    /// training record, loses to the one that explains both. The amplitude dependence must
+    /// also hold up over the plain dynamics with the records' roles swapped: a model carrying a
+    /// spurious one is slow to search and lets other causes stand in for what it distorts.
+    fn select(
+        &self,
+        current: &Scored,
+        todo: &[Cause],
+        tried: &[Scored],
+        weighed: &[Candidate],
+        refused: &mut Vec<(Cause, f64)>,
+    ) -> Option<usize> {
+        let mut ok: Vec<usize> = (0..weighed.len())
+            .filter(|&k| weighed[k].significant)
+            .collect();
+        let both = |k: usize| {
+            (tried[k].valid / current.valid) * (tried[k].fit.rmse_train / current.fit.rmse_train)
+        };
+        ok.sort_by(|a, b| both(*a).total_cmp(&both(*b)));
+        for k in ok {
+            if todo[k] == Cause::AmplitudeDynamics && self.swappable {
+                let (gain, holds) = upgrade_swapped(
+                    &tried[k].fit,
+                    self.train,
+                    &self.scored,
+                    self.opt,
+                    self.y_span,
+                );
                 if !holds {
                     refused.push((Cause::AmplitudeDynamics, gain));
                     continue;
                 }
             }
-            best = Some(k);
-            break;
+            return Some(k);
         }
-        let Some(b) = best else { break };
-        let Some((f, p, e)) = tried.into_iter().nth(b) else {
-            break;
-        };
-        let ev = evidence.swap_remove(b);
-        // The upgrade replaces the plain dynamics' finding (kept inside it).
-        let upgrades = if todo[b] == Cause::AmplitudeDynamics {
-            findings
+        None
+    }
+
+    /// A finding: `cause` took the model from `before` to `after`.
+    fn finding(
+        &self,
+        cause: Cause,
+        round: usize,
+        before: &Scored,
+        after: &Scored,
+        ev: Evidence,
+    ) -> Finding {
+        let gains_per_record = if self.several {
+            per_record(&self.scored, &before.pred)
                 .iter()
-                .position(|f: &Finding| f.cause == Cause::Dynamics)
-                .map(|k| Box::new(findings.remove(k)))
-        } else {
-            None
-        };
-        let gains_per_record = if several {
-            per_record(&scored, &current_pred)
-                .iter()
-                .zip(per_record(&scored, &p))
-                .map(|(before, after)| 1.0 - after / before)
+                .zip(per_record(&self.scored, &after.pred))
+                .map(|(b, a)| 1.0 - a / b)
                 .collect()
         } else {
             Vec::new()
         };
-        findings.push(Finding {
-            cause: todo[b],
+        Finding {
+            cause,
             round,
-            rmse_valid_before: current_valid,
-            rmse_valid: e,
-            gain: 1.0 - e / current_valid,
+            rmse_valid_before: before.valid,
+            rmse_valid: after.valid,
+            gain: 1.0 - after.valid / before.valid,
             evidence: ev,
-            confidence: confidence(&scored, &current_pred, &p),
+            confidence: confidence(&self.scored, &before.pred, &after.pred),
             gains_per_record,
-            upgrades,
-        });
-        current = f;
-        current_pred = p;
-        current_valid = e;
-    }
-    // Backward check: a cause found early can be made redundant by a later one (dynamics
-    // standing in for a delay before the asymmetry was modelled). Refit without each found
-    // cause; drop the cheapest to lose while losing it costs less than the rule for a gain.
-    let mut dropped = Vec::new();
-    while findings.len() > 1 {
-        let tried: Vec<(usize, Fitted, Preds, f64)> = findings
-            .par_iter()
-            .enumerate()
-            .map(|(k, fd)| {
-                let f = reduce(&current, fd.cause, &tiers, opt);
-                let p = f.predict_all(valid);
-                let e = score(&p);
-                (k, f, p, e)
-            })
-            .collect();
-        let Some((k, f, p, e)) = tried.into_iter().min_by(|a, b| a.3.total_cmp(&b.3)) else {
-            break;
-        };
-        let gain = 1.0 - current_valid / e;
-        if !e.is_finite() || (gain >= MIN_GAIN && e - current_valid >= MIN_ABS_GAIN * y_span) {
-            break;
+            upgrades: None,
         }
-        dropped.push(findings.remove(k).cause);
-        current = f;
-        current_pred = p;
-        current_valid = e;
     }
-    // Swap check: a named cause must hold up whichever record trains. The final model is
-    // refitted on the validation records, with and without each cause, and scored on the
-    // training records; a cause that does not then gain by the rule for a gain is refused.
-    // Not with warm-up samples (`--split`, time windows): the training records would then be
-    // scored from their first sample, without the history (a rest, say) the validation
-    // records ran through, which on SmartHysteresis refuses an 80 % creep.
-    if !findings.is_empty() && swappable {
-        let swapped = swap_gains(&current, &findings, train, &scored, opt, y_span);
-        for (fd, g) in findings.iter_mut().zip(&swapped) {
+
+    /// A cause found early can be made redundant by a later one (dynamics standing in for a
+    /// delay before the asymmetry was modelled). Refit without each found cause; drop the
+    /// cheapest to lose while losing it costs less than the rule for a gain.
+    fn backward(&self, state: &mut State) {
+        while state.findings.len() > 1 {
+            let current = &state.current;
+            let tried: Vec<(usize, Scored)> = state
+                .findings
+                .par_iter()
+                .enumerate()
+                .map(|(k, fd)| {
+                    (
+                        k,
+                        self.scored(reduce(&current.fit, fd.cause, &self.tiers, self.opt)),
+                    )
+                })
+                .collect();
+            let Some((k, without)) = tried
+                .into_iter()
+                .min_by(|a, b| a.1.valid.total_cmp(&b.1.valid))
+            else {
+                break;
+            };
+            if !without.valid.is_finite()
+                || gains_by_rule(without.valid, current.valid, self.y_span)
+            {
+                break;
+            }
+            state.dropped.push(state.findings.remove(k).cause);
+            state.current = without;
+        }
+    }
+
+    /// A named cause must hold up whichever record trains. The final model is refitted on
+    /// the validation records, with and without each cause, and scored on the training
+    /// records; a cause that does not then gain by the rule for a gain is refused. Not with
+    /// warm-up samples (`--split`, time windows): the training records would then be scored
+    /// from their first sample, without the history (a rest, say) the validation records ran
+    /// through, which on SmartHysteresis refuses an 80 % creep.
+    fn swap_check(&self, state: &mut State) {
+        if state.findings.is_empty() || !self.swappable {
+            return;
+        }
+        let swapped = swap_gains(
+            &state.current.fit,
+            &state.findings,
+            self.train,
+            &self.scored,
+            self.opt,
+            self.y_span,
+        );
+        for (fd, g) in state.findings.iter_mut().zip(&swapped) {
             fd.confidence.swapped_gain = Some(g.0);
         }
         let mut k = 0;
@@ -668,84 +831,80 @@ pub fn diagnose_records(
                 k += 1;
                 continue;
             }
-            let fd = findings.remove(k);
-            refused.push((fd.cause, gain));
+            let fd = state.findings.remove(k);
+            state.refused.push((fd.cause, gain));
             if let Some((g, true)) = plain {
                 // The amplitude dependence does not hold up but the resonance does: named
                 // as the plain dynamics, measured afresh.
-                current = plain_dynamics(&current, &tiers, opt);
-                let without = reduce(&current, Cause::Dynamics, &tiers, opt).predict_all(valid);
-                let with = current.predict_all(valid);
-                let (before, after) = (score(&without), score(&with));
-                let off = switched_off(&current, Cause::Dynamics).predict_all(valid);
-                let mut confidence = confidence(&scored, &without, &with);
-                confidence.swapped_gain = Some(g);
-                findings.insert(
-                    k,
-                    Finding {
-                        cause: Cause::Dynamics,
-                        round: fd.round,
-                        rmse_valid_before: before,
-                        rmse_valid: after,
-                        gain: 1.0 - after / before,
-                        evidence: evidence_set(&scored, Cause::Dynamics, &off, &current),
-                        confidence,
-                        gains_per_record: if several {
-                            per_record(&scored, &without)
-                                .iter()
-                                .zip(per_record(&scored, &with))
-                                .map(|(b, a)| 1.0 - a / b)
-                                .collect()
-                        } else {
-                            Vec::new()
-                        },
-                        upgrades: None,
-                    },
-                );
+                let fit = plain_dynamics(&state.current.fit, &self.tiers, self.opt);
+                let without = self.scored(reduce(&fit, Cause::Dynamics, &self.tiers, self.opt));
+                let with = self.scored(fit);
+                let off = switched_off(&with.fit, Cause::Dynamics).predict_all(self.valid);
+                let ev = evidence_set(&self.scored, Cause::Dynamics, &off, &with.fit);
+                let mut finding = self.finding(Cause::Dynamics, fd.round, &without, &with, ev);
+                finding.confidence.swapped_gain = Some(g);
+                state.findings.insert(k, finding);
+                state.current = with;
                 k += 1;
                 continue;
             }
-            current = reduce(&current, fd.cause, &tiers, opt);
-        }
-        if !refused.is_empty() {
-            current_pred = current.predict_all(valid);
-            current_valid = score(&current_pred);
+            state.current =
+                self.scored(reduce(&state.current.fit, fd.cause, &self.tiers, self.opt));
         }
     }
-    let per_valid = per_record(&scored, &base_pred)
+
+    /// Stage 6: the diagnosis, with per-record scores and the residual no cause explains.
+    fn report(&self, state: State) -> Diagnosis {
+        let per_valid = per_record(&self.scored, &state.base.pred)
+            .into_iter()
+            .zip(per_record(&self.scored, &state.current.pred))
+            .map(|(b, e)| RecordScore {
+                rmse_base: b,
+                rmse_extended: e,
+                gain: 1.0 - e / b,
+            })
+            .collect();
+        let residual: Preds = self
+            .scored
+            .iter()
+            .zip(&state.current.pred)
+            .map(|(s, p)| {
+                s.y.iter()
+                    .zip(p)
+                    .map(|(y, m)| y.iter().zip(m).map(|(a, b)| a - b).collect())
+                    .collect()
+            })
+            .collect();
+        Diagnosis {
+            unexplained: unexplained::find(&self.scored, &residual, self.noise_rms),
+            dropped: state.dropped,
+            refused: state.refused,
+            base_valid: state.base.valid,
+            base: state.base.fit,
+            extended_valid: state.current.valid,
+            extended: state.current.fit,
+            findings: state.findings,
+            candidates: state.candidates,
+            noise_rms: self.noise_rms,
+            n_train: self.train.len(),
+            per_valid,
+        }
+    }
+}
+
+/// Stage 2: the causes to try on a model with `current`'s causes, for records like `train`.
+fn candidates(current: &Fitted, train: &Signals) -> Vec<Cause> {
+    let has = |c: Cause| current.causes.has(c);
+    applicable(train)
         .into_iter()
-        .zip(per_record(&scored, &current_pred))
-        .map(|(b, e)| RecordScore {
-            rmse_base: b,
-            rmse_extended: e,
-            gain: 1.0 - e / b,
+        .filter(|&c| match c {
+            // An upgrade of the plain dynamics, once they are found: searched only where a
+            // resonance is, and from its fitted frequency and damping.
+            Cause::AmplitudeDynamics => has(Cause::Dynamics) && !has(Cause::AmplitudeDynamics),
+            Cause::Dynamics => !has(Cause::Dynamics) && !has(Cause::AmplitudeDynamics),
+            c => !has(c),
         })
-        .collect();
-    let residual: Preds = scored
-        .iter()
-        .zip(&current_pred)
-        .map(|(s, p)| {
-            s.y.iter()
-                .zip(p)
-                .map(|(y, m)| y.iter().zip(m).map(|(a, b)| a - b).collect())
-                .collect()
-        })
-        .collect();
-    let unexplained = unexplained::find(&scored, &residual, noise_rms);
-    Ok(Diagnosis {
-        unexplained,
-        dropped,
-        refused,
-        base,
-        base_valid,
-        extended: current,
-        extended_valid: current_valid,
-        findings,
-        candidates,
-        noise_rms,
-        n_train: train.len(),
-        per_valid,
-    })
+        .collect()
 }
 
 /// Whether a model with validation RMSE `after` gains over one with `before` by the rule for

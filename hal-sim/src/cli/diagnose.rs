@@ -5,13 +5,20 @@
 //! piezo diagnose --train A.csv --split 0.5        # one record: first half fits, second validates
 //! piezo diagnose --train A.csv --train B.csv --valid C.csv --valid D.csv   # one model for A and B
 //! piezo diagnose --train A.csv --train-window 3.26:6.26 --valid-window 6.26:   # windows of A
+//! piezo diagnose --train A.csv --valid B.csv --no-consistency   # skip the swapped run
 //! ```
+//!
+//! Every run also checks itself on other arrangements of the same data (unless
+//! `--no-consistency`): a split record at the other splits of 0.5 / 0.65 / 0.8, time windows
+//! at those splits of the whole records, a pair with the records' roles swapped. Causes named
+//! in every arrangement are `confident`, the others `uncertain`.
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::fit_args::{Columns, Records, Window};
 pub use crate::ident::diagnose::report::summary;
+use crate::ident::diagnose::consistency::{self, Arrangement, Consistency, SPLITS};
 use crate::ident::diagnose::{self, report, Diagnosis, Options, Signals};
 
 #[derive(clap::Args, Debug)]
@@ -30,6 +37,10 @@ pub struct Args {
     /// Write plots (loops before/after, residual against the cause's signal) into this folder.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Skip the consistency check (the same rule run on the other splits of 0.5 / 0.65 / 0.8,
+    /// or with the records' roles swapped).
+    #[arg(long)]
+    pub no_consistency: bool,
     /// Columns and units of the records.
     #[command(flatten)]
     pub columns: Columns,
@@ -46,6 +57,29 @@ pub fn run(args: Args) -> Result<()> {
     anyhow::ensure!(!rs.train.is_empty(), "--train is required (see --help)");
     let records = rs.train.iter().map(load).collect::<Result<Vec<_>>>()?;
     let windowed = rs.train_window.is_some() || rs.valid_window.is_some();
+    let wholes = records.clone();
+    // The arrangement asked for, and the others the consistency check runs.
+    let (label, others): (String, Vec<Arrangement>) = if windowed {
+        (
+            "windows".into(),
+            SPLITS
+                .iter()
+                .map(|&f| Arrangement::split(&wholes, f))
+                .collect(),
+        )
+    } else if rs.valid.is_empty() {
+        let f = rs.split.unwrap_or(0.5);
+        (
+            format!("split {f}"),
+            SPLITS
+                .iter()
+                .filter(|&&s| (s - f).abs() > 1e-9)
+                .map(|&s| Arrangement::split(&wholes, s))
+                .collect(),
+        )
+    } else {
+        ("as given".into(), Vec::new())
+    };
     let (train, valid, split_note) = if windowed {
         rs.split_at(0, None)?;
         let valid = if rs.valid.is_empty() {
@@ -91,7 +125,18 @@ pub fn run(args: Args) -> Result<()> {
         let valid = rs.valid.iter().map(load).collect::<Result<Vec<_>>>()?;
         (records, valid, None)
     };
-    let d = diagnose::diagnose_records(&train, &valid, &Options::default())?;
+    let opt = Options::default();
+    let d = diagnose::diagnose_records(&train, &valid, &opt)?;
+    let consistency = if args.no_consistency {
+        None
+    } else {
+        let others = if label == "as given" {
+            vec![Arrangement::swapped(&train, &valid)]
+        } else {
+            others
+        };
+        Some(consistency::check(&label, &d, &others, &opt)?)
+    };
     let mut plots = Vec::new();
     if let Some(dir) = &args.out {
         if valid.len() == 1 {
@@ -121,16 +166,22 @@ pub fn run(args: Args) -> Result<()> {
         } else {
             files(&rs.valid)
         };
-        let j = report::json(
+        let mut j = report::json(
             &d,
             split_note.as_deref(),
             &train_files,
             &valid_files,
             &files(&plots),
         );
+        if let Some(c) = &consistency {
+            j["consistency"] = consistency_json(c);
+        }
         println!("{}", serde_json::to_string_pretty(&j)?);
     } else {
         print!("{}", report::summary(&d, split_note.as_deref()));
+        if let Some(c) = &consistency {
+            println!("{}", c.text());
+        }
         for p in &plots {
             println!("plot: {}", p.display());
         }
@@ -139,6 +190,18 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The consistency report: every arrangement's causes, each cause's status, and the confident
+/// and uncertain causes by name.
+fn consistency_json(c: &Consistency) -> serde_json::Value {
+    let names = |v: Vec<diagnose::Cause>| v.iter().map(|c| c.name()).collect::<Vec<_>>();
+    serde_json::json!({
+        "arrangements": c.arrangements,
+        "causes": c.causes,
+        "confident": names(c.confident()),
+        "uncertain": names(c.uncertain()),
+    })
 }
 
 /// The samples of `r` inside `w`, the model starting at rest at the first.

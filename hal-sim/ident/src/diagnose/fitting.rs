@@ -675,3 +675,114 @@ pub(super) fn ablate(f: &Fitted, causes: Causes, cause: Cause, tiers: &Tiers) ->
         tiers.full,
     )
 }
+
+/// Starting shapes that refine the causes a model with `causes` already names: its own
+/// shape, and each named cause's nonlinear coordinates moved either way (a resonance 30 %
+/// off in frequency or twice as damped, a delay half or twice as long, ...).
+fn refine_starts(causes: Causes, shape: &Shape) -> Vec<Shape> {
+    let mut v = vec![*shape];
+    for c in causes.iter() {
+        match c {
+            Cause::Dynamics => {
+                for (f, z) in [(0.7, 1.0), (1.4, 1.0), (1.0, 0.5), (1.0, 2.0)] {
+                    v.push(Shape {
+                        wn_hz: shape.wn_hz * f,
+                        zeta: shape.zeta * z,
+                        ..*shape
+                    });
+                }
+            }
+            Cause::Delay => {
+                for f in [0.5, 2.0] {
+                    v.push(Shape {
+                        delay_s: shape.delay_s * f,
+                        ..*shape
+                    });
+                }
+            }
+            Cause::SlewLimit => {
+                for f in [0.7, 1.4] {
+                    v.push(Shape {
+                        slew_v_per_s: shape.slew_v_per_s * f,
+                        ..*shape
+                    });
+                }
+            }
+            Cause::Backlash => {
+                for f in [0.5, 2.0] {
+                    v.push(Shape {
+                        play_um: shape.play_um * f,
+                        ..*shape
+                    });
+                }
+            }
+            Cause::StartupCreep => {
+                for f in [0.3, 3.0] {
+                    v.push(Shape {
+                        startup_travel_v: shape.startup_travel_v * f,
+                        ..*shape
+                    });
+                }
+            }
+            Cause::RateDependence => {
+                for f in [0.3, 3.0] {
+                    v.push(Shape {
+                        rate_ref_v_per_s: shape.rate_ref_v_per_s * f,
+                        ..*shape
+                    });
+                }
+            }
+            _ => {}
+        }
+    }
+    v.retain(|s| {
+        [
+            s.wn_hz,
+            s.delay_s,
+            s.slew_v_per_s,
+            s.play_um,
+            s.startup_travel_v,
+            s.rate_ref_v_per_s,
+        ]
+        .iter()
+        .all(|x| !x.is_nan())
+    });
+    v
+}
+
+/// The refinement of the causes `current` names: refitted from [`refine_starts`]; `None`
+/// when no named cause has a nonlinear coordinate to move. A new cause must gain over it:
+/// one that only corrects the imperfect fit of another (a rate dependence standing in for a
+/// slightly wrong resonance) is that cause's refinement.
+pub(super) fn refine(current: &Fitted, tiers: &Tiers, opt: &Options) -> Option<Fitted> {
+    let starts: Vec<Vec<Shape>> = current
+        .outputs
+        .iter()
+        .map(|m| refine_starts(current.causes, &m.shape))
+        .collect();
+    if starts.iter().all(|s| s.len() < 2) {
+        return None;
+    }
+    let outputs: Vec<(OutputModel, f64)> = (0..current.outputs.len())
+        .into_par_iter()
+        .map(|i| {
+            fit_output(
+                tiers,
+                i,
+                current.causes,
+                &starts[i],
+                &current.scales[i],
+                &current.taus,
+                opt,
+                Effort::Normal,
+            )
+        })
+        .collect();
+    Some(assemble(
+        current.causes,
+        outputs,
+        current.scales.clone(),
+        current.taus.clone(),
+        tiers.full,
+    ))
+}
