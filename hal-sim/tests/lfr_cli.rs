@@ -97,7 +97,7 @@ fn lfr_beats_the_linear_model_on_a_held_out_level_and_predict_runs_it() {
     let valid = dir.join("valid.csv");
     record(&valid, 2.0, 99);
     let d = |p: &Path| p.display().to_string();
-    let mut fit = |model: &str| {
+    let fit = |model: &str| {
         let out = dir.join(model);
         let mut a: Vec<String> = ["fit", "--model", model, "--order", "3", "--quiet"]
             .iter()
