@@ -405,7 +405,7 @@ impl Gram {
             syy: 0.0,
         }
     }
-    fn add(mut self, o: Self) -> Self {
+    fn plus(mut self, o: Self) -> Self {
         self.r += o.r;
         self.q += o.q;
         self.syy += o.syy;
@@ -492,7 +492,7 @@ fn project(mdl: &mut Lfr, recs: &[Scored]) -> anyhow::Result<f64> {
     let g = recs
         .par_iter()
         .map(|r| gram(m, r))
-        .try_reduce(|| Gram::zeros(nphi, p), |a, b| Ok(a.add(b)))?;
+        .try_reduce(|| Gram::zeros(nphi, p), |a, b| Ok(a.plus(b)))?;
     let c = solve_cd(mdl, &g)?;
     anyhow::ensure!(c.is_finite(), "the LFR cost is not finite");
     Ok(c)
@@ -604,10 +604,10 @@ fn normal_record(
             a_times(&mdl.linear.blocks, col, out);
             let swc = &mut sw[c * nw..(c + 1) * nw];
             for b in 0..nb {
-                for i in 0..nz {
+                for (i, &dzi) in dz.iter().enumerate() {
                     let q = b * nz + i;
                     // A holding play keeps its sensitivity; a moving one follows z.
-                    let a = if moved[q] { dw[q] * dz[i] } else { swc[q] };
+                    let a = if moved[q] { dw[q] * dzi } else { swc[q] };
                     swc[q] = a;
                     if a != 0.0 {
                         for (o, e) in out.iter_mut().zip(e_cols[q]) {
