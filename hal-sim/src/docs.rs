@@ -283,6 +283,7 @@ fn access(a: Access) -> &'static str {
         Access::Limit => "limit",
         Access::ReadOnly => "read-only",
         Access::Model => "model",
+        Access::Sensor => "sensor",
     }
 }
 
@@ -297,7 +298,7 @@ pub fn settings_page() -> String {
          value outside the range with `err 8` before any other check; a model setting is then \
          checked by the core's constructors too, and the law and compensator are rebuilt and \
          installed bumplessly. Access `limit`: an output limit, checked against the other \
-         limits; `model`: the hysteresis model, the open-loop scaling or a gain; `read-only`: \
+         limits; `model`: the hysteresis model, the open-loop scaling or a gain; `sensor`: a sensor check (guard band, stuck-code limit), changed in place; `read-only`: \
          fixed by the board's converters and rate (`get` only). `save` stores every setting \
          but the read-only ones.\n\n",
     );

@@ -66,7 +66,7 @@ fn record(path: &Path, amp: f64, seed: u64) {
         .map(|k| amp * one[k % period] / rms)
         .collect();
     let y = truth()
-        .simulate(&with_warmup(&[u.clone()], period))
+        .simulate(&with_warmup(std::slice::from_ref(&u), period))
         .unwrap();
     let t = (0..2 * period).map(|k| k as f64 / fs).collect();
     Record::new(t, vec![u], vec![y[0][period..].to_vec()])

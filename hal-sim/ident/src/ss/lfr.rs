@@ -187,6 +187,8 @@ impl Lfr {
         let mut xn = vec![0.0; n];
         let mut uk = vec![0.0; m];
         let mut mem = vec![0.0; nz * self.basis.len()];
+        // `k` indexes every input channel's series at once.
+        #[allow(clippy::needless_range_loop)]
         for k in 0..len {
             for (j, v) in uk.iter_mut().enumerate() {
                 *v = u[j][k];
@@ -923,13 +925,10 @@ mod tests {
         // error is not zero.
         let cost = |m: &Lfr| -> f64 {
             let y = m.simulate(&rec.u).unwrap();
-            let mut s = 0.0;
-            for k in 0..rec.u[0].len() {
-                if rec.scored(k) {
-                    s += (rec.y[0][k] + 0.1 - y[0][k]).powi(2);
-                }
-            }
-            s
+            (0..rec.u[0].len())
+                .filter(|&k| rec.scored(k))
+                .map(|k| (rec.y[0][k] + 0.1 - y[0][k]).powi(2))
+                .sum::<f64>()
         };
         let shifted = Scored {
             u: rec.u.clone(),
