@@ -36,7 +36,8 @@
 //!
 //! let model = Loaded::parse(&fit.report.to_json()?, "fit.json")?;
 //! let sim = model.simulate(&rec)?;
-//! assert_eq!(sim, fit.train_sim); // the saved model is the fitted one
+//! let diff = sim[0].iter().zip(&fit.train_sim[0]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+//! assert!(diff < 1e-9, "{diff}"); // the saved model is the fitted one
 //! # Ok(())
 //! # }
 //! ```

@@ -261,7 +261,7 @@ impl Record {
     /// let t = vec![0.0, 1e-3, 2e-3];
     /// let r = Record::new(t.clone(), vec![vec![0.0, 1.0, 2.0]], vec![vec![0.0, 0.5, 1.1]]).unwrap();
     /// assert_eq!((r.len(), r.sample_rate_hz().round()), (3, 1000.0));
-    /// assert!(r.to_csv().starts_with("t,u,y\n"));
+    /// assert!(r.to_csv().starts_with("t_s,u_V,y_um\n")); // built in s, V, um: stated
     /// // A gap in time is refused, as in a file.
     /// let err = Record::new(vec![0.0, 1e-3, 5e-3], r.u.clone(), r.y.clone()).unwrap_err();
     /// assert!(err.to_string().contains("uniform"), "{err}");

@@ -51,7 +51,7 @@ pub fn dynamics(x: &mut [f64], wn_hz: f64, zeta: f64, dt: f64) {
 }
 
 /// [`dynamics`] on each of `cols`, the independent recurrences side by side
-/// ([`crate::fast::held_second_order`]: [`step`]'s arithmetic, to the bit).
+/// ([`crate::fast::held_second_order`]: `step`'s arithmetic, to the bit).
 pub fn dynamics_all(cols: &mut [&mut [f64]], wn_hz: f64, zeta: f64, dt: f64) {
     if !wn_hz.is_finite() {
         return;

@@ -58,7 +58,7 @@ pub enum Cause {
     SensorNonlinearity,
     /// The dynamics `G` of `dynamics` (004 eq. 8) with a natural frequency and damping that
     /// move with the structure's oscillation amplitude, as in the fine steering mirror
-    /// (hal-sim's `stage.amplitude_dynamics`, [`super::dynamics`]). It includes the plain
+    /// (hal-sim's `stage.amplitude_dynamics`, `diagnose::dynamics`). It includes the plain
     /// dynamics, so it is searched as their upgrade once they are found, and named only when
     /// it gains over them (it then replaces them).
     AmplitudeDynamics,

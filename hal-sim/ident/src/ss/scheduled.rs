@@ -123,7 +123,7 @@ pub fn record_level(rec: &Record, period: usize) -> f64 {
 }
 
 /// Groups record indices by level (ascending): a new group where a level exceeds the
-/// group's first by [`GROUP_RATIO`].
+/// group's first by `GROUP_RATIO`.
 pub fn group_by_level(levels: &[f64]) -> Vec<Vec<usize>> {
     let mut idx: Vec<usize> = (0..levels.len()).collect();
     idx.sort_by(|&a, &b| levels[a].total_cmp(&levels[b]));
