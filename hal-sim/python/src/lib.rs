@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
-use piezo_ident::diagnose::{diagnose_records, report, Options, Signals};
+use piezo_ident::diagnose::{consistency, diagnose_records, report, Options, Signals};
 use piezo_ident::fit::{models, FitOptions};
 use piezo_ident::identify::{self, fit_linear_part, FitInput};
 use piezo_ident::optim::Optimizer;
@@ -287,6 +287,7 @@ fn diagnose<'py>(
     train: Vec<RecordIn<'py>>,
     valid: Vec<RecordIn<'py>>,
     split: Option<f64>,
+    consistency: bool,
 ) -> PyResult<(String, String)> {
     let read = |set: &[RecordIn<'py>]| -> anyhow::Result<(Vec<String>, Vec<Signals>)> {
         Ok(set
@@ -306,19 +307,44 @@ fn diagnose<'py>(
     let valid = read(&valid).map_err(|e| raise(py, e))?;
     let run = move || -> anyhow::Result<(String, String)> {
         let ((train_names, train), (valid_names, valid)) = (train, valid);
-        let (train, valid, note, valid_names) = if valid.is_empty() {
-            let h = report::split_records(train, &train_names, split.unwrap_or(0.5))?;
-            (h.train, h.valid, Some(h.note), train_names.clone())
+        // The same self-check as `piezo diagnose`: the other splits of a split record, the
+        // swapped roles of a pair.
+        let (train, valid, note, valid_names, label, others) = if valid.is_empty() {
+            let f = split.unwrap_or(0.5);
+            let others = consistency::other_splits(&train, f);
+            let h = report::split_records(train, &train_names, f)?;
+            let label = format!("split {f}");
+            (
+                h.train,
+                h.valid,
+                Some(h.note),
+                train_names.clone(),
+                label,
+                others,
+            )
         } else {
             anyhow::ensure!(split.is_none(), "--split and --valid exclude each other");
-            (train, valid, None, valid_names)
+            let others = vec![consistency::Arrangement::swapped(&train, &valid)];
+            (
+                train,
+                valid,
+                None,
+                valid_names,
+                "as given".to_string(),
+                others,
+            )
         };
-        let d = diagnose_records(&train, &valid, &Options::default())?;
-        let j = report::json(&d, note.as_deref(), &train_names, &valid_names, &[]);
-        Ok((
-            serde_json::to_string_pretty(&j)?,
-            report::summary(&d, note.as_deref()),
-        ))
+        let opt = Options::default();
+        let d = diagnose_records(&train, &valid, &opt)?;
+        let mut j = report::json(&d, note.as_deref(), &train_names, &valid_names, &[]);
+        let mut text = report::summary(&d, note.as_deref());
+        if consistency {
+            let c = consistency::check(&label, &d, &others, &opt)?;
+            j["consistency"] = c.json();
+            text.push_str(&c.text());
+            text.push('\n');
+        }
+        Ok((serde_json::to_string_pretty(&j)?, text))
     };
     py.detach(run).map_err(|e| raise(py, e))
 }

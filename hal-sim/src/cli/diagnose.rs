@@ -17,8 +17,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::fit_args::{Columns, Records, Window};
+use crate::ident::diagnose::consistency::{self, Arrangement, SPLITS};
 pub use crate::ident::diagnose::report::summary;
-use crate::ident::diagnose::consistency::{self, Arrangement, Consistency, SPLITS};
 use crate::ident::diagnose::{self, report, Diagnosis, Options, Signals};
 
 #[derive(clap::Args, Debug)]
@@ -69,14 +69,7 @@ pub fn run(args: Args) -> Result<()> {
         )
     } else if rs.valid.is_empty() {
         let f = rs.split.unwrap_or(0.5);
-        (
-            format!("split {f}"),
-            SPLITS
-                .iter()
-                .filter(|&&s| (s - f).abs() > 1e-9)
-                .map(|&s| Arrangement::split(&wholes, s))
-                .collect(),
-        )
+        (format!("split {f}"), consistency::other_splits(&wholes, f))
     } else {
         ("as given".into(), Vec::new())
     };
@@ -174,7 +167,7 @@ pub fn run(args: Args) -> Result<()> {
             &files(&plots),
         );
         if let Some(c) = &consistency {
-            j["consistency"] = consistency_json(c);
+            j["consistency"] = c.json();
         }
         println!("{}", serde_json::to_string_pretty(&j)?);
     } else {
@@ -190,18 +183,6 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// The consistency report: every arrangement's causes, each cause's status, and the confident
-/// and uncertain causes by name.
-fn consistency_json(c: &Consistency) -> serde_json::Value {
-    let names = |v: Vec<diagnose::Cause>| v.iter().map(|c| c.name()).collect::<Vec<_>>();
-    serde_json::json!({
-        "arrangements": c.arrangements,
-        "causes": c.causes,
-        "confident": names(c.confident()),
-        "uncertain": names(c.uncertain()),
-    })
 }
 
 /// The samples of `r` inside `w`, the model starting at rest at the first.

@@ -86,6 +86,18 @@ pub struct Consistency {
 }
 
 impl Consistency {
+    /// The report's JSON: every arrangement's causes, each cause's status, and the confident
+    /// and uncertain causes by name (`piezo diagnose --json` key `consistency`).
+    pub fn json(&self) -> serde_json::Value {
+        let names = |v: Vec<Cause>| v.iter().map(|c| c.name()).collect::<Vec<_>>();
+        serde_json::json!({
+            "arrangements": self.arrangements,
+            "causes": self.causes,
+            "confident": names(self.confident()),
+            "uncertain": names(self.uncertain()),
+        })
+    }
+
     /// Compares the causes named by each arrangement (the first is the one asked for).
     pub fn of(named: Vec<Named>) -> Self {
         let mut all: Vec<Cause> = named.iter().flat_map(|n| n.causes.clone()).collect();
@@ -177,6 +189,16 @@ impl Consistency {
         }
         s
     }
+}
+
+/// The other arrangements a run on `whole` records split at `fraction` checks itself on: the
+/// same records split at each other fraction of [`SPLITS`].
+pub fn other_splits(whole: &[Signals], fraction: f64) -> Vec<Arrangement> {
+    SPLITS
+        .iter()
+        .filter(|&&s| (s - fraction).abs() > 1e-9)
+        .map(|&s| Arrangement::split(whole, s))
+        .collect()
 }
 
 /// Runs the discovery on every arrangement in `others` and compares their causes with

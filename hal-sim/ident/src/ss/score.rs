@@ -112,7 +112,14 @@ mod tests {
             .collect();
         // Alternating +-noise per period: the periods differ by 2 noise.
         let y: Vec<f64> = (0..len)
-            .map(|k| 2.0 * u[k] + if (k / period).is_multiple_of(2) { noise } else { -noise })
+            .map(|k| {
+                2.0 * u[k]
+                    + if (k / period).is_multiple_of(2) {
+                        noise
+                    } else {
+                        -noise
+                    }
+            })
             .collect();
         Record {
             comments: Vec::new(),

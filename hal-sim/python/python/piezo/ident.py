@@ -297,13 +297,16 @@ def _records(x) -> list:
 
 
 def diagnose(train, valid=None, *, split: Optional[float] = None,
-             columns: Optional[dict] = None) -> Diagnosis:
+             columns: Optional[dict] = None, consistency: bool = True) -> Diagnosis:
     """`piezo diagnose --train TRAIN [--valid VALID | --split F]`: what the classical
     Bouc-Wen model misses on the stage, named as a cause, with its gain on the validation
     records. `train` and `valid` are a record or a list of records (one model fits all
-    training records); without `valid` each training record is split at `split` (0.5)."""
+    training records); without `valid` each training record is split at `split` (0.5).
+    Like the CLI it checks itself on the other splits (or the swapped pair) and reports each
+    cause as confident or uncertain (`report["consistency"]`); `consistency=False` skips that
+    (`--no-consistency`)."""
     lib = _lib()
     rec = lambda r: as_record(r, columns=columns)._native()  # noqa: E731
     text, summary = lib.diagnose([rec(r) for r in _records(train)],
-                                 [rec(r) for r in _records(valid)], split)
+                                 [rec(r) for r in _records(valid)], split, consistency)
     return Diagnosis(json.loads(text), summary)
