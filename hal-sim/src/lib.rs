@@ -7,6 +7,7 @@ pub mod beam;
 pub mod cli;
 pub mod faults;
 pub mod ident;
+pub mod independent;
 pub mod manipulation;
 pub mod mock;
 pub mod numeric;
