@@ -39,6 +39,9 @@ pub struct Args {
     /// Fail (exit 1) when the exact-set accuracy over all cases is below this share.
     #[arg(long)]
     pub min_exact: Option<f64>,
+    /// Fail (exit 1) when the share of hidden causes named (over all cases) is below this.
+    #[arg(long)]
+    pub min_recall: Option<f64>,
 }
 
 /// One case's outcome.
@@ -232,6 +235,13 @@ fn pct(a: usize, b: usize) -> String {
 }
 
 impl Table {
+    /// Hidden causes named, over all cases: (named, present).
+    pub fn recall(&self) -> (usize, usize) {
+        self.per_cause
+            .iter()
+            .fold((0, 0), |(n, p), r| (n + r.2, p + r.1))
+    }
+
     pub fn markdown(&self) -> String {
         let mut s = String::new();
         let _ = writeln!(
@@ -245,6 +255,12 @@ impl Table {
             self.with_extra,
             self.errors,
             self.presence_flagged
+        );
+        let (named, present) = self.recall();
+        let _ = writeln!(
+            s,
+            "Hidden causes named: {named} of {present} ({}).\n",
+            pct(named, present)
         );
         let _ = writeln!(
             s,
@@ -364,6 +380,14 @@ pub fn run(args: Args) -> Result<()> {
             .with_context(|| format!("cannot write {}", dir.join("table.json").display()))?;
         println!("written: {}/table.md, table.json, case-NNN/", dir.display());
     }
+    if let Some(floor) = args.min_recall {
+        let (named, present) = t.recall();
+        let share = named as f64 / present.max(1) as f64;
+        anyhow::ensure!(
+            share >= floor,
+            "recall {share:.3} is below the floor {floor} ({named} of {present} hidden causes named)"
+        );
+    }
     if let Some(floor) = args.min_exact {
         let share = t.exact as f64 / t.cases.max(1) as f64;
         anyhow::ensure!(
@@ -424,6 +448,7 @@ mod tests {
             vec![(0, 1, 1), (1, 2, 0), (2, 1, 1), (3, 0, 0)]
         );
         assert_eq!((t.exact, t.with_missing, t.with_extra), (2, 1, 1));
+        assert_eq!(t.recall(), (3, 4));
         assert!(t
             .markdown()
             .contains("| drift | 1 | 0 (0.0 %) | 3 | 1 (33.3 %) |"));
