@@ -8,6 +8,7 @@ pub mod cli;
 pub mod docs;
 pub mod faults;
 pub mod ident;
+pub mod independent;
 pub mod manipulation;
 pub mod mock;
 pub mod object;

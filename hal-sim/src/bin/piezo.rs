@@ -26,6 +26,9 @@ enum Cmd {
     Score(hal_sim::cli::score::Args),
     /// Find what the base model gets wrong, name the cause, extend the model, measure the gain.
     Diagnose(hal_sim::cli::diagnose::Args),
+    /// Run diagnose on an independent generator's stages with hidden causes; print recall,
+    /// false positives and exact-set accuracy.
+    DiagnoseBench(hal_sim::cli::diagnose_bench::Args),
     /// Fault campaign over every controller mode.
     Faults(hal_sim::cli::faults::Args),
     /// Talk to the firmware over its serial command port (or QEMU's, over TCP).
@@ -41,6 +44,7 @@ fn main() {
         Cmd::Predict(a) => hal_sim::cli::predict::run(a),
         Cmd::Score(a) => hal_sim::cli::score::run(a),
         Cmd::Diagnose(a) => hal_sim::cli::diagnose::run(a),
+        Cmd::DiagnoseBench(a) => hal_sim::cli::diagnose_bench::run(a),
         Cmd::Faults(a) => hal_sim::cli::faults::run(a),
         Cmd::Serial(a) => hal_sim::cli::serial::run(a),
     };

@@ -1,6 +1,7 @@
 //! Subcommands of the `piezo` binary, one module each.
 pub mod demo;
 pub mod diagnose;
+pub mod diagnose_bench;
 pub mod faults;
 pub mod fit;
 pub mod fit_args;
