@@ -281,7 +281,7 @@ fn predict<'py>(
 /// validation records each training record is split at `split` (0.5 by default). Returns
 /// the JSON report (`piezo diagnose --json`) and the summary for a person.
 #[pyfunction]
-#[pyo3(signature = (train, valid=Vec::new(), split=None))]
+#[pyo3(signature = (train, valid=Vec::new(), split=None, consistency=true))]
 fn diagnose<'py>(
     py: Python<'py>,
     train: Vec<RecordIn<'py>>,
