@@ -2,26 +2,26 @@
 //!
 //! The rule runs as stages, each a function below, in this order:
 //!
-//! 1. **Base** ([`Setup::base`]): the classical Bouc-Wen `y = d*u - h + y0` (000 eq. 1-2), one
+//! 1. **Base** (`Setup::base`): the classical Bouc-Wen `y = d*u - h + y0` (000 eq. 1-2), one
 //!    per output, each driven by its own input, fitted on the training records.
-//! 2. **Candidates** ([`candidates`]): every cause of the catalogue not yet in the model
+//! 2. **Candidates** (`candidates`): every cause of the catalogue not yet in the model
 //!    (`amplitude-dynamics` only as the upgrade of found `dynamics`).
-//! 3. **Fitting** ([`Setup::fit_round`]): the model extended by each candidate, and the
+//! 3. **Fitting** (`Setup::fit_round`): the model extended by each candidate, and the
 //!    controls a candidate must beat: the named causes refitted by the same search, refined
 //!    (each named cause's nonlinear coordinates searched again from either side) and each
 //!    candidate's fit with its cause switched off. The best control becomes the model.
-//! 4. **Selection** ([`Setup::weigh`], [`Setup::select`]): a candidate counts when it gains
+//! 4. **Selection** (`Setup::weigh`, `Setup::select`): a candidate counts when it gains
 //!    at least [`MIN_GAIN`] of the validation RMSE and its signature explains at least
 //!    [`MIN_R2`] of the residual its extension removes ([`evidence`]); whether its gain is
 //!    worth its extra parameters in the residual's effective number of independent samples
 //!    ([`criterion`]) is reported with it. Of those, the one that removes most of the
 //!    residual on both records is taken. Rounds repeat until nothing counts or the residual is at the noise floor the
 //!    record shows ([`NOISE_FLOOR`]). Then a backward check drops causes a later one made
-//!    redundant ([`Setup::backward`]), and a swap check refuses causes that do not gain with
-//!    the records' roles swapped ([`Setup::swap_check`]).
+//!    redundant (`Setup::backward`), and a swap check refuses causes that do not gain with
+//!    the records' roles swapped (`Setup::swap_check`).
 //! 5. **Consistency** ([`consistency`], run by the caller): the same rule on other
 //!    arrangements of the data; causes named in every one are `confident`.
-//! 6. **Report** ([`Setup::report`]): the [`Diagnosis`] and its JSON.
+//! 6. **Report** (`Setup::report`): the [`Diagnosis`] and its JSON.
 //!
 //! Errors are RMSE (004 eq. 23); all parameters are fitted on the training records only.
 

@@ -164,7 +164,7 @@ fn gbw_specs(s: &Scales) -> Vec<ParamSpec> {
     v
 }
 
-/// [`gbw_specs`]' vector as the model.
+/// `gbw_specs`' vector as the model.
 pub fn gbw(p: &[f64]) -> Result<Gbw<f64>, ParamError> {
     let g = p[3] * p[2];
     Gbw::with_beta_h(p[0], 1.0, p[1], p[2], p[4] * (p[2] + g), g, 1.0)
