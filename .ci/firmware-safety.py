@@ -48,13 +48,15 @@ BUILTIN = re.compile(r"^(__aeabi_|__udiv|__div|__mod|__umod|__floatun|__float|__
 BUILTIN_FRAME = 32
 # Made by the linker, no frame: a range-extension thunk (a jump to its target) and the label
 # of the ITCM section's padding words (build.rs), which is no code.
+PAD = re.compile(r"\tbmi\s+0x[0-9a-f]+ <[^>]*> @ imm = #-0x58$")
 LINKER = re.compile(r"^(__\w*LongThunk_.+|__sitcm)$")
 HEAP = re.compile(r"__rust_alloc|__rg_alloc|__rust_alloc_error_handler|__rdl_alloc")
 INDIRECT = re.compile(r"\t(blx\s+r\d+|bx\s+r\d+|mov\s+pc,|ldr(\.w)?\s+pc,)")
 # Exception entry with lazy FPU stacking: 8 core + 18 FPU words.
 EXC_FRAME = 104
 # Priorities of the RTIC tasks bound to interrupts (src/bin/h743/main.rs), for the system bound.
-PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1}
+# The NMI (-2) and HardFault (-1) preempt every configurable level: their stacks add on top.
+PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1, "NonMaskableInt": -2, "HardFault": -1}
 
 
 def build(features):
@@ -118,13 +120,13 @@ def call_graph(elf):
     # Mangled names: demangled generics contain '<', '>' and ', ' that break the parse.
     out = subprocess.check_output([tool("llvm-objdump"), "-d", "--no-show-raw-insn", elf], text=True)
     graph, indirect, consts, code, cur = {}, {}, {}, {}, None
-    lo, hi = set(), set()
+    lo, hi, pad = set(), set(), []
     for line in out.splitlines():
         m = re.match(r"^[0-9a-f]+ <(.*)>:$", line)
         if m:
             if cur is not None:
                 consts[cur] = {h << 16 | low for h in hi for low in lo}
-            lo, hi = set(), set()
+            lo, hi, pad = set(), set(), []
             cur = m.group(1)
             graph.setdefault(cur, set())
             continue
@@ -137,8 +139,17 @@ def call_graph(elf):
         # A branch into the middle of another function is no call: it is alignment padding
         # after a function's last branch that happens to decode as a branch (seen after
         # h743::safe::halt's `wfi` loop: `bmi <h743::app::idle+0x15e>`).
-        if m and m.group(2) != cur and m.group(3) is None:
-            graph[cur].add(thunk_target(m.group(2)))
+        # lld fills the gap after a function with 0xd4d4 (Thumb `bmi #-0x58`): a run of those
+        # ending the function is padding, whatever function it seems to branch to (seen after
+        # h743::safe::halt: `bmi <NonMaskableInt>`, a false cycle halt -> NMI -> halt).
+        if PAD.search(line):
+            if m and m.group(2) != cur and m.group(3) is None:
+                pad.append(thunk_target(m.group(2)))
+        elif re.match(r"^\s*[0-9a-f]+:", line):
+            graph[cur].update(pad)
+            pad = []
+            if m and m.group(2) != cur and m.group(3) is None:
+                graph[cur].add(thunk_target(m.group(2)))
         m = re.match(r"^\s*([0-9a-f]+):\s*\t(\S+)\s*([^@]*)", line)
         if m and m.group(2).startswith("adr"):  # pc-relative address: counted as taken
             t = ((int(m.group(1), 16) + 4) & ~3) + int(m.group(3).split("#")[1].split()[0], 0)
