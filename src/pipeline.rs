@@ -424,6 +424,11 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         }
     }
 
+    // Cold and out of line: the control interrupt enters it once after a fault or a
+    // configuration change, so it and the resets it calls stay in flash, leaving ITCM to the
+    // per-sample path (build.rs; `.ci/firmware-safety.py` checks the split).
+    #[cold]
+    #[inline(never)]
     fn restart(&mut self) {
         self.restart_due = false;
         let sp: [Setpoint<T>; N] = core::array::from_fn(|i| {

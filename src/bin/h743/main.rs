@@ -98,33 +98,41 @@ mod board {
     /// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
     pub const WATCHDOG_MS: u32 = 10;
 
-    /// Copies the control interrupt's code (build.rs's `.itcm`: the handlers, the pipeline
-    /// step and its callees) from flash into ITCM, before anything runs from there.
+    // ITCM is loaded in `__pre_init` (cortex-m-rt calls it first in the reset handler, before
+    // .data and .bss): nothing can run from ITCM before it holds its code, not even a
+    // `__aeabi_memcpy` (placed there for the control path) called by init or by the runtime.
+    // Assembly: no stack, no statics, no calls. ITCM is on at reset on the H7
+    // (CM7_ITCMCR.EN); it is set anyway, as stabilizer does. build.rs's `.itcm` section is
+    // word aligned (its bounds `__sitcm`/`__eitcm`, its flash image `__siitcm`).
     #[allow(unsafe_code)]
-    pub fn load_itcm() {
-        extern "C" {
-            static mut __sitcm: u32;
-            static mut __eitcm: u32;
-            static __siitcm: u32;
-        }
-        // ITCM is on at reset on the H7 (CM7_ITCMCR.EN); set it anyway, as stabilizer does.
-        const ITCMCR: *mut u32 = 0xE000_EF90 as *mut u32;
-        // SAFETY: ITCMCR is the core's TCM control register; the linker symbols bound the
-        // `.itcm` output section (word aligned, at 8 or above: never null) and its load
-        // image in flash; no code in ITCM has run yet.
-        unsafe {
-            ITCMCR.write_volatile(ITCMCR.read_volatile() | 1);
-            cortex_m::asm::dsb();
-            let dst = core::ptr::addr_of_mut!(__sitcm);
-            let end = core::ptr::addr_of_mut!(__eitcm);
-            let src = core::ptr::addr_of!(__siitcm);
-            let words = (end as usize - dst as usize) / 4;
-            for i in 0..words {
-                dst.add(i).write_volatile(src.add(i).read_volatile());
-            }
-        }
-        cortex_m::asm::dsb();
-        cortex_m::asm::isb();
+    mod pre_init {
+        core::arch::global_asm!(
+            ".section .text.__pre_init,\"ax\",%progbits",
+            ".global __pre_init",
+            ".type __pre_init,%function",
+            ".thumb_func",
+            "__pre_init:",
+            "    ldr r0, =0xE000EF90",
+            "    ldr r1, [r0]",
+            "    orr r1, r1, #1",
+            "    str r1, [r0]",
+            "    dsb",
+            "    isb",
+            "    ldr r0, =__sitcm",
+            "    ldr r1, =__eitcm",
+            "    ldr r2, =__siitcm",
+            "1:",
+            "    cmp r0, r1",
+            "    bhs 2f",
+            "    ldr r3, [r2], #4",
+            "    str r3, [r0], #4",
+            "    b 1b",
+            "2:",
+            "    dsb",
+            "    isb",
+            "    bx lr",
+            ".ltorg",
+        );
     }
 
     /// The converters of this build, and the control state over them.
@@ -252,9 +260,8 @@ mod app {
         // amplifier off, on-chip DAC at the safe code (0: SAFE_VOLTS = 0 V at the DAC
         // scale's 0 V code; the pipeline's own value is checked below).
         safe::early(&dp.IWDG, &dp.DBGMCU, &dp.RCC, 0);
-        // The control interrupt's code into ITCM, then the caches on (DTCM, which holds the
+        // The caches on (ITCM was loaded at reset, `__pre_init`; DTCM, which holds the
         // stack and the control state, is never cached; no DMA shares memory with the CPU).
-        super::load_itcm();
         cp.SCB.enable_icache();
         cp.SCB.enable_dcache(&mut cp.CPUID);
         // Bank 2's settings sectors (the SCB goes with them: their cache maintenance).
