@@ -3,4 +3,4 @@
 # (the dev-profile `cargo test` runs 2 seeds per cause), and rate dependence named exactly
 # where the stage has it (20/40/100 Hz drives, each record training in turn).
 set -euo pipefail
-DIAGNOSE_SEEDS=5 cargo test --release -p hal-sim --test diagnose --test diagnose_rate -- --nocapture
+DIAGNOSE_SEEDS=5 cargo test --profile host -p hal-sim --test diagnose --test diagnose_rate -- --nocapture

@@ -6,10 +6,10 @@
 # (every case exact) is far above them. See docs/src/diagnose-independent.md.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-cargo build --release -p hal-sim --bin piezo
+cargo build --profile host -p hal-sim --bin piezo
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cases=()
 for i in $(seq 150 161); do cases+=(--case "$i"); done
-target/release/piezo diagnose-bench --cases 300 --seed 1 "${cases[@]}" --jobs 2 --out "$out" \
+target/host/piezo diagnose-bench --cases 300 --seed 1 "${cases[@]}" --jobs 2 --out "$out" \
   --min-exact 0.08 --min-recall 0.5

@@ -6,7 +6,7 @@
 # Issue 19: the same on the asymmetric GBW stage and the Dahl stage, where the GBW laws
 # (nmpc-gbw, fts-gbw), ADRC and the CBW variants must all have run (about 15 s).
 set -euo pipefail
-cargo build --release -q -p hal-sim --bin piezo
+cargo build --profile host -q -p hal-sim --bin piezo
 field() { echo "$1" | sed -E "s/.*\"$2\":\"?([^,\"}]*).*/\1/"; }
 # Checks every run of a `piezo sim --json` document; prints "scenario/controller" per run.
 check_runs() {
@@ -24,7 +24,7 @@ check_runs() {
     echo "$sc/$c $(field "$run" rmse_pct)"
   done <<< "$runs"
 }
-out=$(target/release/piezo sim --json --amplitude-um 30 \
+out=$(target/host/piezo sim --json --amplitude-um 30 \
   --scenario sine-1hz --scenario sine-10hz --scenario sine-50hz --scenario force-37pct \
   --scenario sine-10hz-model+20pct --scenario sine-10hz-model-20pct --scenario sine-10hz-noise10x)
 checked=$(check_runs "$out" 7)
@@ -35,7 +35,7 @@ awk -v p="$pct" 'BEGIN { exit !(p <= 0.05) }' \
 echo "hgo-robust sine-10hz RMSE $pct % of stroke"
 echo "feedback sim: $(echo "$checked" | wc -l) runs, all voltages inside 0..150 V"
 
-out=$(target/release/piezo sim --json --scenario gbw-asymmetric-10hz --scenario dahl-10hz)
+out=$(target/host/piezo sim --json --scenario gbw-asymmetric-10hz --scenario dahl-10hz)
 checked=$(check_runs "$out" 2)
 for sc in gbw-asymmetric-10hz dahl-10hz; do
   for c in nmpc-gbw fts-gbw adrc ff+adrc hgo-robust fts nmpc; do

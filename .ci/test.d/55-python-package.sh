@@ -11,7 +11,7 @@ export PIEZO_DATA="${PIEZO_DATA:-$repo/../shared/data}"
 [ -d "$PIEZO_DATA" ] || { echo "55-python-package: no records at $PIEZO_DATA"; exit 1; }
 # The CLI the answers are compared with, built from this checkout (50-feedback-sim built it
 # already: a no-op then).
-cargo build --release -q -p hal-sim --bin piezo
+cargo build --profile host -q -p hal-sim --bin piezo
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 if ! python3 -m venv "$work/venv" >/dev/null 2>&1; then
@@ -25,7 +25,7 @@ start=$(date +%s)
 echo "55-python-package: pip install ./hal-sim/python took $(( $(date +%s) - start )) s"
 # Exit code 5 (no test collected) fails the step like any other.
 rc=0
-(cd "$work" && PIEZO_BIN="$repo/target/release/piezo" PIEZO_REQUIRE=1 \
+(cd "$work" && PIEZO_BIN="$repo/target/host/piezo" PIEZO_REQUIRE=1 \
   "$py" -m pytest -q -p no:cacheprovider "$repo/hal-sim/python/tests") || rc=$?
 [ "$rc" -eq 0 ] || { echo "55-python-package: pytest exited with $rc"; exit 1; }
 (cd "$work" && "$py" "$repo/hal-sim/python/examples/diagnose_record.py" \

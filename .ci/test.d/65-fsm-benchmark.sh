@@ -12,9 +12,9 @@ if [ ! -d "$D" ]; then
 fi
 # PIEZO=path skips the build (to try the script with another build of the binary).
 if [ -z "${PIEZO:-}" ]; then
-    cargo build --release -p hal-sim --bin piezo
+    cargo build --profile host -p hal-sim --bin piezo
 fi
-P=${PIEZO:-target/release/piezo}
+P=${PIEZO:-target/host/piezo}
 OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
 T=()
