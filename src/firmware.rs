@@ -34,7 +34,7 @@ mod storage;
 mod target;
 mod timing;
 
-pub use budget::{Budget, WORST_M4F};
+pub use budget::{Budget, WORST_M4F, WORST_M4F_BUILD, WORST_M4F_XY};
 pub use console::{CommandLine, Port, Replica, WithFlash};
 pub use control_loop::Loop;
 pub use converters::{
