@@ -5,6 +5,7 @@
 
 pub mod beam;
 pub mod cli;
+pub mod console;
 pub mod faults;
 pub mod ident;
 pub mod manipulation;

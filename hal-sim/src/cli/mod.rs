@@ -8,3 +8,4 @@ pub mod fit_ss;
 pub mod predict;
 pub mod serial;
 pub mod sim;
+pub mod ui;

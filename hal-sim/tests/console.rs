@@ -1,0 +1,213 @@
+//! The lab console's link thread (`hal_sim::console::worker`) against the firmware's own
+//! executor behind TCP (as `tests/serial.rs` runs it): jobs from many tasks never
+//! interleave, the scope's captures arrive, a lost link is reported and opened again.
+
+mod control {
+    pub use piezo_core::firmware::*;
+    use piezo_core::firmware::{Converters, OnChip};
+    pub type Ctl = piezo_core::firmware::Ctl<OnChip>;
+    pub const DAC_MAX: i32 = OnChip::DAC_MAX;
+}
+
+use std::collections::VecDeque;
+use std::io::{Read, Write};
+use std::net::TcpListener;
+use std::sync::Arc;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use hal_sim::cli::serial::Conn;
+use hal_sim::console::worker::{self, Shared};
+use piezo_core::command::LineBuffer;
+use serde_json::{json, Value};
+
+/// The firmware's control state and a first-order stage (0.16 um/V).
+struct Fake {
+    ctl: control::Ctl,
+    y_um: f64,
+    dac: i32,
+}
+
+impl Fake {
+    fn new() -> Self {
+        Self {
+            ctl: control::Ctl::new(control::c(control::SAMPLE_HZ as f64)),
+            y_um: 0.0,
+            dac: 0,
+        }
+    }
+
+    fn run(&mut self, periods: usize) {
+        for _ in 0..periods {
+            let volts = self.dac as f64 * 150.0 / control::DAC_MAX as f64;
+            self.y_um += 0.3 * (0.16 * volts - self.y_um);
+            let code = (1000.0 + self.y_um * 655.35).clamp(0.0, 65535.0) as i32;
+            [self.dac] = self.ctl.lp.step([code]);
+            self.ctl.record([code], [self.dac]);
+        }
+    }
+}
+
+/// Serves connections one after another on one firmware state; the first `drop_after`
+/// lines of the first connection only, then it hangs up (a lost link).
+fn spawn_firmware(drop_after: Option<usize>) -> String {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    thread::spawn(move || {
+        let mut fake = Fake::new();
+        let mut limit = drop_after;
+        for mut s in listener.incoming().flatten() {
+            s.write_all(b"boot noise\nready\n").ok();
+            let mut lb = LineBuffer::new();
+            let mut buf = [0u8; 512];
+            let mut lines = 0;
+            'conn: loop {
+                let n = match s.read(&mut buf) {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => n,
+                };
+                let mut out = VecDeque::new();
+                for &b in &buf[..n] {
+                    if let Some(line) = lb.push(b) {
+                        lines += 1;
+                        if limit.is_some_and(|l| lines > l) {
+                            limit = None;
+                            break 'conn;
+                        }
+                        fake.run(50);
+                        fake.ctl.serve(line, &mut out);
+                    }
+                }
+                if s.write_all(out.make_contiguous()).is_err() {
+                    break;
+                }
+            }
+        }
+    });
+    addr
+}
+
+fn conn(addr: &str) -> Conn {
+    Conn {
+        port: None,
+        baud: 115_200,
+        tcp: Some(addr.to_string()),
+        timeout_s: 5.0,
+        no_sync: false,
+        keep_going: false,
+    }
+}
+
+/// The next event of `type` (within `limit` events).
+async fn next_event(
+    rx: &mut tokio::sync::broadcast::Receiver<Arc<str>>,
+    kind: &str,
+    limit: usize,
+) -> Value {
+    for _ in 0..limit {
+        let text = tokio::time::timeout(Duration::from_secs(30), rx.recv())
+            .await
+            .expect("an event within 30 s")
+            .expect("the event channel open");
+        let v: Value = serde_json::from_str(&text).unwrap();
+        if v["type"] == kind {
+            return v;
+        }
+    }
+    panic!("no `{kind}` event among {limit}");
+}
+
+async fn connected(shared: &Shared) {
+    let t = Instant::now();
+    while !shared.link.lock().unwrap().0 {
+        assert!(t.elapsed() < Duration::from_secs(30), "never connected");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn jobs_of_many_pages_never_interleave_and_the_scope_streams() {
+    let shared = worker::spawn(conn(&spawn_firmware(None)));
+    let mut rx = shared.events.subscribe();
+    connected(&shared).await;
+    let f = next_event(&mut rx, "frame", 200).await;
+    assert_eq!(
+        f["channels"],
+        json!(["ref_um", "y_um", "error_um", "u_volts"])
+    );
+    assert_eq!(f["columns"][0].as_array().unwrap().len(), 256);
+    assert_eq!(f["sample_hz"], json!(100_000.0 / 4.0));
+
+    // Eight pages, each setting pid_kp to its own value and reading it back in one job:
+    // a command of another page between the two would show as a wrong value.
+    let mut tasks = Vec::new();
+    for page in 0..8u32 {
+        let s = shared.clone();
+        tasks.push(tokio::spawn(async move {
+            for k in 0..10u32 {
+                let v = 0.25 + f64::from(page) * 0.125 + f64::from(k) * 0.001;
+                let got = s
+                    .job(Box::new(move |c| {
+                        hal_sim::console::jobs::set(c, "pid_kp", v)?;
+                        Ok(json!(c.get("pid_kp")?))
+                    }))
+                    .await
+                    .unwrap();
+                assert!((got.as_f64().unwrap() - v).abs() < 1e-6, "{got} != {v}");
+            }
+        }));
+    }
+    for t in tasks {
+        t.await.unwrap();
+    }
+    // The scope goes on after the jobs.
+    let before = f["seq"].as_u64().unwrap();
+    let g = next_event(&mut rx, "frame", 500).await;
+    assert!(g["seq"].as_u64().unwrap() > before);
+
+    // Stop: open loop holding offset_um, the output at 0 V.
+    let r = shared
+        .job(Box::new(hal_sim::console::jobs::stop))
+        .await
+        .unwrap();
+    assert_eq!(
+        r["replies"],
+        json!([
+            "ok wave off",
+            "ok mode open-loop",
+            "ok ff linear",
+            "ok wave hold 0"
+        ])
+    );
+    // A firmware refusal keeps its number.
+    let e = shared
+        .job(Box::new(|c| hal_sim::console::jobs::mode(c, "warp", None)))
+        .await
+        .unwrap_err();
+    let body = hal_sim::console::jobs::refusal(&e);
+    assert_eq!(body["code"], json!(9), "{body}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lost_link_is_shown_and_opened_again() {
+    let shared = worker::spawn(conn(&spawn_firmware(Some(40))));
+    let mut rx = shared.events.subscribe();
+    let up = next_event(&mut rx, "link", 10).await;
+    assert_eq!(up["connected"], json!(true), "{up}");
+    let lost = next_event(&mut rx, "link", 10_000).await;
+    assert_eq!(lost["connected"], json!(false), "{lost}");
+    assert!(
+        lost["detail"]
+            .as_str()
+            .unwrap()
+            .starts_with("connection lost"),
+        "{lost}"
+    );
+    let again = next_event(&mut rx, "link", 10_000).await;
+    assert_eq!(again["connected"], json!(true), "{again}");
+    let r = shared
+        .job(Box::new(|c| Ok(json!(c.get("sample_hz")?))))
+        .await
+        .unwrap();
+    assert_eq!(r, json!(100_000.0));
+}
