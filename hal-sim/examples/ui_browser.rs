@@ -245,10 +245,9 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
         "return window.consoleState.frames >= 10;",
     )
     .await?;
-    let rate = r
-        .c
-        .execute("return window.consoleState.rate;", vec![])
-        .await?;
+    let rate =
+        r.c.execute("return window.consoleState.rate;", vec![])
+            .await?;
     r.pass(&format!(
         "the scope receives frames ({rate} updates/s at its default 256 frames)"
     ));
@@ -423,7 +422,9 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
         .frame_where(
             "a capture at the safe code",
             seq,
-            &format!("col('dac_code').every(v => v === {safe}) && col('u_volts').every(v => v === 0)"),
+            &format!(
+                "col('dac_code').every(v => v === {safe}) && col('u_volts').every(v => v === 0)"
+            ),
         )
         .await?;
     r.frame_where(

@@ -238,7 +238,11 @@ async fn set(State(app): State<App>, Json(r): Json<SetReq>) -> Reply {
         Err(why) => return refused(why),
     };
     let v = r.value;
-    answer(app.shared.job(Box::new(move |c| jobs::set(c, name, v))).await)
+    answer(
+        app.shared
+            .job(Box::new(move |c| jobs::set(c, name, v)))
+            .await,
+    )
 }
 
 #[derive(Deserialize)]
@@ -407,11 +411,7 @@ struct DiagnoseReq {
 
 /// `piezo diagnose` on an uploaded record (the body) or a scope capture, run as this
 /// binary's own subcommand beside the link (it needs no firmware).
-async fn diagnose(
-    State(app): State<App>,
-    Query(q): Query<DiagnoseReq>,
-    body: String,
-) -> Reply {
+async fn diagnose(State(app): State<App>, Query(q): Query<DiagnoseReq>, body: String) -> Reply {
     let text = match q.seq {
         Some(s) => {
             let caps = app
@@ -456,7 +456,9 @@ async fn diagnose(
             } else {
                 (
                     StatusCode::UNPROCESSABLE_ENTITY,
-                    Json(json!({"error": format!("piezo diagnose failed: {}", err.trim()), "report": report})),
+                    Json(
+                        json!({"error": format!("piezo diagnose failed: {}", err.trim()), "report": report}),
+                    ),
                 )
             }
         }

@@ -211,3 +211,85 @@ async fn a_lost_link_is_shown_and_opened_again() {
         .unwrap();
     assert_eq!(r, json!(100_000.0));
 }
+
+#[test]
+fn the_pages_waves_pass_the_firmwares_parser_and_bad_scopes_are_refused() {
+    use hal_sim::console::jobs::Wave;
+    use hal_sim::console::worker::ScopeCfg;
+    use hal_sim::serial::lines::checked_line;
+    // The Wave panel's defaults (assets/app.js), as the page sends them.
+    for body in [
+        json!({"shape": "sine", "amp_um": 5, "freq_hz": 100, "offset_um": 10}),
+        json!({"shape": "triangle", "amp_um": 5, "freq_hz": 100, "offset_um": 10}),
+        json!({"shape": "square", "amp_um": 5, "freq_hz": 100, "offset_um": 10}),
+        json!({"shape": "raster", "x_span_um": 10, "y_span_um": 10, "lines": 4, "line_hz": 20, "xc_um": 10, "yc_um": 10}),
+        json!({"shape": "prbs", "low_um": 10, "high_um": 12, "order": 12, "bit_hz": 10000, "seed": 1}),
+        json!({"shape": "chirp", "amp_um": 2, "f0_hz": 10, "f1_hz": 2000, "duration_s": 0.1, "offset_um": 10}),
+        json!({"shape": "multisine", "amp_um": 2, "f0_hz": 100, "harmonics": 16, "offset_um": 10, "seed": 0}),
+        json!({"shape": "hold", "position_um": 10}),
+        json!({"shape": "off"}),
+    ] {
+        let w: Wave = serde_json::from_value(body.clone()).unwrap();
+        let line = checked_line(&w.command()).unwrap_or_else(|e| panic!("{body}: {e}"));
+        assert!(line.starts_with("wave "), "{line}");
+    }
+    // A PRBS order the firmware does not have is refused before it is sent.
+    let w: Wave = serde_json::from_value(
+        json!({"shape": "prbs", "low_um": 10, "high_um": 12, "order": 40, "bit_hz": 10000, "seed": 1}),
+    )
+    .unwrap();
+    assert!(checked_line(&w.command()).is_err());
+
+    assert!(ScopeCfg::default().check().is_ok());
+    for (cfg, why) in [
+        (
+            ScopeCfg {
+                signals: vec!["warp_um".into()],
+                ..Default::default()
+            },
+            "unknown signal",
+        ),
+        (
+            ScopeCfg {
+                frames: 4,
+                ..Default::default()
+            },
+            "frames",
+        ),
+        (
+            ScopeCfg {
+                every: 0,
+                ..Default::default()
+            },
+            "every",
+        ),
+        (
+            ScopeCfg {
+                trigger: "rise:dac_code:1".into(),
+                ..Default::default()
+            },
+            "dac_code",
+        ),
+        (
+            ScopeCfg {
+                trigger: "rise:ref_um:10".into(),
+                pre: 300,
+                ..Default::default()
+            },
+            "pre",
+        ),
+    ] {
+        let e = format!("{:#}", cfg.check().unwrap_err());
+        assert!(e.contains(why), "{e}");
+    }
+    // The table's check of the Settings panel, as `piezo serial set` does it.
+    use hal_sim::console::jobs::check_setting;
+    assert_eq!(check_setting("u_max", 120.0), Ok("u_max"));
+    assert!(check_setting("u_max", 200.0)
+        .unwrap_err()
+        .contains("outside 0 .. 150"));
+    assert!(check_setting("sample_hz", 1.0)
+        .unwrap_err()
+        .contains("read-only"));
+    assert!(check_setting("notch_q", f64::NAN).is_err());
+}

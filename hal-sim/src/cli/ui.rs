@@ -34,9 +34,9 @@ pub fn run(args: Args) -> Result<()> {
         bail!("say where the firmware is: --port <device> or --tcp <host:port>");
     }
     let ip = args.bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST));
-    let work = args.work.unwrap_or_else(|| {
-        std::env::temp_dir().join(format!("piezo-ui-{}", std::process::id()))
-    });
+    let work = args
+        .work
+        .unwrap_or_else(|| std::env::temp_dir().join(format!("piezo-ui-{}", std::process::id())));
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()

@@ -347,11 +347,7 @@ pub fn bode(c: &mut Client, a: &BodeArgs, frames: usize) -> Result<Value> {
 }
 
 /// `identify` with its defaults into `dir`; the progress per phase goes to `progress`.
-pub fn identify(
-    c: &mut Client,
-    dir: PathBuf,
-    progress: Box<dyn FnMut(&str)>,
-) -> Result<Value> {
+pub fn identify(c: &mut Client, dir: PathBuf, progress: Box<dyn FnMut(&str)>) -> Result<Value> {
     #[derive(Parser)]
     struct P {
         #[command(flatten)]

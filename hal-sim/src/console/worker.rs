@@ -330,7 +330,9 @@ fn run(conn: Conn, shared: &Shared, rx: mpsc::Receiver<Job>) {
                     shared.set_link(false, format!("connection lost: {e:#}"));
                 } else {
                     // Shown once; the thread waits for a change of the scope or a job.
-                    shared.event(json!({"type": "scope", "state": "error", "detail": format!("{e:#}")}));
+                    shared.event(
+                        json!({"type": "scope", "state": "error", "detail": format!("{e:#}")}),
+                    );
                     scope.failed = true;
                     scope.applied = usize::MAX;
                     let mut cfg = shared.scope.lock().unwrap_or_else(|e| e.into_inner());
