@@ -27,7 +27,7 @@ MEMORY
 
 /* The control interrupt's code in ITCM (zero wait states, no flash/cache latency, as
  * stabilizer does): the handlers, the pipeline step and what it calls on every sample,
- * loaded from FLASH and copied at boot (`init`, before the first sample). Placed before
+ * loaded from FLASH and copied at reset (`__pre_init`, before anything runs from it). Placed before
  * .text so these patterns win over its catch-all. */
 SECTIONS
 {
@@ -41,16 +41,29 @@ SECTIONS
     LONG(0);
     *(.itcm .itcm.*);
     *(.text.ADC1_2 .text.TIM2);
-    *(.text._ZN10piezo_core8pipeline*Pipeline*4step*);
-    *(.text._ZN10piezo_core11feedforward*11Feedforward*10compensate*);
-    *(.text._ZN10piezo_core11feedforward3ims*);
-    *(.text._ZN10piezo_core11feedforward5solve*);
-    *(.text._ZN10piezo_core10hysteresis*advance_h*);
-    *(.text._ZN10piezo_core8feedback*);
-    *(.text._ZN10piezo_core8firmware*control_period*);
-    *(.text._ZN10piezo_core4real*);
-    *(.text._ZN4libm4math*);
-    *(.text.__aeabi_*);
+    /* Each pattern twice: the legacy symbol scheme (`_ZN10piezo_core8pipeline...`, trait
+     * impls `_$LT$piezo_core..hysteresis..pi..Pi...`) and v0 (`_R...10piezo_core8pipeline...`,
+     * nightly's default); `.ci/firmware-safety.py` checks that every function the control
+     * interrupt reaches landed here. */
+    *(.text.*10piezo_core8pipeline*Pipeline*4step*);
+    *(.text.*10piezo_core8pipeline5fused* .text.*piezo_core..pipeline..fused*);
+    *(.text.*10piezo_core8pipeline9reference*8at_phase* .text.*10piezo_core8pipeline9reference*15next_from_phase*);
+    *(.text.*10piezo_core8pipeline9reference*6resync* .text.*10piezo_core8pipeline10excitation*);
+    *(.text.*10piezo_core11feedforward*Feedforward*10compensate*);
+    *(.text.*10piezo_core11feedforward5creep*6commit* .text.*10piezo_core11feedforward5multi*10compensate*);
+    *(.text.*10piezo_core11feedforward3ims* .text.*piezo_core..feedforward..ims..*);
+    *(.text.*10piezo_core11feedforward5solve*);
+    *(.text.*10piezo_core10hysteresis*9advance_h* .text.*10piezo_core10hysteresis10rk4_kinked*);
+    *(.text.*10piezo_core10hysteresis2pi*4step* .text.*piezo_core..hysteresis..pi..Pi*Hysteresis*4step*);
+    *(.text.*10piezo_core8feedback* .text.*piezo_core..feedback..*);
+    *(.text.*10piezo_core8firmware*control_period*);
+    *(.text.*4h7433spi*11transaction* .text.*h743..spi..SpiDev*11transaction*);
+    *(.text.*10piezo_core4real* .text.*piezo_core..real..*);
+    /* libm: what the control path calls (sinf/cosf and their 3 KB of argument reduction
+     * serve the configuration only and would not fit). */
+    *(.text.*4libm4math4expf* .text.*4libm4math6expm1f* .text.*4libm4math6log1pf*);
+    *(.text.*4libm4math4powf* .text.*4libm4math6scalbn* .text.*4libm4math4sqrt*);
+    *(.text.*17compiler_builtins3mem* .text.__aeabi_*);
     . = ALIGN(8);
     __eitcm = .;
   } > ITCM AT > FLASH

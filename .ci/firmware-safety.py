@@ -48,13 +48,22 @@ BUILTIN = re.compile(r"^(__aeabi_|__udiv|__div|__mod|__umod|__floatun|__float|__
 BUILTIN_FRAME = 32
 # Made by the linker, no frame: a range-extension thunk (a jump to its target) and the label
 # of the ITCM section's padding words (build.rs), which is no code.
+PAD = re.compile(r"\tbmi\s+0x[0-9a-f]+ <[^>]*> @ imm = #-0x58$")
 LINKER = re.compile(r"^(__\w*LongThunk_.+|__sitcm)$")
 HEAP = re.compile(r"__rust_alloc|__rg_alloc|__rust_alloc_error_handler|__rdl_alloc")
 INDIRECT = re.compile(r"\t(blx\s+r\d+|bx\s+r\d+|mov\s+pc,|ldr(\.w)?\s+pc,)")
 # Exception entry with lazy FPU stacking: 8 core + 18 FPU words.
 EXC_FRAME = 104
 # Priorities of the RTIC tasks bound to interrupts (src/bin/h743/main.rs), for the system bound.
-PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1}
+# A control interrupt is one that reaches the pipeline's step (on-chip converters and xy:
+# ADC1_2; spi-converters: TIM2).
+CONTROL = re.compile(r"piezo_core::pipeline::Pipeline\W.*::step(::h[0-9a-f]{16})?$")
+# Entered from the control interrupt only once after a fault or a configuration change
+# (`Pipeline::restart`, #[cold]): it and what only it reaches may stay in flash (ITCM is 64 KB
+# and the two-axis build's per-sample code alone nearly fills it).
+COLD = re.compile(r"piezo_core::pipeline::Pipeline\W.*::restart(::h[0-9a-f]{16})?$")
+# The NMI (-2) and HardFault (-1) preempt every configurable level: their stacks add on top.
+PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1, "NonMaskableInt": -2, "HardFault": -1}
 
 
 def build(features):
@@ -118,13 +127,13 @@ def call_graph(elf):
     # Mangled names: demangled generics contain '<', '>' and ', ' that break the parse.
     out = subprocess.check_output([tool("llvm-objdump"), "-d", "--no-show-raw-insn", elf], text=True)
     graph, indirect, consts, code, cur = {}, {}, {}, {}, None
-    lo, hi = set(), set()
+    lo, hi, pad = set(), set(), []
     for line in out.splitlines():
         m = re.match(r"^[0-9a-f]+ <(.*)>:$", line)
         if m:
             if cur is not None:
                 consts[cur] = {h << 16 | low for h in hi for low in lo}
-            lo, hi = set(), set()
+            lo, hi, pad = set(), set(), []
             cur = m.group(1)
             graph.setdefault(cur, set())
             continue
@@ -137,8 +146,17 @@ def call_graph(elf):
         # A branch into the middle of another function is no call: it is alignment padding
         # after a function's last branch that happens to decode as a branch (seen after
         # h743::safe::halt's `wfi` loop: `bmi <h743::app::idle+0x15e>`).
-        if m and m.group(2) != cur and m.group(3) is None:
-            graph[cur].add(thunk_target(m.group(2)))
+        # lld fills the gap after a function with 0xd4d4 (Thumb `bmi #-0x58`): a run of those
+        # ending the function is padding, whatever function it seems to branch to (seen after
+        # h743::safe::halt: `bmi <NonMaskableInt>`, a false cycle halt -> NMI -> halt).
+        if PAD.search(line):
+            if m and m.group(2) != cur and m.group(3) is None:
+                pad.append(thunk_target(m.group(2)))
+        elif re.match(r"^\s*[0-9a-f]+:", line):
+            graph[cur].update(pad)
+            pad = []
+            if m and m.group(2) != cur and m.group(3) is None:
+                graph[cur].add(thunk_target(m.group(2)))
         m = re.match(r"^\s*([0-9a-f]+):\s*\t(\S+)\s*([^@]*)", line)
         if m and m.group(2).startswith("adr"):  # pc-relative address: counted as taken
             t = ((int(m.group(1), 16) + 4) & ~3) + int(m.group(3).split("#")[1].split()[0], 0)
@@ -355,6 +373,39 @@ def main():
         if not thread and (panics or ind or w is None):
             ok = False
 
+    # ITCM, checked (build.rs's `.itcm` patterns name functions by their symbols, and a
+    # symbol scheme the patterns miss leaves code in flash without a word): every function a
+    # control interrupt reaches (thunks followed) lies in ITCM, and __pre_init, which loads
+    # ITCM before anything runs, lies in flash.
+    itcm_hi = 0x0001_0000
+    if "--itcm-only" in args:  # a build without stack sizes (the release build's own ELF)
+        ok = not heap
+    for h in handlers[1:]:
+        if not any(CONTROL.search(name(f)) for f in reach(h)):
+            continue
+        hot, todo = {h}, [h]
+        while todo:
+            f = todo.pop()
+            for g in graph.get(f, set()) | (set(targets(f)) if f in indirect else set()):
+                if g not in hot and not COLD.search(name(g)):
+                    hot.add(g)
+                    todo.append(g)
+        in_flash = lambda fs: sorted(name(f) for f in fs if f in addr_of and addr_of[f] >= itcm_hi and not LINKER.match(f))
+        far, cold = in_flash(hot), set(reach(h)) - hot
+        print(f"{name(h)}: {len(hot) - len(far)} functions of the per-sample path in ITCM, {len(far)} in flash;"
+              f" {len(cold)} more behind the restart (cold), {len(in_flash(cold))} of them in flash")
+        for f in far[:int(os.environ.get("ITCM_LIST", "12"))]:
+            print(f"  in flash: {f}")
+        ok = ok and not far
+    if "__eitcm" in addr_of and "__sitcm" in addr_of:
+        print(f"ITCM: {addr_of['__eitcm'] - addr_of['__sitcm']} of {itcm_hi - 8} bytes used")
+    pre = addr_of.get("__pre_init")
+    if pre is None or pre < itcm_hi:
+        print(f"__pre_init: {'missing' if pre is None else 'in ITCM'} (it must load ITCM from flash)")
+        ok = False
+    if "--itcm-only" in args:
+        print(f"firmware ITCM: {'PASS' if ok else 'FAIL'}")
+        sys.exit(0 if ok else 1)
     print(f"{'handler':<34} {'reachable fns':>13} {'panic path':>10} {'indirect':>8} {'stack (bytes)':>14}")
     for h, n, panics, ind, w, thread in rows:
         label = (name(h) + " (thread: init, idle)") if thread else name(h)

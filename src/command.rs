@@ -39,7 +39,7 @@
 //! | `rec read <start> <count>` | frames as `<i> <v0> <v1> ...` lines | `ok rec read <n>` |
 //! | `rec len [<n>]` | frames per capture, 1 up to the recorder's storage (`err 8` beyond; `err 12` while capturing); drops a finished capture; without `n`: report it | `ok rec len <n> of <capacity>` |
 //! | `rec bin <start> <count>` | frames as binary packets ([`crate::bulk`]: COBS, a zero byte after each, 32 frames of f32 LE per packet, CRC-32 each) after the reply line; `err 12` when no finished capture holds them | `ok rec bin <n> <packets>`, then the packets |
-//! | `fault` | latched fault (`none`, `sensor-range`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
+//! | `fault` | latched fault (`none`, `sensor-range`, `sensor-stuck`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
 //! | `selftest` | converters and safe-state hardware: DAC read-back, ADC code and sensor window, amplifier enable, reset cause, mock-chip rule violations (QEMU) | `ok selftest reset <cause> dac <read>/<wrote> ok adc <code> in ...` |
@@ -55,6 +55,8 @@
 //! | `u_min` | V | lowest output voltage | limit | 0 | 0 .. 150 |
 //! | `u_max` | V | highest output voltage (at most 150) | limit | 150 | 0 .. 150 |
 //! | `slew` | V/s | output slew-rate limit | limit | 20000 | 0.001 .. 1000000000 |
+//! | `guard` | um | sensor guard band: codes this close to either end of the ADC span are sensor faults | sensor | 5 | 0 .. 9 |
+//! | `stuck` | samples | identical consecutive ADC codes that are a sensor fault (0 = off) | sensor | 100 | 0 .. 10000 |
 //! | `um_per_code` | um | position per ADC code | read-only | board | - |
 //! | `volts_per_code` | V | output voltage per DAC code | read-only | board | - |
 //! | `sample_hz` | Hz | control rate | read-only | board | - |

@@ -39,6 +39,10 @@ pub enum Error<S, P> {
     },
     /// The driver configuration is not supported; the text names the field.
     Config(&'static str),
+    /// A conversion's status bits (AD4000 family) were not what the configuration sets:
+    /// the over-voltage clamp flag, or mode bits of a part that reset or a data line held
+    /// at one level.
+    Status(u8),
 }
 
 impl<S: core::fmt::Debug, P: core::fmt::Debug> core::fmt::Display for Error<S, P> {
@@ -50,6 +54,7 @@ impl<S: core::fmt::Debug, P: core::fmt::Debug> core::fmt::Display for Error<S, P
                 write!(f, "register read back {read:#x}, wrote {wrote:#x}")
             }
             Error::Config(m) => write!(f, "driver config: {m}"),
+            Error::Status(s) => write!(f, "ADC status bits {s:#04x} (over-voltage or mode lost)"),
         }
     }
 }

@@ -17,7 +17,7 @@ pub mod wpmbw;
 pub mod zpetc;
 
 pub use creep::CreepInverse;
-pub use ims::{Ims, ImsLoop, ImsModel};
+pub use ims::{Ims, ImsDynamics, ImsLoop, ImsModel};
 pub use mbw::MbwFf;
 pub use multi::{pseudo_inverse, MultiIms};
 pub use pi::{ppi_inverse, DpiInverse, PiInverse, PpiInverse, MAX_OPS};

@@ -28,6 +28,7 @@ mod laws;
 mod nor;
 mod params;
 mod period;
+pub mod reset;
 mod settings;
 mod storage;
 mod target;

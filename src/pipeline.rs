@@ -22,7 +22,7 @@ pub mod sensor;
 pub use adopt::Parts;
 pub use output::{DacScale, Limited, Output, OutputLimits};
 pub use reference::{lissajous, raster, Wave, WaveGen, TABLE_LEN};
-pub use sensor::Sensor;
+pub use sensor::{Sensor, StuckCode};
 
 use crate::feedback::Feedback;
 use crate::feedforward::{LinearFf, MultiFeedforward};
@@ -102,8 +102,11 @@ pub enum Mode {
 /// Why the pipeline went to its safe state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Fault {
-    /// An ADC code outside the sensor's valid window.
+    /// An ADC code outside the sensor's valid window (or a conversion whose frame or status
+    /// the driver refused).
     SensorRange { axis: usize },
+    /// The ADC code did not change for too many samples ([`StuckCode`]).
+    SensorStuck { axis: usize },
     /// The controllers produced NaN or infinity.
     NonFiniteCommand { axis: usize },
     /// The DAC did not take the last code: it still holds an older one.
@@ -114,7 +117,7 @@ pub enum Fault {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Counters {
     pub samples: u32,
-    /// Samples with an ADC code outside the sensor window (any axis).
+    /// Samples with an ADC code outside the sensor window or a stuck code (any axis).
     pub sensor_faults: u32,
     /// Samples with a non-finite command (any axis).
     pub nonfinite_commands: u32,
@@ -376,6 +379,30 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         }
     }
 
+    /// A sensor check outside the pipeline (the stuck-code detector on the converter's own
+    /// codes) found `fault`: counted and latched like a code outside the window.
+    pub fn sensor_failed(&mut self, fault: Fault) {
+        let st = &mut self.state;
+        st.counters.sensor_faults = st.counters.sensor_faults.saturating_add(1);
+        if st.fault.is_none() {
+            st.fault = Some(fault);
+        }
+    }
+
+    /// Replaces the sensor scaling and window of `axis` (validated like [`Pipeline::new`]).
+    pub fn set_sensor(&mut self, axis: usize, sensor: Sensor<T>) -> Result<(), ConfigError> {
+        sensor.validate().map_err(|e| e.on_axis(axis))?;
+        let a = self
+            .config
+            .axes
+            .get_mut(axis)
+            .ok_or(ConfigError::new("axis index out of range"))?;
+        a.sensor = sensor;
+        // The fused step's guard proof covers the sensor window: decide again.
+        self.fused = !self.restart_due && self.fusable();
+        Ok(())
+    }
+
     /// Leaves the safe state (a fault latches it) in the current mode, bumplessly.
     pub fn clear_fault(&mut self) {
         self.state.fault = None;
@@ -397,6 +424,11 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         }
     }
 
+    // Cold and out of line: the control interrupt enters it once after a fault or a
+    // configuration change, so it and the resets it calls stay in flash, leaving ITCM to the
+    // per-sample path (build.rs; `.ci/firmware-safety.py` checks the split).
+    #[cold]
+    #[inline(never)]
     fn restart(&mut self) {
         self.restart_due = false;
         let sp: [Setpoint<T>; N] = core::array::from_fn(|i| {

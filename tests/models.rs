@@ -5,7 +5,7 @@
 //! sample-rate numbers.
 
 use piezo_core::hysteresis::{
-    AbwAbs, AbwU, Cbw, Dahl, Gbw, Hysteresis, Mbw002, MbwRlm, MultiBw, Pi, Wpmbw,
+    AbwAbs, AbwU, BwState, Cbw, Dahl, Gbw, Hysteresis, Mbw002, MbwRlm, MultiBw, Pi, Wpmbw,
 };
 use proptest::prelude::*;
 use std::f64::consts::PI as PI64;
@@ -136,6 +136,44 @@ proptest! {
             m.step(&mut s, u, 1e-3);
             prop_assert!(s.h.abs() <= m.h_bound() * (1.0 + 1e-6), "{} > {}", s.h, m.h_bound());
         }
+    }
+
+    /// A GBW state beyond the equilibrium of the motion (above `h_up` moving up, below
+    /// `-h_down` moving down: where an observer's symmetric clamp `|h| <= h_bound` lets an
+    /// estimate go when the loop is asymmetric) is in the restoring region of eq. (3): `h`
+    /// moves monotonically back onto that equilibrium, never past it.
+    #[test]
+    fn gbw_relaxes_back_beyond_its_equilibria(
+        alpha in 0.5f64..2.0,
+        a in 0.05f64..1.0,
+        g in 0.002f64..0.05,
+        bh_frac in 0.0f64..3.0,
+        b_frac in -0.9f64..0.9,
+        n in prop::sample::select(vec![1.0f64, 1.5, 2.0]),
+        beyond in 0.01f64..1.0,
+        up in any::<bool>(),
+    ) {
+        let bh = bh_frac * g;
+        let b = b_frac * (bh + g);
+        let m = Gbw::with_beta_h(0.93, alpha, a, bh, b, g, n).unwrap();
+        let (s_dir, h_eq) = if up { (1.0, m.h_up()) } else { (-1.0, -m.h_down()) };
+        let h0 = h_eq * (1.0 + beyond);
+        // Input span that brings h to within 1e-6 of the equilibrium: the linearised decay
+        // rate there is alpha*n*k*|h_eq|^(n-1) with k|h_eq|^n = A.
+        let rate = alpha * n * a / h_eq.abs();
+        let span = 20.0 / rate;
+        let steps = 400;
+        let mut st = BwState { u: 0.0, h: h0 };
+        let mut prev = h0;
+        for k in 1..=steps {
+            let u = s_dir * span * k as f64 / steps as f64;
+            m.step(&mut st, u, 1e-3);
+            // Toward the equilibrium, never past it.
+            prop_assert!((st.h - prev) * s_dir <= 1e-12 * h_eq.abs(), "{k}: {prev} -> {}", st.h);
+            prop_assert!((st.h - h_eq) * s_dir >= -1e-9 * h_eq.abs(), "{k}: {} past {h_eq}", st.h);
+            prev = st.h;
+        }
+        prop_assert!((st.h - h_eq).abs() <= 1e-6 * h_eq.abs(), "{} vs {h_eq} from {h0}", st.h);
     }
 
     /// 004 eq. (16): `lambda/mu*u - b_w <= w <= lambda/mu*u + b_w` when `lambda >= rho*mu`.

@@ -32,6 +32,8 @@ fn record(i: u32) -> Vec<u8> {
                 "u_min" => x * 0.25,
                 "u_max" => 100.0 + x,
                 "offset_um" => x,
+                // Whole samples.
+                "stuck" => 100.0 + x,
                 _ => defaults.value(name).unwrap() * (1.0 + x / 200.0),
             };
             (name, v)

@@ -24,6 +24,7 @@ fn the_protocol_doc_help_and_get_follow_the_settings_table() {
         Access::Limit => "limit",
         Access::ReadOnly => "read-only",
         Access::Model => "model",
+        Access::Sensor => "sensor",
     };
     let want: Vec<Vec<String>> = SETTINGS
         .iter()

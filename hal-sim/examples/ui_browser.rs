@@ -1,6 +1,6 @@
 //! The lab console in a real browser: drives headless Chromium through chromedriver
 //! (WebDriver) against a running `piezo ui` and checks what a person would see. Run by
-//! `.ci/test.d/55-ui.sh` against the QEMU firmware:
+//! `.ci/test.d/56-ui.sh` against the QEMU firmware:
 //!
 //! ```text
 //! cargo run -p hal-sim --example ui_browser -- --ui http://127.0.0.1:8080/ \

@@ -6,15 +6,17 @@
 pub mod beam;
 pub mod cli;
 pub mod console;
+pub mod docs;
 pub mod faults;
 pub mod ident;
+pub mod independent;
 pub mod manipulation;
 pub mod mock;
-pub mod numeric;
 pub mod object;
-pub mod plot;
-pub mod record;
 pub mod scenario;
 pub mod serial;
 pub mod sim;
 pub mod stage;
+
+// The identification library's records, numerics and plots, where hal-sim's modules use them.
+pub use piezo_ident::{numeric, plot, record};

@@ -17,7 +17,9 @@
 mod ad4020;
 mod ad5791;
 
-pub use ad4020::{AdcSpec, AdcStats, MockAdc, MockAdcSpi, MockCnv};
+pub use ad4020::{
+    AdcFault, AdcSpec, AdcStats, MockAdc, MockAdcSpi, MockCnv, DISCONNECTED_FRACTION,
+};
 pub use ad5791::{DacOutput, DacSpec, DacStats, MockDac, MockDacSpi, MockLdac};
 
 use embedded_hal::delay::DelayNs;

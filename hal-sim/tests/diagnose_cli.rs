@@ -151,6 +151,7 @@ fn time_windows_select_the_samples() {
     let windowed = json(&[
         &"diagnose",
         &"--json",
+        &"--no-consistency",
         &"--train",
         &a,
         &"--train-window",
@@ -160,7 +161,16 @@ fn time_windows_select_the_samples() {
         &"--predict",
         &dir.join("p.csv"),
     ]);
-    let split = json(&[&"diagnose", &"--json", &"--train", &a, &"--split", &"0.5"]);
+    let split = json(&[
+        &"diagnose",
+        &"--json",
+        &"--no-consistency",
+        &"--train",
+        &a,
+        &"--split",
+        &"0.5",
+    ]);
+    assert!(split.get("consistency").is_none());
     for k in ["base", "extended"] {
         assert_eq!(windowed[k]["rmse_valid"], split[k]["rmse_valid"], "{k}");
     }
@@ -205,5 +215,51 @@ fn time_windows_select_the_samples() {
         "0:1"
     ])
     .contains("diagnose"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// One record checks itself at the splits 0.5, 0.65 and 0.8: the JSON names every
+/// arrangement's causes and each cause's status, the text report says which are confident;
+/// a pair is checked with the records swapped.
+#[test]
+fn consistency_over_splits_and_swap() {
+    let dir = std::env::temp_dir().join(format!("diagnose_cli_consist_{}", std::process::id()));
+    let plant = Plant::draw(8, &[Cause::Delay]);
+    write(&dir.join("a.csv"), &plant.record(8, 0));
+    write(&dir.join("b.csv"), &plant.record(8, 1));
+    let (a, b) = (dir.join("a.csv"), dir.join("b.csv"));
+    let out = cli_support::piezo(&[&"diagnose", &"--json", &"--train", &a, &"--split", &"0.65"]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &j["consistency"];
+    let labels: Vec<&str> = c["arrangements"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["label"].as_str().unwrap())
+        .collect();
+    assert_eq!(labels, ["split 0.65", "split 0.5", "split 0.8"], "{c:#}");
+    // Every cause the first arrangement names is listed with a status; confident ones are
+    // named in every arrangement.
+    for cause in j["causes"].as_array().unwrap() {
+        let entry = c["causes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|e| e["cause"] == *cause)
+            .unwrap_or_else(|| panic!("{cause} missing in {c:#}"));
+        let confident = entry["status"] == "confident";
+        assert_eq!(
+            confident,
+            entry["not_in"].as_array().unwrap().is_empty(),
+            "{c:#}"
+        );
+    }
+    assert_eq!(c["confident"], serde_json::json!(["delay"]), "{c:#}");
+    let out = cli_support::piezo(&[&"diagnose", &"--train", &a, &"--valid", &b]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("consistency over as given, swapped: confident delay"),
+        "{text}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

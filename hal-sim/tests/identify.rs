@@ -50,6 +50,9 @@ struct Fake {
     dac: i32,
     lb: LineBuffer,
     out: VecDeque<u8>,
+    /// The ADC's noise, +-2 LSB from an LCG: a real converter never repeats one code for
+    /// long, and the firmware's stuck-code check trips on a reading that does.
+    noise: u32,
 }
 
 impl Fake {
@@ -60,6 +63,7 @@ impl Fake {
             dac: 0,
             lb: LineBuffer::new(),
             out: VecDeque::new(),
+            noise: 1,
         }
     }
 
@@ -69,7 +73,14 @@ impl Fake {
         for _ in 0..periods {
             let volts = self.dac as f64 * 150.0 / OnChip::DAC_MAX as f64;
             let y = self.stage.step(volts);
-            let code = (y * 546.125 + 5461.25).clamp(0.0, 65535.0) as i32;
+            self.noise = self
+                .noise
+                .wrapping_mul(1_664_525)
+                .wrapping_add(1_013_904_223);
+            let lsb = (self.noise >> 29) as f64 - 3.5; // -3.5..3.5 in 8 steps
+            let code = (y * 546.125 + 5461.25 + 0.6 * lsb)
+                .round()
+                .clamp(0.0, 65535.0) as i32;
             [self.dac] = self.ctl.lp.step([code]);
             self.ctl.record([code], [self.dac]);
             self.ctl.timing.step.record(40);

@@ -41,8 +41,11 @@ struct Fake {
 
 impl Fake {
     fn new() -> Self {
+        let mut ctl = control::Ctl::new(control::c(control::SAMPLE_HZ as f64));
+        // A noise-free stage: a resting one repeats its code, so the stuck-code detector off.
+        ctl.lp.stuck_limit = 0;
         Self {
-            ctl: control::Ctl::new(control::c(control::SAMPLE_HZ as f64)),
+            ctl,
             y_um: 0.0,
             dac: 0,
             code_at_zero: 0.0,

@@ -58,10 +58,47 @@ fn adc_driver_configures_and_converts_with_no_violation() {
         assert_eq!(adc.convert().unwrap(), (v / lsb).round() as i32, "{v}");
         clock.advance_ns(10_000);
     }
+    // Beyond the span: the over-voltage flag in the status word fails the read.
     chip.set_input_volts(7.0);
-    assert_eq!(adc.convert().unwrap(), (1 << 19) - 1, "clips");
+    let e = adc.convert().unwrap_err();
+    assert!(
+        matches!(e, Error::Status(s) if s & ad4000::STATUS_OV != 0),
+        "{e:?}"
+    );
     assert_eq!(chip.violations().count, 0, "{:?}", chip.violations());
     assert_eq!(chip.stats().early_reads, 0);
+}
+
+/// The configuration register as the part has it: reset value 0xE1, reserved bits 7:5 read
+/// 1 and written as 1. The driver keeps them set and compares only the mode bits; the
+/// driver's write before (0x02, reserved bits 0) is refused.
+#[test]
+fn adc_register_resets_to_0xe1_and_keeps_its_reserved_bits() {
+    let (clock, chip) = adc();
+    assert_eq!(chip.register(), 0xE1);
+    let mut adc = driver(&clock, &chip);
+    adc.init().unwrap();
+    assert_eq!(chip.register() & ad4000::REG_RESERVED, ad4000::REG_RESERVED);
+    assert_eq!(
+        chip.register() & ad4000::REG_WRITABLE,
+        Ad4000Config::AD4020.register() & ad4000::REG_WRITABLE
+    );
+    assert_eq!(adc.read_register().unwrap(), chip.register());
+    assert_eq!(chip.violations().count, 0, "{:?}", chip.violations());
+    // The old write in a proper CNV frame: reserved bits written as 0.
+    clock.advance_ns(10_000);
+    let (mut cnv, mut spi) = (chip.cnv(), chip.spi());
+    cnv.set_high().unwrap();
+    clock.advance_ns(400);
+    cnv.set_low().unwrap();
+    let e = spi
+        .transfer(&mut [0; 3], &[ad4000::CMD_WRITE, 0x02, 0xFF])
+        .unwrap_err();
+    assert!(
+        matches!(e, MockSpiError::Violation(r) if r.contains("reserved bits 7:5")),
+        "{e:?}"
+    );
+    assert_eq!(chip.register() & ad4000::REG_RESERVED, ad4000::REG_RESERVED);
 }
 
 #[test]
@@ -72,6 +109,7 @@ fn adc_straight_binary_16bit() {
         format: CodeFormat::StraightBinary,
         turbo: false,
         high_z: true,
+        status: false,
         sck_hz: 40_000_000,
     };
     let chip = MockAdc::new(
@@ -120,7 +158,11 @@ fn old_adc_init_is_refused_outside_a_cnv_frame() {
         .transfer(&mut buf, &[ad4000::CMD_READ, 0xFF])
         .unwrap_err();
     assert!(matches!(e, MockSpiError::Violation(r) if r.starts_with("register access outside")));
-    assert_eq!(chip.register(), 0, "the part ignored the write");
+    assert_eq!(
+        chip.register(),
+        ad4000::REG_RESET,
+        "the part ignored the write"
+    );
     assert_eq!(chip.violations().count, 2);
 }
 
@@ -243,6 +285,37 @@ fn dac_driver_brings_the_output_up_at_the_safe_code() {
     assert_eq!(chip.violations().count, 0);
 }
 
+/// SYNC stays high for `t6` = 48 ns between two frames: the driver waits it before every
+/// frame (init, a read-back right after the loop's write and load, as `selftest` does);
+/// two frames back to back, as the driver sent them before, are refused.
+#[test]
+fn dac_sync_high_t6_between_frames() {
+    let (clock, chip) = bipolar_dac();
+    let mut dac = Ad5791::new(
+        chip.spi(),
+        chip.ldac(),
+        MockDelay(clock.clone()),
+        Ad5791Config::DEFAULT,
+    )
+    .unwrap();
+    dac.init(MID).unwrap();
+    dac.set_code(MID + 5).unwrap();
+    assert_eq!(dac.read_code().unwrap(), MID + 5);
+    assert_eq!(chip.violations().count, 0, "{:?}", chip.violations());
+    let mut spi = chip.spi();
+    clock.advance_ns(1000);
+    spi.write(&ad5791::write_frame(REG_DAC, 7)).unwrap();
+    clock.advance_ns(47);
+    let e = spi.write(&ad5791::write_frame(REG_DAC, 8)).unwrap_err();
+    assert!(
+        matches!(e, MockSpiError::Violation(r) if r.starts_with("SYNC high shorter than t6")),
+        "{e:?}"
+    );
+    assert_eq!(chip.violations().first.unwrap().measured, 47);
+    clock.advance_ns(48);
+    spi.write(&ad5791::write_frame(REG_DAC, 9)).unwrap();
+}
+
 #[test]
 fn dac_twos_complement_coding() {
     let (clock, chip) = bipolar_dac();
@@ -267,12 +340,14 @@ fn dac_twos_complement_coding() {
 /// write clock. Each step breaks a rule of the part.
 #[test]
 fn old_dac_init_is_refused() {
-    let (_clock, chip) = bipolar_dac();
+    let (clock, chip) = bipolar_dac();
     let mut spi = chip.spi();
     let mut ldac = chip.ldac();
     let ctrl = Ad5791Config::DEFAULT.control();
+    // (SYNC high for t6 between the frames here: the rules below are the ones tested.)
     spi.write(&ad5791::write_frame(REG_SWCTRL, SW_RESET))
         .unwrap();
+    clock.advance_ns(100);
     spi.write(&ad5791::write_frame(REG_CTRL, ctrl)).unwrap();
     let first = chip.violations().first.unwrap();
     assert!(
@@ -286,11 +361,13 @@ fn old_dac_init_is_refused() {
         DacOutput::Driven(0),
         "-10 V on the amplifier input"
     );
+    clock.advance_ns(100);
     spi.write(&ad5791::write_frame(REG_DAC, MID as u32))
         .unwrap();
     ldac.set_low().unwrap();
     let e = ldac.set_high().unwrap_err();
     assert!(e.0.starts_with("LDAC low pulse shorter than t10"), "{e:?}");
+    clock.advance_ns(100);
     let e = spi.write(&[0xA0, 0, 0]).unwrap_err(); // read CTRL at 25 MHz
     assert!(
         matches!(e, MockSpiError::Violation(r) if r.starts_with("read-back SCLK above 10.87 MHz")),
@@ -313,6 +390,7 @@ fn dac_floating_output_and_fast_write_clock_are_refused() {
         .rule
         .starts_with("output floating"));
     // A bus that can run 50 MHz, asked for 30 MHz: every frame is refused.
+    clock.advance_ns(100);
     assert_eq!(spi.set_sclk_max_hz(30_000_000), 30_000_000);
     let e = spi.write(&ad5791::write_frame(REG_DAC, 1)).unwrap_err();
     assert!(matches!(e, MockSpiError::Violation(r) if r.starts_with("SCLK above 25 MHz")));
@@ -326,5 +404,4 @@ fn dac_floating_output_and_fast_write_clock_are_refused() {
     dac.init(MID).unwrap();
     assert_eq!(chip2.bus().hz, 25_000_000);
     assert_eq!(chip2.violations().count, 0);
-    let _ = clock;
 }

@@ -14,7 +14,10 @@
 //! IOVCC 1.71 V to 3.3 V column, the slower one at the H743's 3.3 V I/O):
 //! * SCLK cycle `t1` >= 40 ns for writes ([`SCLK_MAX_HZ`], 25 MHz),
 //! * SCLK cycle `t1` >= 92 ns in read-back ([`SCLK_READBACK_MAX_HZ`], 10.87 MHz),
-//! * LDAC low pulse `t10` >= 13 ns ([`LDAC_LOW_NS`]).
+//! * LDAC low pulse `t10` >= 13 ns ([`LDAC_LOW_NS`]);
+//! * SYNC high `t6` >= 48 ns between two frames ([`SYNC_HIGH_NS`]): the bus raises SYNC at
+//!   the end of a transaction and lowers it at the start of the next, so the driver waits
+//!   `t6` before every frame (the bus cannot know how soon the next one comes).
 
 use super::{Error, SpiClock};
 use embedded_hal::delay::DelayNs;
@@ -49,6 +52,8 @@ pub const SCLK_MAX_HZ: u32 = 25_000_000;
 pub const SCLK_READBACK_MAX_HZ: u32 = 10_869_565;
 /// Shortest LDAC low pulse: `t10` >= 13 ns (Table 3, IOVCC 1.71 V to 3.3 V).
 pub const LDAC_LOW_NS: u32 = 13;
+/// Shortest SYNC high time between frames: `t6` >= 48 ns (Table 3, IOVCC 1.71 V to 3.3 V).
+pub const SYNC_HIGH_NS: u32 = 48;
 
 /// The 3 bytes of a write frame.
 #[inline]
@@ -192,6 +197,7 @@ impl<SPI: SpiDevice + SpiClock, LDAC: OutputPin, D: DelayNs> Ad5791<SPI, LDAC, D
         reg: u32,
         data: u32,
     ) -> Result<(), Error<SPI::Error, LDAC::Error>> {
+        self.delay.delay_ns(SYNC_HIGH_NS);
         self.spi.write(&write_frame(reg, data)).map_err(Error::Spi)
     }
 
@@ -206,14 +212,13 @@ impl<SPI: SpiDevice + SpiClock, LDAC: OutputPin, D: DelayNs> Ad5791<SPI, LDAC, D
         }
         let b = (READ | ((reg & 0b111) << 20)).to_be_bytes();
         let mut out = [0u8; 3];
-        let read = self
-            .spi
-            .write(&[b[1], b[2], b[3]])
-            .and_then(|()| {
-                self.spi
-                    .transaction(&mut [Operation::Transfer(&mut out, &[0, 0, 0])])
-            })
-            .map_err(Error::Spi);
+        self.delay.delay_ns(SYNC_HIGH_NS);
+        let read = self.spi.write(&[b[1], b[2], b[3]]).and_then(|()| {
+            self.delay.delay_ns(SYNC_HIGH_NS);
+            self.spi
+                .transaction(&mut [Operation::Transfer(&mut out, &[0, 0, 0])])
+        });
+        let read = read.map_err(Error::Spi);
         self.write_clock()?;
         read?;
         Ok(u32::from_be_bytes([0, out[0], out[1], out[2]]) & DATA_MASK)

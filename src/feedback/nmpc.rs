@@ -1,5 +1,6 @@
-//! Nonlinear MPC with the Bouc-Wen family (GBW by default) as prediction model, on the HGO's
-//! estimates (000 Part IV, "Model Predictive Control with Hysteresis").
+//! Nonlinear MPC with the HGO's hysteresis model as prediction model (CBW for `nmpc`, GBW
+//! for `nmpc-gbw`, 000 eq. 3 with its CBW term), on the HGO's estimates (000 Part IV,
+//! "Model Predictive Control with Hysteresis").
 //!
 //! At every `decimation`-th sample it minimises, over a fixed horizon of `H` moves
 //! ([`HORIZON`] = 8 in the firmware and `piezo sim`) held for `decimation` samples each,

@@ -8,12 +8,17 @@
 //! least `d - max dh/du > 0`, which brackets the root; a bounded Illinois solve finishes it
 //! ([`super::solve::solve_increasing`]). [`ImsLoop::Delayed`] is the usual one-sample-delay
 //! workaround of 004 §4.4 (`h` from the previous sample), kept for comparison.
+//!
+//! [`ImsDynamics`] puts the inverse of a second-order linear part in front of the IMS: 004
+//! eq. (26) is that with the asymmetric BW of 004 eq. (21) ([`ImsDynamics::eq26`]).
 
 use super::creep::CreepInverse;
 use super::solve::solve_increasing_hinted;
+use super::wpmbw::LinearPart;
 use super::FfError;
-use crate::hysteresis::{BwState, Cbw, Hysteresis};
+use crate::hysteresis::{AbwU, BwState, Cbw, Hysteresis};
 use crate::real::Real;
+use crate::signals::Setpoint;
 
 /// A model in piezo form `y = d*u - h` that the IMS can invert.
 pub trait ImsModel<T: Real>: Hysteresis<T> {
@@ -229,6 +234,109 @@ fn invert_cbw_n1<T: Real>(
         iterations: it,
         hint: phi,
     })
+}
+
+impl<T: Real> ImsModel<T> for AbwU<T> {
+    fn d(&self) -> T {
+        self.d()
+    }
+    /// The CBW part of `dh/du` is at most `2*alpha*beta/(beta + gamma)` (as for CBW, any
+    /// `n`: at `h = -h_max`, `h_max^n = alpha/(beta + gamma)`); the `delta` term adds
+    /// `-delta*u/|u'|`, which is never positive while `delta*u >= 0` (what
+    /// [`ImsDynamics::eq26`] requires of the voltage range). The `delta` drift can carry `h`
+    /// past `h_max` at slow rates, where the bound fails: the bracketed solve then steps
+    /// further out, and the delayed loop (004's) needs no bound.
+    fn max_h_slope(&self) -> T {
+        T::TWO * self.alpha() * self.beta() / (self.beta() + self.gamma())
+    }
+}
+
+/// An IMS behind the inverse of a second-order linear part `a2*y'' + a1*y' + a0*y = b0*v`:
+/// `v_d = (a0*y_d + a1*y_d' + a2*y_d'')/b0` from the setpoint's derivatives, then
+/// `u = (v_d + h(u))/d` ([`Ims`]).
+#[derive(Debug, Clone)]
+pub struct ImsDynamics<T: Real, M: ImsModel<T>> {
+    ims: Ims<T, M>,
+    linear: LinearPart<T>,
+}
+
+impl<T: Real, M: ImsModel<T>> ImsDynamics<T, M> {
+    /// `linear`: the linear part to invert (finite, `b0 != 0`).
+    pub fn new(ims: Ims<T, M>, linear: LinearPart<T>) -> Result<Self, FfError> {
+        let l = linear;
+        super::ensure(
+            [l.a0, l.a1, l.a2, l.b0].iter().all(|x| x.is_finite()) && l.b0 != T::ZERO,
+            "IMS dynamics: linear coefficients finite and b0 != 0",
+        )?;
+        Ok(Self { ims, linear })
+    }
+
+    /// Voltage (V) for the setpoint (`y`, `y'`, `y''`; non-finite derivatives count as zero,
+    /// a non-finite position holds the output).
+    #[inline]
+    pub fn compensate(&mut self, sp: &Setpoint<T>) -> T {
+        let fin = |x: T| if x.is_finite() { x } else { T::ZERO };
+        let l = &self.linear;
+        let v = (l.a0 * sp.y_um + l.a1 * fin(sp.dy) + l.a2 * fin(sp.ddy)) / l.b0;
+        self.ims.compensate(v)
+    }
+
+    pub fn ims(&self) -> &Ims<T, M> {
+        &self.ims
+    }
+    pub fn linear(&self) -> &LinearPart<T> {
+        &self.linear
+    }
+    /// The last voltage (V).
+    pub fn volts(&self) -> T {
+        self.ims.volts()
+    }
+    /// Restart relaxed at voltage `u0`.
+    pub fn reset_volts(&mut self, u0: T) {
+        self.ims.reset_volts(u0);
+    }
+}
+
+impl<T: Real> ImsDynamics<T, AbwU<T>> {
+    /// 004 eq. (26) as written: the asymmetric BW of 004 eq. (21) (`d0, alpha0, beta0,
+    /// gamma0, n_h, delta`: [`AbwU::new`]'s order) and its linear part `m*y'' + b*y' + k*y
+    /// = k*(d0*u - h)` inverted from the setpoint's derivatives,
+    /// `u = ((m*y_d'' + b*y_d' + k*y_d)/k + h)/d0`. `closure`: [`ImsLoop::Delayed`] is 004's
+    /// "constant time delay" (`h` of the previous sample), [`ImsLoop::Solved`] closes the
+    /// algebraic loop exactly. The voltage range must keep `delta*u >= 0` (else the
+    /// `delta*u*sgn(u')` term makes `dh/du` unbounded as `u' -> 0` and `y` need not increase
+    /// with `u`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn eq26(
+        abw: AbwU<T>,
+        mass: T,
+        damping: T,
+        stiffness: T,
+        closure: ImsLoop,
+        volts_min: T,
+        volts_max: T,
+        dt_s: T,
+    ) -> Result<Self, FfError> {
+        super::ensure(
+            mass.is_finite() && damping.is_finite() && stiffness.is_finite() && stiffness > T::ZERO,
+            "004 eq. (26): m, b finite, k finite and > 0",
+        )?;
+        let delta = abw.delta();
+        super::ensure(
+            delta * volts_min >= T::ZERO && delta * volts_max >= T::ZERO,
+            "004 eq. (26): delta*u >= 0 over the voltage range",
+        )?;
+        let ims = Ims::new(abw, closure, volts_min, volts_max, dt_s)?;
+        Self::new(
+            ims,
+            LinearPart {
+                a0: stiffness,
+                a1: damping,
+                a2: mass,
+                b0: stiffness,
+            },
+        )
+    }
 }
 
 impl<T: Real> Ims<T, Cbw<T>> {
@@ -769,5 +877,115 @@ mod iteration_tests {
         }
         let mean = total as f64 / n as f64;
         assert!(mean < 1.6 && worst <= 4, "mean {mean}, worst {worst}");
+    }
+}
+
+#[cfg(test)]
+mod eq26_tests {
+    use super::*;
+    use crate::linear::{Discretisation, Linear, Section};
+    use core::f64::consts::PI;
+
+    /// 004's identified "model in [36]" (sec. 4.3): `m, b, k` and the ABW of eq. (21).
+    const MBK: (f64, f64, f64) = (0.1029, 81.3370, 3.1628e4);
+    fn abw() -> AbwU<f64> {
+        AbwU::new(0.9221, 0.3050, 0.5913, 0.1649, 1.7170, 0.0415).unwrap()
+    }
+
+    /// 3 mrad +- 2 mrad at `f_hz`, with exact derivatives.
+    fn sine(t: f64, f_hz: f64) -> Setpoint<f64> {
+        let w = 2.0 * PI * f_hz;
+        Setpoint {
+            y_um: 3.0 - 2.0 * (w * t).cos(),
+            dy: 2.0 * w * (w * t).sin(),
+            ddy: 2.0 * w * w * (w * t).cos(),
+        }
+    }
+
+    /// Drives 004 eq. (21) itself (the ABW, then `m y'' + b y' + k y = k v`, ZOH exact) with
+    /// eq. (26); RMSE of `y - y_d` over the second second.
+    fn track(closure: ImsLoop, f_hz: f64, dt: f64) -> f64 {
+        let (m, b, k) = MBK;
+        let mut ff =
+            ImsDynamics::eq26(abw(), m, b, k, closure, 0.0, 10.0, dt).expect("004's values");
+        let lin = Linear::<f64, 1>::new(
+            1.0,
+            [Section::Second {
+                wn: (k / m).sqrt(),
+                zeta: b / (2.0 * (k * m).sqrt()),
+                zero: None,
+            }],
+            dt,
+            Discretisation::Zoh,
+        )
+        .unwrap();
+        let plant = abw();
+        let (mut hs, mut ls) = (plant.init(0.0), lin.init(0.0));
+        let n = (2.0 / dt) as usize;
+        let (mut se, mut cnt) = (0.0, 0);
+        for i in 0..n {
+            let t = i as f64 * dt;
+            let u = ff.compensate(&sine(t, f_hz));
+            assert!((0.0..=10.0).contains(&u), "{u}");
+            let y = lin.step(&mut ls, plant.step(&mut hs, u, dt));
+            // ZOH: the output at the end of the sample answers the setpoint of its start.
+            if i >= n / 2 {
+                se += (y - sine(t + dt, f_hz).y_um).powi(2);
+                cnt += 1;
+            }
+        }
+        (se / cnt as f64).sqrt()
+    }
+
+    /// Eq. (26) on its own model tracks it; the exact loop beats 004's delay; without the
+    /// inverse linear part (eq. 25's structure) the lag of the dynamics shows.
+    #[test]
+    fn eq26_tracks_its_own_model() {
+        let dt = 1e-4;
+        for f in [1.0, 10.0] {
+            let solved = track(ImsLoop::Solved, f, dt);
+            let delayed = track(ImsLoop::Delayed, f, dt);
+            std::eprintln!("{f} Hz: solved {solved:.2e} mrad, delayed {delayed:.2e} mrad");
+            // The ZOH sample of lag and the continuous-time inverse of a discrete plant.
+            assert!(solved < 2e-3 * f, "{f} Hz: {solved}");
+            assert!(delayed > solved, "{f} Hz: {delayed} vs {solved}");
+        }
+    }
+
+    /// The voltage is eq. (26)'s first line evaluated with `h` of the previous sample.
+    #[test]
+    fn delayed_voltage_is_eq26_as_written() {
+        let (m, b, k) = MBK;
+        let dt = 1e-4;
+        let mut ff = ImsDynamics::eq26(abw(), m, b, k, ImsLoop::Delayed, 0.0, 10.0, dt).unwrap();
+        let model = abw();
+        let mut st = model.init(0.0);
+        model.step(&mut st, 0.0, dt);
+        for i in 0..3000 {
+            let sp = sine(i as f64 * dt, 5.0);
+            let expect = ((m * sp.ddy + b * sp.dy + k * sp.y_um) / k + st.h) / model.d();
+            let u = ff.compensate(&sp);
+            assert!(
+                (u - expect.clamp(0.0, 10.0)).abs() < 1e-12,
+                "{i}: {u} vs {expect}"
+            );
+            model.step(&mut st, u, dt);
+        }
+    }
+
+    #[test]
+    fn eq26_refuses_a_range_with_delta_u_negative() {
+        let (m, b, k) = MBK;
+        let e = ImsDynamics::eq26(abw(), m, b, k, ImsLoop::Solved, -5.0, 10.0, 1e-4).unwrap_err();
+        assert!(e.0.contains("delta*u >= 0"), "{}", e.0);
+        assert!(ImsDynamics::eq26(abw(), m, b, 0.0, ImsLoop::Solved, 0.0, 10.0, 1e-4).is_err());
+        let mut ff = ImsDynamics::eq26(abw(), m, b, k, ImsLoop::Solved, 0.0, 10.0, 1e-4).unwrap();
+        let u = ff.compensate(&Setpoint::hold(2.0));
+        let nan = Setpoint {
+            y_um: f64::NAN,
+            ..Setpoint::hold(0.0)
+        };
+        assert_eq!(ff.compensate(&nan), u);
+        assert_eq!(ff.compensate(&Setpoint::hold(1e9)), 10.0);
     }
 }

@@ -187,7 +187,12 @@ impl<C: Converters> CommandLine<C> {
         let r = &mut self.replica;
         ctl.lock(|live| r.lp.p.sync_state(&live.lp.p));
         r.lp.apply_settings(rec)?;
-        ctl.lock(|live| live.lp.adopt(&r.lp, Parts::MODEL.union(Parts::LIMITS)));
+        ctl.lock(|live| {
+            live.lp.adopt(
+                &r.lp,
+                Parts::MODEL.union(Parts::LIMITS).union(Parts::SENSOR),
+            )
+        });
         Ok(())
     }
 

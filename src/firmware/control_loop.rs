@@ -4,11 +4,12 @@
 use super::converters::{converter_config, Converters};
 use super::laws::{ff_with, law_with, validate, FFS, LAWS};
 use super::params::Params;
+use super::settings::default_of;
 use super::target::{c, LoopPipeline, AXES, R, SAFE_VOLTS};
 use crate::command::Error;
 use crate::feedback::Feedback;
 use crate::feedforward::{Feedforward, MultiFeedforward};
-use crate::pipeline::{Mode, OutputLimits, Parts, Wave};
+use crate::pipeline::{Fault, Mode, OutputLimits, Parts, StuckCode, Wave};
 use crate::recorder::Signal;
 use crate::Real;
 use core::marker::PhantomData;
@@ -24,6 +25,12 @@ pub struct Loop<C> {
     pub ff: &'static str,
     /// Model, open-loop scaling and gains the law and compensator are built from.
     pub params: Params,
+    /// The sensor window's guard band (um, settings `guard`).
+    pub guard_um: R,
+    /// Identical consecutive ADC codes that are a sensor fault (settings `stuck`, 0: off),
+    /// and each axis' detector, on the converter's own codes.
+    pub stuck_limit: u32,
+    stuck: [StuckCode; AXES],
     converters: PhantomData<C>,
 }
 
@@ -36,6 +43,9 @@ impl<C> Clone for Loop<C> {
             law: self.law,
             ff: self.ff,
             params: self.params,
+            guard_um: self.guard_um,
+            stuck_limit: self.stuck_limit,
+            stuck: self.stuck,
             converters: PhantomData,
         }
     }
@@ -51,6 +61,10 @@ impl<C: Converters> Loop<C> {
         self.law = from.law;
         self.ff = from.ff;
         self.params = from.params;
+        if parts.contains(Parts::SENSOR) {
+            self.guard_um = from.guard_um;
+            self.stuck_limit = from.stuck_limit;
+        }
     }
 
     /// Open loop, holding 0 um, in the safe state's voltage.
@@ -72,14 +86,24 @@ impl<C: Converters> Loop<C> {
             law: "open-loop",
             ff: "linear",
             params,
+            guard_um: c(default_of("guard")),
+            stuck_limit: default_of("stuck") as u32,
+            stuck: [StuckCode::default(); AXES],
             converters: PhantomData,
         }
     }
 
     /// One control period: ADC codes in, DAC codes out (the converters' own codes, 0 ..=
     /// [`Converters::DAC_FULL`]), one per axis. No panic, bounded, NaN-safe.
+    /// A code that repeats [`Loop::stuck_limit`] times latches the safe state (checked on
+    /// the converter's own codes, before the shift drops their noise).
     #[inline(always)]
     pub fn step(&mut self, adc_code: [i32; AXES]) -> [i32; AXES] {
+        for (axis, (s, &code)) in self.stuck.iter_mut().zip(&adc_code).enumerate() {
+            if s.update(code, self.stuck_limit) {
+                self.p.sensor_failed(Fault::SensorStuck { axis });
+            }
+        }
         let codes = self.p.step(adc_code.map(|c| c >> C::ADC_SHIFT));
         // max/min, not clamp: clamp asserts min <= max (a panic path in the handler).
         #[allow(clippy::manual_clamp)]
@@ -237,6 +261,17 @@ impl<C: Converters> Loop<C> {
                 .set_open_loop(axis, self.params.linear())
                 .map_err(|_| Error::OutOfRange)?;
         }
+        Ok(())
+    }
+
+    /// Sets the sensor window's guard band (um) on every axis, in place.
+    pub(super) fn set_guard(&mut self, guard_um: R) -> Result<(), Error> {
+        for axis in 0..AXES {
+            self.p
+                .set_sensor(axis, C::sensor(guard_um.to_f64()))
+                .map_err(|_| Error::OutOfRange)?;
+        }
+        self.guard_um = guard_um;
         Ok(())
     }
 

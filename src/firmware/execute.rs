@@ -89,6 +89,8 @@ pub(super) fn run<C: Converters, const N: usize>(
             set_param(lp, name, c(v as f64))?;
             parts = if matches!(name, "u_min" | "u_max" | "slew") {
                 Parts::LIMITS
+            } else if matches!(name, "guard" | "stuck") {
+                Parts::SENSOR
             } else {
                 Parts::MODEL
             };
@@ -373,7 +375,7 @@ pub(super) fn run<C: Converters, const N: usize>(
         }
         Command::Defaults => {
             lp.default_settings()?;
-            parts = Parts::MODEL.union(Parts::LIMITS);
+            parts = Parts::MODEL.union(Parts::LIMITS).union(Parts::SENSOR);
             out.push_str("ok defaults");
         }
         // The board's own: the command line runs them (see `Port`).
@@ -617,6 +619,7 @@ fn push_fault<const N: usize>(out: &mut command::Reply<N>, p: &LoopPipeline) {
     out.push_str(match st.fault {
         None => "none",
         Some(Fault::SensorRange { .. }) => "sensor-range",
+        Some(Fault::SensorStuck { .. }) => "sensor-stuck",
         Some(Fault::NonFiniteCommand { .. }) => "non-finite",
         Some(Fault::DacWrite { .. }) => "dac-write",
     });
@@ -666,6 +669,8 @@ pub(super) fn get_param<C: Converters>(lp: &Loop<C>, name: &str) -> Result<R, Er
         "um_per_code" => a.sensor.um_per_code,
         "volts_per_code" => a.dac.volts_per_code,
         "sample_hz" => cfg.sample_hz,
+        "guard" => lp.guard_um,
+        "stuck" => R::from_i32(lp.stuck_limit.min(i32::MAX as u32) as i32),
         _ => {
             let mut p = lp.params;
             *p.slot(name).ok_or(Error::UnknownParam)?
@@ -696,6 +701,14 @@ fn set_param<C: Converters>(lp: &mut Loop<C>, name: &str, v: R) -> Result<(), Er
         "slew" => {
             check(v > c(0.0))?;
             lp.set_limits(|l| l.slew_volts_per_s = v)
+        }
+        "guard" => lp.set_guard(v),
+        "stuck" => {
+            // Whole samples only.
+            let n = v.to_f64();
+            check(n == (n as u32) as f64)?;
+            lp.stuck_limit = n as u32;
+            Ok(())
         }
         _ if READ_ONLY.contains(&name) => Err(Error::Busy),
         _ => lp.set_params(name, v),

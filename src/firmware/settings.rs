@@ -18,6 +18,8 @@ pub enum Access {
     /// The hysteresis model, the open-loop scaling or a gain ([`super::Params`]): `set`
     /// rebuilds the law and the compensator.
     Model,
+    /// A sensor check (guard band, stuck-code limit): `set` changes it in place.
+    Sensor,
 }
 
 /// A model setting's slot in [`Params`]: an enum and a `match`, not a function pointer,
@@ -111,17 +113,20 @@ const fn row(
     }
 }
 
-use Access::{Limit, Model, ReadOnly};
+use Access::{Limit, Model, ReadOnly, Sensor};
 
 /// Every setting, in the order `help` lists them: name, unit, meaning, access,
 /// `[default, min, max]`, slot. Defaults: the QEMU board's simulated stage (CBW set 1 of the
 /// 000 backup slide) and gains tuned on it; ranges: what a piezo stage behind a 150 V
 /// amplifier can use, wide enough for any fitted model.
 #[rustfmt::skip]
-pub const SETTINGS: [Setting; 20] = [
+pub const SETTINGS: [Setting; 22] = [
     row("u_min", "V", "lowest output voltage", Limit, [0.0, 0.0, 150.0], None),
     row("u_max", "V", "highest output voltage (at most 150)", Limit, [150.0, 0.0, 150.0], None),
     row("slew", "V/s", "output slew-rate limit", Limit, [20_000.0, 1e-3, 1e9], None),
+    // Up to 9 um: the window keeps the stage at rest (0 um, 10 um above the bottom rail).
+    row("guard", "um", "sensor guard band: codes this close to either end of the ADC span are sensor faults", Sensor, [5.0, 0.0, 9.0], None),
+    row("stuck", "samples", "identical consecutive ADC codes that are a sensor fault (0 = off)", Sensor, [100.0, 0.0, 10_000.0], None),
     row("um_per_code", "um", "position per ADC code", ReadOnly, BOARD, None),
     row("volts_per_code", "V", "output voltage per DAC code", ReadOnly, BOARD, None),
     row("sample_hz", "Hz", "control rate", ReadOnly, BOARD, None),
@@ -170,7 +175,7 @@ const fn names<const N: usize>(only: Option<Access>) -> [&'static str; N] {
 }
 
 /// Names of `get`/`set` (and `help`'s list).
-pub const PARAMS: [&str; 20] = names(None);
+pub const PARAMS: [&str; 22] = names(None);
 /// The settings only `get` reads.
 pub const READ_ONLY: [&str; 3] = names(Some(Access::ReadOnly));
 
@@ -254,7 +259,10 @@ mod tests {
                 s.name
             );
         }
-        for s in SETTINGS.iter().filter(|s| s.access == Access::Limit) {
+        for s in SETTINGS
+            .iter()
+            .filter(|s| matches!(s.access, Access::Limit | Access::Sensor))
+        {
             assert!(s.accepts(s.default), "{}", s.name);
         }
     }

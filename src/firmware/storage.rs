@@ -15,7 +15,7 @@ use super::converters::Converters;
 use super::execute::{get_param, PARAMS, READ_ONLY};
 use super::nor::Blocking;
 use super::params::Params;
-use super::settings::setting;
+use super::settings::{default_of, setting};
 use super::target::{c, R};
 use crate::command::Error;
 use crate::pipeline::{Mode, Wave};
@@ -281,7 +281,8 @@ impl<C: Converters> Loop<C> {
                 .ok_or(Error::BadSettings)
         };
         let limits = [get("u_min")?, get("u_max")?, get("slew")?];
-        self.install_settings(p, limits)
+        let sensor = [get("guard")?, get("stuck")?];
+        self.install_settings(p, limits, sensor)
             .map_err(|_| Error::BadSettings)
     }
 
@@ -291,13 +292,26 @@ impl<C: Converters> Loop<C> {
         self.install_settings(
             Params::default(),
             [l.volts_min, l.volts_max, l.slew_volts_per_s],
+            [c(default_of("guard")), c(default_of("stuck"))],
         )
     }
 
-    /// Installs the parameters and the limits `[u_min, u_max, slew]` (V, V, V/s), with
-    /// the checks of `set`, all or none.
-    fn install_settings(&mut self, p: Params, [lo, hi, slew]: [R; 3]) -> Result<(), Error> {
+    /// Installs the parameters, the limits `[u_min, u_max, slew]` (V, V, V/s) and the
+    /// sensor checks `[guard, stuck]` (um, samples), with the checks of `set`, all or none.
+    fn install_settings(
+        &mut self,
+        p: Params,
+        [lo, hi, slew]: [R; 3],
+        [guard, stuck]: [R; 2],
+    ) -> Result<(), Error> {
         if !(lo >= c(0.0) && lo < hi && hi <= c(150.0) && slew > c(0.0)) {
+            return Err(Error::OutOfRange);
+        }
+        let whole = stuck.to_f64();
+        let sensor_ok = [("guard", guard.to_f64()), ("stuck", whole)]
+            .iter()
+            .all(|(n, v)| setting(n).is_some_and(|s| s.accepts(*v)));
+        if !(sensor_ok && whole == (whole as u32) as f64) {
             return Err(Error::OutOfRange);
         }
         let lp = self;
@@ -313,6 +327,9 @@ impl<C: Converters> Loop<C> {
             let _ = lp.install(old);
             return Err(e);
         }
+        // Checked above; the window of a guard within its range always validates.
+        lp.set_guard(guard)?;
+        lp.stuck_limit = whole as u32;
         Ok(())
     }
 

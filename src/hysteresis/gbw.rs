@@ -14,14 +14,20 @@ use crate::real::Real;
 /// `h_up = (A/(B+G))^(1/n)`, moving down at `-h_down = -(A/(G-B))^(1/n)`, so `B != 0` makes
 /// the loop asymmetric. But eq. (3) as printed is not bounded for `B != 0`: with `B > 0`, a
 /// long descent takes `h` below `-h_up`, where the slope on the next ascent is negative and
-/// `h` runs away (and symmetrically for `B < 0`). The model therefore keeps `dh/du >= 0` (`h`
-/// never moves against the input, as in CBW inside its bounds): in the run-away region `h`
-/// holds. This bounds `-h_down <= h <= h_up` ([`Gbw::h_bound`]), but a periodic input still
-/// ratchets `h` toward the larger equilibrium, where the guard freezes it: after a few
-/// full-stroke cycles the printed eq. (3) has no loop left (test
-/// `printed_form_loses_its_loop`). And with `B = 0` it has none to begin with
-/// (`dh/du = alpha*(A - G*|h|^n)` in both directions). So eq. (3) as printed neither nests
-/// CBW (the lecture's claim for `alpha = n = 1`) nor keeps an asymmetric loop.
+/// `h` runs away (and symmetrically for `B < 0`). The model therefore holds `h` in the
+/// run-away region: where the slope is negative *and* `h` is on the side opposite to the
+/// motion (`sgn(h) != sgn(du/dt)`, beyond the unstable equilibrium). Where the slope is
+/// negative on the side of the motion (`h` above `h_up` moving up, below `-h_down` moving
+/// down) it is the restoring region of the stable equilibrium, and `h` relaxes back to it as
+/// eq. (3) says (such states come from an observer's estimate or an initial state; test
+/// `gbw_relaxes_back_beyond_its_equilibria` in `tests/models.rs`). This bounds
+/// `-h_down <= h <= h_up` from inside, and `|h|` never grows from outside
+/// ([`Gbw::h_bound`]), but a periodic input still ratchets `h` toward the larger
+/// equilibrium, where the guard freezes it: after a few full-stroke cycles the printed
+/// eq. (3) has no loop left (test `printed_form_loses_its_loop`). And with `B = 0` it has
+/// none to begin with (`dh/du = alpha*(A - G*|h|^n)` in both directions). So eq. (3) as
+/// printed neither nests CBW (the lecture's claim for `alpha = n = 1`) nor keeps an
+/// asymmetric loop.
 ///
 /// The lecture's nesting claim holds with the CBW term `B_h*sgn(u'*h)*|h|^n`
 /// (`= beta*|u'|*|h|^(n-1)*h` of 000 eq. 1): `alpha = n = 1`, `B = 0` is CBW exactly
@@ -143,10 +149,22 @@ impl<T: Real> Gbw<T> {
         self.alpha * (self.a - k * h.abs_pow(self.n))
     }
 
-    /// `dh/du` of the model (eq. 3 with the guard `dh/du >= 0`).
+    /// `h` is in the run-away region for direction `s`: the slope is negative and `h` is on
+    /// the side opposite to the motion, beyond the unstable equilibrium there. (A negative
+    /// slope on the side of the motion is the restoring region of `h_up` or `-h_down`.)
+    #[inline]
+    pub fn runs_away(&self, h: T, s: T) -> bool {
+        h * s < T::ZERO && self.slope_raw(h, s) < T::ZERO
+    }
+
+    /// `dh/du` of the model: eq. (3), held (0) in the run-away region.
     #[inline]
     pub fn slope(&self, h: T, s: T) -> T {
-        self.slope_raw(h, s).max(T::ZERO)
+        if self.runs_away(h, s) {
+            T::ZERO
+        } else {
+            self.slope_raw(h, s)
+        }
     }
 
     /// Input-domain update of `h` over `du`: exact for `n = 1`, RK4 otherwise.
@@ -156,20 +174,22 @@ impl<T: Real> Gbw<T> {
         if s == T::ZERO {
             return h;
         }
-        // The run-away region (slope < 0) is invariant under the guarded dynamics and the
-        // region slope >= 0 never enters it (its boundary is an unstable equilibrium).
-        if self.slope_raw(h, s) < T::ZERO {
+        // The run-away region is invariant under the guarded dynamics, and no other state
+        // enters it (its boundary is the unstable equilibrium on that side).
+        if self.runs_away(h, s) {
             return h;
         }
         if self.n == T::ONE {
             // |h| = sigma*h, sgn(h) = sigma:
             // dh/du = alpha*A - alpha*(B_h*s + (B*s + G)*sigma)*h.
+            // Exact, so from beyond an equilibrium it decays onto it without overshoot.
             step_piecewise_affine(h, du, self.alpha * self.a, |sigma| {
                 self.alpha * (self.bh * s + (self.b * s + self.g) * sigma)
             })
         } else {
-            rk4_input(h, u0, du, self.max_du, |h, _| self.slope(h, s))
-                .clamp_to(self.h_lo, self.h_hi)
+            // The invariant band, widened to a start outside it (which relaxes inward).
+            let (lo, hi) = (self.h_lo.min(h), self.h_hi.max(h));
+            rk4_input(h, u0, du, self.max_du, |h, _| self.slope(h, s)).clamp_to(lo, hi)
         }
     }
 }
@@ -219,7 +239,7 @@ mod tests {
             2000,
             |h, u, du| m.advance_h(h, u, du),
             |h, u, du| {
-                if m.slope_raw(h, du.signum()) < 0.0 {
+                if m.runs_away(h, du.signum()) {
                     h
                 } else {
                     rk4_input(h, u, du, 1e-3, |h, _| m.slope(h, du.signum()))

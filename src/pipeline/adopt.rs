@@ -19,6 +19,8 @@ impl Parts {
     pub const LIMITS: Self = Self(1 << 3);
     pub const MODE: Self = Self(1 << 4);
     pub const CLEAR_FAULT: Self = Self(1 << 5);
+    /// The sensor scaling and window of every axis.
+    pub const SENSOR: Self = Self(1 << 6);
     /// The feedforward, the open-loop scaling and the law with its mode (a model change).
     pub const MODEL: Self =
         Self(Self::FEEDFORWARD.0 | Self::FEEDBACK.0 | Self::OPEN_LOOP.0 | Self::MODE.0);
@@ -76,6 +78,9 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             if parts.contains(Parts::OPEN_LOOP) {
                 d.open_loop = s.open_loop;
             }
+            if parts.contains(Parts::SENSOR) {
+                d.sensor = s.sensor;
+            }
             if parts.contains(Parts::LIMITS) {
                 d.limits = s.limits;
                 d.safe_volts = s.safe_volts;
@@ -105,7 +110,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             // path while the flag is up) and decides the fused path again.
             self.restart_due = true;
             self.fused = false;
-        } else if parts.contains(Parts::LIMITS) && !self.restart_due {
+        } else if parts.any(Parts::LIMITS.union(Parts::SENSOR)) && !self.restart_due {
             // A restart still due keeps the generic path until it ran.
             self.fused = self.fusable();
         }

@@ -72,9 +72,52 @@ impl<T: Real> Sensor<T> {
     }
 }
 
+/// Stuck-code detector: `limit` identical consecutive codes are a sensor fault. A working
+/// position channel never repeats its code that long (the converter's transition noise and
+/// the sensor's own noise move the code by a few LSB from sample to sample); a frozen
+/// converter, a data line held by nothing, or an input left floating on its sampling
+/// capacitor does. Run it on the converter's own codes (before any shift drops their noise).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StuckCode {
+    last: i32,
+    run: u32,
+}
+
+impl StuckCode {
+    /// Takes this sample's code; true once it is the `limit`-th identical code in a row
+    /// (`limit` 0: never).
+    #[inline(always)]
+    pub fn update(&mut self, code: i32, limit: u32) -> bool {
+        if code == self.last {
+            self.run = self.run.saturating_add(1);
+        } else {
+            self.last = code;
+            self.run = 1;
+        }
+        limit != 0 && self.run >= limit
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stuck_code_trips_at_the_limit_and_not_before() {
+        let mut s = StuckCode::default();
+        for k in 1..=9 {
+            assert!(!s.update(7, 10), "{k}");
+        }
+        assert!(s.update(7, 10));
+        assert!(!s.update(8, 10), "a new code starts a new run");
+        let mut s = StuckCode::default();
+        assert!((0..1000).all(|_| !s.update(5, 0)), "0: off");
+        let mut s = StuckCode::default();
+        assert!(
+            (0..1000).all(|k| !s.update(k % 3, 2)),
+            "a moving code never trips"
+        );
+    }
 
     #[test]
     fn two_point_calibration_maps_both_points() {

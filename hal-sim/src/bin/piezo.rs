@@ -7,7 +7,7 @@ use clap::{Parser, Subcommand};
     version,
     about = "Simulate, identify and diagnose piezoelectric stages"
 )]
-struct Cli {
+pub(crate) struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
 }
@@ -22,8 +22,13 @@ enum Cmd {
     Fit(hal_sim::cli::fit::Args),
     /// Simulate a saved model (`fit.json`) from rest on an input record.
     Predict(hal_sim::cli::predict::Args),
+    /// Score a saved model on periodic records by the FSM benchmark's official rule; noise floor and BLA distortion per level.
+    Score(hal_sim::cli::score::Args),
     /// Find what the base model gets wrong, name the cause, extend the model, measure the gain.
     Diagnose(hal_sim::cli::diagnose::Args),
+    /// Run diagnose on an independent generator's stages with hidden causes; print recall,
+    /// false positives and exact-set accuracy.
+    DiagnoseBench(hal_sim::cli::diagnose_bench::Args),
     /// Fault campaign over every controller mode.
     Faults(hal_sim::cli::faults::Args),
     /// Talk to the firmware over its serial command port (or QEMU's, over TCP).
@@ -39,7 +44,9 @@ fn main() {
         Cmd::Sim(a) => hal_sim::cli::sim::run(a),
         Cmd::Fit(a) => hal_sim::cli::fit::run(a),
         Cmd::Predict(a) => hal_sim::cli::predict::run(a),
+        Cmd::Score(a) => hal_sim::cli::score::run(a),
         Cmd::Diagnose(a) => hal_sim::cli::diagnose::run(a),
+        Cmd::DiagnoseBench(a) => hal_sim::cli::diagnose_bench::run(a),
         Cmd::Faults(a) => hal_sim::cli::faults::run(a),
         Cmd::Serial(a) => hal_sim::cli::serial::run(a),
         Cmd::Ui(a) => hal_sim::cli::ui::run(a),

@@ -5,13 +5,21 @@
 //! piezo diagnose --train A.csv --split 0.5        # one record: first half fits, second validates
 //! piezo diagnose --train A.csv --train B.csv --valid C.csv --valid D.csv   # one model for A and B
 //! piezo diagnose --train A.csv --train-window 3.26:6.26 --valid-window 6.26:   # windows of A
+//! piezo diagnose --train A.csv --valid B.csv --no-consistency   # skip the swapped run
 //! ```
+//!
+//! Every run also checks itself on other arrangements of the same data (unless
+//! `--no-consistency`): a split record at the other splits of 0.5 / 0.65 / 0.8, time windows
+//! at those splits of the whole records, a pair with the records' roles swapped. Causes named
+//! in every arrangement are `confident`, the others `uncertain`.
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::fit_args::{Columns, Records, Window};
-use crate::ident::diagnose::{self, Diagnosis, Finding, Options, Signals};
+use crate::ident::diagnose::consistency::{self, Arrangement, SPLITS};
+pub use crate::ident::diagnose::report::summary;
+use crate::ident::diagnose::{self, report, Diagnosis, Options, Signals};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -29,6 +37,10 @@ pub struct Args {
     /// Write plots (loops before/after, residual against the cause's signal) into this folder.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Skip the consistency check (the same rule run on the other splits of 0.5 / 0.65 / 0.8,
+    /// or with the records' roles swapped).
+    #[arg(long)]
+    pub no_consistency: bool,
     /// Columns and units of the records.
     #[command(flatten)]
     pub columns: Columns,
@@ -45,6 +57,22 @@ pub fn run(args: Args) -> Result<()> {
     anyhow::ensure!(!rs.train.is_empty(), "--train is required (see --help)");
     let records = rs.train.iter().map(load).collect::<Result<Vec<_>>>()?;
     let windowed = rs.train_window.is_some() || rs.valid_window.is_some();
+    let wholes = records.clone();
+    // The arrangement asked for, and the others the consistency check runs.
+    let (label, others): (String, Vec<Arrangement>) = if windowed {
+        (
+            "windows".into(),
+            SPLITS
+                .iter()
+                .map(|&f| Arrangement::split(&wholes, f))
+                .collect(),
+        )
+    } else if rs.valid.is_empty() {
+        let f = rs.split.unwrap_or(0.5);
+        (format!("split {f}"), consistency::other_splits(&wholes, f))
+    } else {
+        ("as given".into(), Vec::new())
+    };
     let (train, valid, split_note) = if windowed {
         rs.split_at(0, None)?;
         let valid = if rs.valid.is_empty() {
@@ -82,29 +110,26 @@ pub fn run(args: Args) -> Result<()> {
         );
         (train, valid, Some(note))
     } else if rs.valid.is_empty() {
-        let mut notes = Vec::new();
-        let (mut train, mut valid) = (Vec::new(), Vec::new());
-        for (whole, path) in records.into_iter().zip(&rs.train) {
-            let k = rs.split_at(whole.len(), Some(0.5))?.unwrap_or(0);
-            notes.push(format!(
-                "samples 0..{k} of {} fit, {k}..{} validate",
-                path.display(),
-                whole.len()
-            ));
-            train.push(whole.slice(0, k));
-            valid.push(whole.with_warmup(k));
-        }
-        let note = format!(
-            "no --valid: {} (the model runs through the first part to reach them)",
-            notes.join("; ")
-        );
-        (train, valid, Some(note))
+        let names: Vec<String> = rs.train.iter().map(|p| p.display().to_string()).collect();
+        let h = report::split_records(records, &names, rs.split.unwrap_or(0.5))?;
+        (h.train, h.valid, Some(h.note))
     } else {
         rs.split_at(0, None)?;
         let valid = rs.valid.iter().map(load).collect::<Result<Vec<_>>>()?;
         (records, valid, None)
     };
-    let d = diagnose::diagnose_records(&train, &valid, &Options::default())?;
+    let opt = Options::default();
+    let d = diagnose::diagnose_records(&train, &valid, &opt)?;
+    let consistency = if args.no_consistency {
+        None
+    } else {
+        let others = if label == "as given" {
+            vec![Arrangement::swapped(&train, &valid)]
+        } else {
+            others
+        };
+        Some(consistency::check(&label, &d, &others, &opt)?)
+    };
     let mut plots = Vec::new();
     if let Some(dir) = &args.out {
         if valid.len() == 1 {
@@ -123,30 +148,33 @@ pub fn run(args: Args) -> Result<()> {
         write_predict(path, &d, &valid)?;
     }
     if args.json {
-        let mut j = d.json();
-        if let Some(note) = &split_note {
-            j["split"] = serde_json::json!(note);
-        }
-        if j.get("records").is_some() {
-            j["records"]["train_files"] = serde_json::json!(rs
-                .train
-                .iter()
+        let files = |ps: &[PathBuf]| {
+            ps.iter()
                 .map(|p| p.display().to_string())
-                .collect::<Vec<_>>());
-            let valid_files: Vec<String> = if rs.valid.is_empty() {
-                rs.train.iter().map(|p| p.display().to_string()).collect()
-            } else {
-                rs.valid.iter().map(|p| p.display().to_string()).collect()
-            };
-            j["records"]["valid_files"] = serde_json::json!(valid_files);
+                .collect::<Vec<_>>()
+        };
+        let train_files = files(&rs.train);
+        let valid_files = if rs.valid.is_empty() {
+            train_files.clone()
+        } else {
+            files(&rs.valid)
+        };
+        let mut j = report::json(
+            &d,
+            split_note.as_deref(),
+            &train_files,
+            &valid_files,
+            &files(&plots),
+        );
+        if let Some(c) = &consistency {
+            j["consistency"] = c.json();
         }
-        j["plots"] = serde_json::json!(plots
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect::<Vec<_>>());
         println!("{}", serde_json::to_string_pretty(&j)?);
     } else {
-        print!("{}", summary(&d, split_note.as_deref()));
+        print!("{}", report::summary(&d, split_note.as_deref()));
+        if let Some(c) = &consistency {
+            println!("{}", c.text());
+        }
         for p in &plots {
             println!("plot: {}", p.display());
         }
@@ -181,100 +209,6 @@ fn valid_window(r: &Signals, w: Window) -> Result<Signals> {
         b - a
     );
     Ok(r.slice(0, b).with_warmup(a))
-}
-
-/// The report for a person.
-pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
-    let mut s = String::new();
-    if let Some(n) = split_note {
-        let _ = writeln!(s, "split: {n}");
-    }
-    let _ = writeln!(
-        s,
-        "base {}: rmse train {:.4}, valid {:.4} (noise about {:.4})",
-        d.base.causes.label(),
-        d.base.rmse_train,
-        d.base_valid,
-        d.noise_rms
-    );
-    for c in &d.candidates {
-        let _ = writeln!(
-            s,
-            "  round {} {:<14} valid {:.4}  gain {:+6.1} %  evidence R2 {:.2}{}",
-            c.round,
-            c.cause.name(),
-            c.rmse_valid,
-            100.0 * c.gain,
-            c.evidence.r2,
-            if c.significant { "  *" } else { "" }
-        );
-    }
-    if d.findings.is_empty() {
-        let _ = writeln!(
-            s,
-            "cause: none (no extension gains on the validation record)"
-        );
-    }
-    // What a finding gained: `cause: <name> (round <k>): valid rmse <before> -> <after> (<gain> %`.
-    let head = |f: &Finding| {
-        format!(
-            "cause: {} (round {}): valid rmse {:.4} -> {:.4} ({:.1} %",
-            f.cause.name(),
-            f.round,
-            f.rmse_valid_before,
-            f.rmse_valid,
-            100.0 * f.gain
-        )
-    };
-    for f in &d.findings {
-        if let Some(u) = &f.upgrades {
-            let _ = writeln!(s, "{}), upgraded below", head(u));
-        }
-        let swapped = f.confidence.swapped_gain.map_or_else(String::new, |g| {
-            format!(", {:.1} % with the records swapped", 100.0 * g)
-        });
-        let _ = writeln!(
-            s,
-            "{}; gains on {:.0} % of the validation blocks, worst block {:+.1} %{swapped}); {}",
-            head(f),
-            100.0 * f.confidence.share_gaining,
-            100.0 * f.confidence.min_gain,
-            f.evidence.text
-        );
-    }
-    for (c, g) in &d.refused {
-        let _ = writeln!(
-            s,
-            "refused: {} (gains {:.1} % with the records swapped: does not hold up)",
-            c.name(),
-            100.0 * g
-        );
-    }
-    if let Some(u) = &d.unexplained {
-        let _ = writeln!(s, "unexplained: {}", u.text);
-    }
-    let _ = writeln!(
-        s,
-        "extended {}: rmse train {:.4}, valid {:.4}; gain {:.1} %",
-        d.extended.causes.label(),
-        d.extended.rmse_train,
-        d.extended_valid,
-        100.0 * d.gain()
-    );
-    if d.n_train > 1 || d.per_valid.len() > 1 {
-        let _ = writeln!(s, "{} training records; per validation record:", d.n_train);
-        for (k, r) in d.per_valid.iter().enumerate() {
-            let _ = writeln!(
-                s,
-                "  valid {}: rmse base {:.4} -> extended {:.4} (gain {:.1} %)",
-                k + 1,
-                r.rmse_base,
-                r.rmse_extended,
-                100.0 * r.gain
-            );
-        }
-    }
-    s
 }
 
 fn write_predict(path: &PathBuf, d: &Diagnosis, valid: &[Signals]) -> Result<()> {

@@ -173,11 +173,7 @@ impl Records {
         let Some(f) = self.split.or(default) else {
             return Ok(None);
         };
-        anyhow::ensure!(
-            f.is_finite() && (0.1..=0.9).contains(&f),
-            "--split must be within 0.1..0.9, got {f}"
-        );
-        Ok(Some((len as f64 * f) as usize))
+        crate::ident::identify::split_sample(len, f).map(Some)
     }
 }
 
@@ -190,9 +186,9 @@ pub struct Args {
     #[command(flatten)]
     pub records: Records,
     /// State-space models: order (number of states) or `auto` (chosen by validation on
-    /// every fourth training record).
-    #[arg(long, default_value = "auto")]
-    pub order: String,
+    /// every fourth training record). Default: `auto`; `lfr`: 28.
+    #[arg(long)]
+    pub order: Option<String>,
     /// `hammerstein-ss`: hysteresis model of the core ahead of each input (a
     /// rate-independent `--list` name, e.g. cbw), or `none` (then the same as `ss`).
     #[arg(long, default_value = "cbw")]
@@ -203,6 +199,13 @@ pub struct Args {
     /// `scheduled-ss`: time constant of the running input RMS that schedules the model (s).
     #[arg(long, default_value_t = 0.15)]
     pub schedule_tau_s: f64,
+    /// `lfr`: basis functions of the nonlinearity in feedback, applied to every channel
+    /// (comma list of `cubic` = z^3, `abs-square` = z |z|).
+    #[arg(long, value_delimiter = ',', default_value = "cubic")]
+    pub lfr_basis: Vec<String>,
+    /// `lfr`: Levenberg-Marquardt iterations on the simulation error.
+    #[arg(long, default_value_t = 4)]
+    pub lfr_iterations: usize,
     /// Columns and units of the records.
     #[command(flatten)]
     pub columns: Columns,

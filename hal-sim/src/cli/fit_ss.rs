@@ -1,11 +1,12 @@
-//! `piezo fit --model ss | hammerstein-ss | scheduled-ss`: one multivariable state-space
-//! model (with a hysteresis per actuator, or scheduled by the input level) for several
-//! training records.
+//! `piezo fit --model ss | hammerstein-ss | scheduled-ss | lfr`: one multivariable
+//! state-space model (with a hysteresis per actuator, scheduled by the input level, or with
+//! a nonlinearity in feedback) for several training records.
 use super::fit_args::Args;
 use crate::ident::fit::models;
 pub use crate::ident::saved::handles;
 use crate::ident::saved::{score_last_period, Loaded};
 use crate::ident::ss::frf::{self, PeriodicSpectra};
+use crate::ident::ss::lfr::{self, Basis, LfrOptions};
 use crate::ident::ss::saved::SsJson;
 use crate::ident::ss::{identify, SsOptions};
 use crate::record::{Quantity, Record};
@@ -31,7 +32,11 @@ pub fn run(args: &Args) -> Result<()> {
     let model = args.model.as_deref().unwrap_or("ss");
     let t0 = std::time::Instant::now();
     let recs = read_all(args)?;
-    let order = match args.order.as_str() {
+    let order_arg = args
+        .order
+        .as_deref()
+        .unwrap_or(if model == "lfr" { "28" } else { "auto" });
+    let order = match order_arg {
         "auto" => None,
         s => Some(
             s.parse::<usize>()
@@ -41,7 +46,7 @@ pub fn run(args: &Args) -> Result<()> {
         ),
     };
     let hysteresis = match (model, args.hysteresis.as_str()) {
-        ("ss" | "scheduled-ss", _) | (_, "none") => None,
+        ("ss" | "scheduled-ss" | "lfr", _) | (_, "none") => None,
         (_, name) => Some(models::find(name)?),
     };
     let opts = SsOptions {
@@ -64,6 +69,21 @@ pub fn run(args: &Args) -> Result<()> {
         );
     }
     let fit = identify(&recs, &opts)?;
+    let lfr_fit = if model == "lfr" {
+        let lopts = LfrOptions {
+            basis: args
+                .lfr_basis
+                .iter()
+                .map(|b| Basis::parse(b))
+                .collect::<Result<_>>()?,
+            iterations: args.lfr_iterations,
+            progress: !args.quiet,
+            ..Default::default()
+        };
+        Some(lfr::identify(&fit.model.linear, &recs, &lopts)?)
+    } else {
+        None
+    };
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = serde_json::json!({
         "train": args.records.train.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
@@ -73,6 +93,9 @@ pub fn run(args: &Args) -> Result<()> {
         "train_rms_hammerstein": fit.hammerstein_rms,
         "train_rms_scheduled_bla": fit.scheduled_rms,
         "bla_levels": levels,
+        "train_rms_lfr_start": lfr_fit.as_ref().map(|f| f.start_rms),
+        "train_rms_lfr": lfr_fit.as_ref().map(|f| f.rms),
+        "lfr_iterations": lfr_fit.as_ref().map(|f| f.iterations),
         "seconds": seconds,
     });
     let saved = SsJson::new(
@@ -82,6 +105,10 @@ pub fn run(args: &Args) -> Result<()> {
         serde_json::Value::Null,
     )
     .with_schedule(fit.schedule.clone());
+    let saved = match &lfr_fit {
+        Some(f) => saved.with_lfr(&f.model),
+        None => saved,
+    };
     let loaded = Loaded::Ss(Box::new(saved.clone()));
     let mut valid = Vec::new();
     for v in &args.records.valid {
@@ -111,6 +138,15 @@ pub fn run(args: &Args) -> Result<()> {
         fit.hammerstein_rms.map_or(String::new(), |h| format!(", hammerstein {h:.4e}")),
         Quantity::Length.internal()
     );
+    if let Some(f) = &lfr_fit {
+        println!(
+            "  lfr ({} iterations): RMS output error on the scored samples (one period warm-up) {:.4e} {}, linear start {:.4e}",
+            f.iterations,
+            f.rms,
+            Quantity::Length.internal(),
+            f.start_rms
+        );
+    }
     for (f, p) in &fit.model.fronts.iter().enumerate().collect::<Vec<_>>() {
         println!("  u{} hysteresis {}: {:?}", f + 1, p.def.name, p.params);
     }

@@ -382,14 +382,30 @@ impl Hidden {
     /// Record `which` (0: train, 1: valid, others: more excitations): time, the commanded
     /// piezo voltage per axis, the sensor reading per axis.
     pub fn record(&self, which: u64) -> Signals {
-        let u = self.command(which);
-        let n = self.samples();
+        self.record_with(self.command(which), which)
+            .expect("the draw's own command fits its stage")
+    }
+
+    /// The stage driven by the command `u` (piezo voltage per axis, one value per sample at
+    /// the draw's rate) from rest: time, `u` and the sensor reading per axis; `which` seeds
+    /// the noise as for [`Hidden::record`].
+    pub fn record_with(&self, u: Vec<Vec<f64>>, which: u64) -> Result<Signals> {
+        let axes = self.scenario.stage.axes;
+        anyhow::ensure!(
+            u.len() == axes,
+            "the stage has {axes} axes, the command {}",
+            u.len()
+        );
+        let n = u.first().map_or(0, Vec::len);
+        anyhow::ensure!(
+            u.iter().all(|c| c.len() == n),
+            "every axis' command needs the same number of samples"
+        );
         let t: Vec<f64> = (0..n).map(|k| k as f64 / self.rate_hz).collect();
         let mut s = self.scenario.clone();
         s.run.seed = self.seed.wrapping_mul(10).wrapping_add(which);
-        let mut stage = Stage::new(&s).expect("validated scenario");
+        let mut stage = Stage::new(&s)?;
         let gain = s.stage.amplifier.gain;
-        let axes = u.len();
         let mut y = vec![Vec::with_capacity(n); axes];
         let mut dac = vec![0.0; axes];
         for k in 0..n {
@@ -407,7 +423,7 @@ impl Hidden {
                 sensor.apply(y, self.rate_hz, &mut r);
             }
         }
-        Signals::new(t, u, y).expect("generated record is valid")
+        Signals::new(t, u, y)
     }
 
     /// The same stage read by a realistic sensor ([`SensorRealism::draw`] from the seed).

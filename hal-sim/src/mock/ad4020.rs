@@ -9,7 +9,15 @@
 //! * a register command (`0x14` write, `0x54` read) is only taken as the first bits of a
 //!   CNV frame (after a rising edge in CS mode): elsewhere, e.g. with CNV low since power-up,
 //!   the part ignores it, so the mock refuses it;
-//! * SCK period `t_SCK` >= 9.8 ns (Table 3, VIO above 2.7 V).
+//! * SCK period `t_SCK` >= 9.8 ns (Table 3, VIO above 2.7 V);
+//! * the configuration register resets to `0xE1` (Table 14): its reserved bits 7:5 read 1
+//!   and must be written as 1 (a write with any of them 0 is refused), bits 4:1 are the
+//!   mode bits, bit 0 the read-only over-voltage flag;
+//! * with the register's status bit set, six status bits follow each result (over-voltage
+//!   clamp flag for an input beyond the span, the mode bits as the register holds them).
+//!
+//! Fault injection ([`MockAdc::set_fault`], [`AdcFault`]): SDO held low or high, an input
+//! left floating (the code frozen), a sensor disconnected (the input pulled near a rail).
 
 use super::{BusClock, MockClock, MockPinError, MockSpiError, Violations};
 use crate::numeric::Rng;
@@ -66,6 +74,27 @@ pub struct AdcStats {
     pub failed_transactions: u64,
 }
 
+/// A fault of the position channel ([`MockAdc::set_fault`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AdcFault {
+    /// SDO held low (a short, a part without supply): every bit clocked out reads 0, so a
+    /// two's complement result decodes to 0 (mid-stroke) and the status word to 0.
+    StuckLow,
+    /// SDO held high: every bit reads 1 (code -1, mid-stroke; status all ones).
+    StuckHigh,
+    /// The input left floating: the sampling capacitor keeps its charge and every
+    /// conversion returns the code of the last conversion before the fault, noise-free,
+    /// with a good status word.
+    Floating,
+    /// The sensor disconnected: its input pulled by the front end's bias network to
+    /// [`DISCONNECTED_FRACTION`] of the positive full scale (inside the span: no
+    /// over-voltage), converted with the usual noise.
+    Disconnected,
+}
+
+/// Where a disconnected sensor's input settles, as a fraction of the positive full scale.
+pub const DISCONNECTED_FRACTION: f64 = 0.97;
+
 /// What the CNV-low period in progress is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Frame {
@@ -103,9 +132,12 @@ struct AdcChip {
     ready_at_ns: u64,
     result: i32,
     /// The frames of `converting` and `result` (encoded once per conversion, not per read).
-    converting_frame: [u8; 3],
-    result_frame: [u8; 3],
+    converting_frame: [u8; 4],
+    result_frame: [u8; 4],
     stuck: Option<i32>,
+    fault: Option<AdcFault>,
+    /// The code a floating input keeps.
+    floating_code: i32,
     fail_next: u32,
     stats: AdcStats,
     violations: Violations,
@@ -131,7 +163,7 @@ impl AdcChip {
     /// The frame a read shifts out: the finished conversion, or the previous result if
     /// the conversion is still running (counted).
     #[inline]
-    fn conversion_frame(&mut self) -> [u8; 3] {
+    fn conversion_frame(&mut self) -> [u8; 4] {
         let now = self.clock.now_ns();
         if !self.cnv_high && self.ready_at_ns <= now {
             self.result = self.converting;
@@ -148,9 +180,13 @@ impl AdcChip {
     /// conversion.
     #[inline]
     fn rise(&mut self) {
-        let code = match self.stuck {
-            Some(c) => c,
-            None => self.quantise(self.input_volts),
+        let (code, over) = match (self.stuck, self.fault) {
+            (Some(c), _) => (c, false),
+            (None, Some(AdcFault::Floating)) => (self.floating_code, false),
+            (None, Some(AdcFault::Disconnected)) => {
+                self.quantise(DISCONNECTED_FRACTION * self.spec.vref)
+            }
+            _ => self.quantise(self.input_volts),
         };
         self.frame = if self.sdi_high {
             Frame::Cs
@@ -159,13 +195,20 @@ impl AdcChip {
         };
         self.rise_ns = self.clock.now_ns();
         self.converting = code;
-        self.converting_frame = ad4000::encode(&self.spec.config, code);
+        let reg = self.reg;
+        let cfg = Ad4000Config {
+            status: reg & ad4000::REG_STATUS_BITS != 0,
+            ..self.spec.config
+        };
+        self.converting_frame = ad4000::encode(&cfg, code, ad4000::status_of(reg, over));
         self.ready_at_ns = self.rise_ns + self.spec.t_conv_ns;
         self.stats.conversions += 1;
     }
 
+    /// The code of `volts` and whether the input is beyond the span (the over-voltage
+    /// clamp flag).
     #[inline]
-    fn quantise(&mut self, volts: f64) -> i32 {
+    fn quantise(&mut self, volts: f64) -> (i32, bool) {
         let lo = self.code_lo_f;
         let noise = if self.spec.noise_lsb > 0.0 {
             self.spec.noise_lsb * self.rng.gauss()
@@ -174,13 +217,25 @@ impl AdcChip {
         };
         let x = volts * self.codes_per_volt + self.spec.offset_lsb + noise;
         if x.is_nan() {
-            return self.code_lo;
+            return (self.code_lo, true);
         }
         // Round half up without a libm call: shift to positive, truncate (the shifted value
         // is kept in `0 ..= hi - lo + 0.5`, so truncation is the floor and the code is in
         // range).
-        let x = (x - lo + 0.5).max(0.0).min(self.code_top_f);
-        x as i32 + self.code_lo
+        let x = x - lo + 0.5;
+        let over = !(0.0..=self.code_top_f).contains(&x);
+        let x = x.max(0.0).min(self.code_top_f);
+        (x as i32 + self.code_lo, over)
+    }
+
+    /// SDO held at one level: every byte clocked out is that level.
+    #[inline]
+    fn sdo_held(&self) -> Option<u8> {
+        match self.fault {
+            Some(AdcFault::StuckLow) => Some(0),
+            Some(AdcFault::StuckHigh) => Some(0xFF),
+            _ => None,
+        }
     }
 
     /// Any SPI transaction: the interface rules, register access or conversion read,
@@ -219,19 +274,27 @@ impl AdcChip {
                 0,
             ));
         }
-        let out: [u8; 3] = match mosi[0] {
+        let out: [u8; 4] = match mosi[0] {
             ad4000::CMD_WRITE if command && n >= 2 => {
-                // Bit 0 (over-voltage flag) is read-only.
-                self.reg = mosi[1] & !1;
+                if mosi[1] & ad4000::REG_RESERVED != ad4000::REG_RESERVED {
+                    return Err(self.violate(
+                        "configuration register write with reserved bits 7:5 not 1",
+                        mosi[1] as u64,
+                    ));
+                }
+                // Only the mode bits take the write.
+                let w = ad4000::REG_WRITABLE;
+                self.reg = (self.reg & !w) | (mosi[1] & w);
                 self.stats.register_writes += 1;
-                [0xFF; 3]
+                [0xFF; 4]
             }
-            ad4000::CMD_READ if command => [0xFF, self.reg, 0xFF],
+            ad4000::CMD_READ if command => [0xFF, self.reg, 0xFF, 0xFF],
             _ if start => self.conversion_frame(),
             // Power-up (no conversion yet) or past the result: the last result, zeros.
             _ if self.frame == Frame::PowerUp => self.result_frame,
-            _ => [0; 3],
+            _ => [0; 4],
         };
+        let out = self.sdo_held().map_or(out, |b| [b; 4]);
         self.sdi_high = wire::last_mosi_high(ops, self.sdi_high);
         let clock = &mut self.clock;
         let k = wire::clock_miso(ops, &out, |ns| clock.advance_ns(ns as u64));
@@ -248,7 +311,7 @@ impl MockAdc {
     pub fn new(spec: AdcSpec, clock: MockClock) -> Self {
         let rng = Rng::new(spec.seed);
         let (lo, hi) = spec.config.code_range();
-        let zero = ad4000::encode(&spec.config, 0);
+        let zero = ad4000::encode(&spec.config, 0, 0);
         Self(Rc::new(RefCell::new(AdcChip {
             codes_per_volt: AdcChip::codes_per_volt(&spec),
             code_lo: lo,
@@ -260,7 +323,9 @@ impl MockAdc {
             clock,
             rng,
             input_volts: 0.0,
-            reg: 0,
+            fault: None,
+            floating_code: 0,
+            reg: ad4000::REG_RESET,
             cnv_high: false,
             sdi_high: false,
             frame: Frame::PowerUp,
@@ -316,6 +381,14 @@ impl MockAdc {
         self.0.borrow_mut().stuck = code;
     }
 
+    /// Fault injection: a fault of the position channel from the next conversion on (or
+    /// none again with `None`). A floating input keeps the last conversion's code.
+    pub fn set_fault(&self, fault: Option<AdcFault>) {
+        let mut chip = self.0.borrow_mut();
+        chip.floating_code = chip.result;
+        chip.fault = fault;
+    }
+
     /// Fault injection: the next `n` transactions fail.
     pub fn fail_transactions(&self, n: u32) {
         self.0.borrow_mut().fail_next = n;
@@ -343,19 +416,24 @@ impl SpiDevice for MockAdcSpi {
         // The loop's one read frame (SDI held high, at the start of a CS frame): the
         // conversion result. Inlined into the driver's read; everything else takes the
         // general path, which checks every rule.
-        if let [Operation::Transfer(r, [0xFF, 0xFF, 0xFF])] = &mut *ops {
-            if let Ok(r) = <&mut [u8; 3]>::try_from(&mut **r) {
-                if chip.fail_next == 0
-                    && !chip.cnv_high
-                    && chip.frame == Frame::Cs
-                    && chip.clocked == 0
-                    && chip.spec.bus.hz <= SCK_MAX_HZ
-                {
-                    *r = chip.conversion_frame();
-                    chip.sdi_high = true;
-                    chip.clocked = 3;
-                    return Ok(());
+        if let [Operation::Transfer(r, w)] = &mut *ops {
+            if r.len() == w.len()
+                && r.len() <= 4
+                && w.iter().all(|b| *b == 0xFF)
+                && chip.fail_next == 0
+                && chip.fault.is_none()
+                && !chip.cnv_high
+                && chip.frame == Frame::Cs
+                && chip.clocked == 0
+                && chip.spec.bus.hz <= SCK_MAX_HZ
+            {
+                let f = chip.conversion_frame();
+                for (d, s) in r.iter_mut().zip(f) {
+                    *d = s;
                 }
+                chip.sdi_high = true;
+                chip.clocked = r.len() as u32;
+                return Ok(());
             }
         }
         chip.transaction(ops)

@@ -5,6 +5,8 @@
 //! * SCLK cycle `t1` >= 40 ns (25 MHz) for every frame, >= 92 ns (10.87 MHz) for a read-back
 //!   (the read command and the frame that clocks the register out);
 //! * LDAC low pulse `t10` >= 13 ns;
+//! * SYNC high `t6` >= 48 ns between two frames (the mock's frames take no time: the gap
+//!   from one frame to the next);
 //! * power-on (and software reset): OPGND = 1, DACTRI = 1, the output clamped to AGND through
 //!   ~6 kOhm and the DAC register at code 0 (p. 19); the output is driven only once the
 //!   control register clears both. Clearing OPGND while DACTRI is set leaves the output
@@ -29,6 +31,8 @@ const SCLK_MAX_HZ: u32 = 25_000_000;
 const SCLK_READBACK_MAX_HZ: u32 = 10_869_565;
 /// Shortest LDAC low pulse (ns): `t10`.
 const LDAC_LOW_MIN_NS: u64 = 13;
+/// Shortest SYNC high time between frames (ns): `t6`.
+const SYNC_HIGH_MIN_NS: u64 = 48;
 /// Power-on value of the control register: output clamped to ground, DAC tri-stated.
 const CTRL_POWER_ON: u32 = CTRL_OPGND | CTRL_DACTRI;
 /// Output transitions kept for tests (the first ones: power-up and release).
@@ -87,6 +91,8 @@ struct DacChip {
     clearcode: u32,
     ldac_low: bool,
     ldac_fall_ns: u64,
+    /// When SYNC rose at the end of the last frame (`None`: no frame since power-up).
+    sync_rise_ns: Option<u64>,
     /// DAC register value driving the output.
     active: u32,
     /// The DAC register was written since the reset, and that write was loaded.
@@ -233,9 +239,26 @@ impl DacChip {
         Ok(())
     }
 
+    /// SYNC falls for a frame: it was high for `t6` at least since the last one (which ends,
+    /// SYNC rising, at the same instant: frames take no time here).
+    #[inline]
+    fn sync_fall(&mut self) -> Result<(), MockSpiError> {
+        let now = self.clock.now_ns();
+        let last = self.sync_rise_ns.replace(now);
+        match last {
+            Some(t) if now - t < SYNC_HIGH_MIN_NS => {
+                let rule =
+                    self.violate("SYNC high shorter than t6 = 48 ns between frames", now - t);
+                Err(MockSpiError::Violation(rule))
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// Any SPI frame (one transaction is one SYNC-low frame).
     #[inline(never)]
     fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), MockSpiError> {
+        self.sync_fall()?;
         self.stats.frames += 1;
         let pending = self.readback.take();
         let first = ops.iter().find_map(|op| match op {
@@ -303,6 +326,7 @@ impl MockDac {
             clearcode: 0,
             ldac_low: false,
             ldac_fall_ns: 0,
+            sync_rise_ns: None,
             active: 0,
             written: false,
             loaded: false,
@@ -390,6 +414,7 @@ impl SpiDevice for MockDacSpi {
         // The loop's one write frame, inlined into the driver; the rest: general path.
         if let [Operation::Write([b0, b1, b2])] = ops {
             if chip.readback.is_none() && *b0 & 0x80 == 0 && chip.spec.bus.hz <= SCLK_MAX_HZ {
+                chip.sync_fall()?;
                 chip.stats.frames += 1;
                 chip.frame(u32::from_be_bytes([0, *b0, *b1, *b2]));
                 return Ok(());

@@ -1,5 +1,6 @@
 //! A stage from an identified model (`piezo sim --stage DIR/fit.json`): the `ss` /
-//! `hammerstein-ss` model of `piezo fit` behind the simulator's amplifier and converters.
+//! `hammerstein-ss` / `lfr` model of `piezo fit` behind the simulator's amplifier and
+//! converters (`scheduled-ss`: its model of all records).
 //!
 //! Scaling (the identified stage rarely has the converters' ranges): the amplifier range
 //! `[volts_min, volts_max]` maps linearly onto the model's training input range of each
@@ -13,6 +14,7 @@
 //! its input held between samples (zero-order hold) and its output held between its
 //! samples.
 
+use crate::ident::ss::lfr::Lfr;
 use crate::ident::ss::model::Modal;
 use crate::ident::ss::saved::SsJson;
 use anyhow::{Context, Result};
@@ -40,6 +42,10 @@ pub struct IdentifiedCfg {
 pub struct IdentifiedPlant {
     fronts: Vec<Option<(Cbw<f64>, BwState<f64>)>>,
     modal: Modal,
+    /// `lfr` fit.json: the nonlinearity in feedback around `modal`.
+    lfr: Option<Lfr>,
+    /// Its hysteresis operators' memory.
+    lfr_mem: Vec<f64>,
     x: Vec<f64>,
     xn: Vec<f64>,
     /// Model inputs now (model units) and outputs at the last model sample.
@@ -66,6 +72,7 @@ impl IdentifiedPlant {
         let model = saved
             .to_model()
             .with_context(|| path.display().to_string())?;
+        let lfr = saved.to_lfr().with_context(|| path.display().to_string())?;
         let (m, p) = (model.linear.inputs(), model.linear.outputs());
         anyhow::ensure!(
             axes <= m.min(p),
@@ -152,6 +159,8 @@ impl IdentifiedPlant {
             um_per_unit,
             centre_um: cfg.centre_um,
             modal: model.linear,
+            lfr_mem: lfr.as_ref().map_or(Vec::new(), Lfr::rest_memory),
+            lfr,
         };
         let v0 = vec![cfg.volts_min; axes];
         plant.settle(&v0);
@@ -191,8 +200,34 @@ impl IdentifiedPlant {
         let n = a.nrows();
         let ia = nalgebra::DMatrix::<f64>::identity(n, n) - a;
         let bv = &self.modal.b * nalgebra::DVector::from_column_slice(&v);
-        if let Some(x) = ia.lu().solve(&bv) {
+        let lu = ia.lu();
+        if let Some(x) = lu.solve(&bv) {
             self.x = x.iter().copied().collect();
+        }
+        // With the LFR's feedback: the fixed point `x = (I - A)^-1 (B v + E N(F x + G v))`.
+        // Kept only where the iteration contracts; else the linear rest (the model then
+        // settles in its first samples).
+        if let Some(l) = &self.lfr {
+            let x_lin = self.x.clone();
+            let mut last = f64::INFINITY;
+            for _ in 0..50 {
+                let mut rhs: Vec<f64> = bv.iter().copied().collect();
+                self.lfr_mem = l.rest_memory();
+                l.add_feedback(&self.x, &v, &mut self.lfr_mem, &mut rhs);
+                let Some(x) = lu.solve(&nalgebra::DVector::from_vec(rhs)) else {
+                    self.x = x_lin;
+                    self.lfr_mem = l.rest_memory();
+                    break;
+                };
+                let step: f64 = x.iter().zip(&self.x).map(|(a, b)| (a - b).powi(2)).sum();
+                if !step.is_finite() || step > last {
+                    self.x = x_lin;
+                    self.lfr_mem = l.rest_memory();
+                    break;
+                }
+                last = step;
+                self.x = x.iter().copied().collect();
+            }
         }
         self.output(&v);
         self.since = 0.0;
@@ -234,6 +269,9 @@ impl IdentifiedPlant {
                 for (j, vj) in v.iter().enumerate() {
                     *xn += self.modal.b[(r, j)] * vj;
                 }
+            }
+            if let Some(l) = &self.lfr {
+                l.add_feedback(&self.x, &v, &mut self.lfr_mem, &mut self.xn);
             }
             std::mem::swap(&mut self.x, &mut self.xn);
         }

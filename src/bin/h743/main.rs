@@ -98,33 +98,41 @@ mod board {
     /// Independent watchdog timeout (ms): 1000 control periods without a healthy one.
     pub const WATCHDOG_MS: u32 = 10;
 
-    /// Copies the control interrupt's code (build.rs's `.itcm`: the handlers, the pipeline
-    /// step and its callees) from flash into ITCM, before anything runs from there.
+    // ITCM is loaded in `__pre_init` (cortex-m-rt calls it first in the reset handler, before
+    // .data and .bss): nothing can run from ITCM before it holds its code, not even a
+    // `__aeabi_memcpy` (placed there for the control path) called by init or by the runtime.
+    // Assembly: no stack, no statics, no calls. ITCM is on at reset on the H7
+    // (CM7_ITCMCR.EN); it is set anyway, as stabilizer does. build.rs's `.itcm` section is
+    // word aligned (its bounds `__sitcm`/`__eitcm`, its flash image `__siitcm`).
     #[allow(unsafe_code)]
-    pub fn load_itcm() {
-        extern "C" {
-            static mut __sitcm: u32;
-            static mut __eitcm: u32;
-            static __siitcm: u32;
-        }
-        // ITCM is on at reset on the H7 (CM7_ITCMCR.EN); set it anyway, as stabilizer does.
-        const ITCMCR: *mut u32 = 0xE000_EF90 as *mut u32;
-        // SAFETY: ITCMCR is the core's TCM control register; the linker symbols bound the
-        // `.itcm` output section (word aligned, at 8 or above: never null) and its load
-        // image in flash; no code in ITCM has run yet.
-        unsafe {
-            ITCMCR.write_volatile(ITCMCR.read_volatile() | 1);
-            cortex_m::asm::dsb();
-            let dst = core::ptr::addr_of_mut!(__sitcm);
-            let end = core::ptr::addr_of_mut!(__eitcm);
-            let src = core::ptr::addr_of!(__siitcm);
-            let words = (end as usize - dst as usize) / 4;
-            for i in 0..words {
-                dst.add(i).write_volatile(src.add(i).read_volatile());
-            }
-        }
-        cortex_m::asm::dsb();
-        cortex_m::asm::isb();
+    mod pre_init {
+        core::arch::global_asm!(
+            ".section .text.__pre_init,\"ax\",%progbits",
+            ".global __pre_init",
+            ".type __pre_init,%function",
+            ".thumb_func",
+            "__pre_init:",
+            "    ldr r0, =0xE000EF90",
+            "    ldr r1, [r0]",
+            "    orr r1, r1, #1",
+            "    str r1, [r0]",
+            "    dsb",
+            "    isb",
+            "    ldr r0, =__sitcm",
+            "    ldr r1, =__eitcm",
+            "    ldr r2, =__siitcm",
+            "1:",
+            "    cmp r0, r1",
+            "    bhs 2f",
+            "    ldr r3, [r2], #4",
+            "    str r3, [r0], #4",
+            "    b 1b",
+            "2:",
+            "    dsb",
+            "    isb",
+            "    bx lr",
+            ".ltorg",
+        );
     }
 
     /// The converters of this build, and the control state over them.
@@ -252,9 +260,8 @@ mod app {
         // amplifier off, on-chip DAC at the safe code (0: SAFE_VOLTS = 0 V at the DAC
         // scale's 0 V code; the pipeline's own value is checked below).
         safe::early(&dp.IWDG, &dp.DBGMCU, &dp.RCC, 0);
-        // The control interrupt's code into ITCM, then the caches on (DTCM, which holds the
+        // The caches on (ITCM was loaded at reset, `__pre_init`; DTCM, which holds the
         // stack and the control state, is never cached; no DMA shares memory with the CPU).
-        super::load_itcm();
         cp.SCB.enable_icache();
         cp.SCB.enable_dcache(&mut cp.CPUID);
         // Bank 2's settings sectors (the SCB goes with them: their cache maintenance).
@@ -275,18 +282,28 @@ mod app {
         );
 
         let pwrcfg = dp.PWR.constrain().freeze();
+        // The ST-LINK's 8 MHz MCO into PH0 (HSE bypass, Nucleo-144 default solder bridges):
+        // a crystal-accurate sample rate instead of HSI's +-1 %. Started here with a bounded
+        // wait; without it the PLL runs from HSI and the boot log says so.
+        let hse = safe::hse_start(&dp.RCC);
+        let rcc = dp.RCC.constrain();
+        let rcc = if hse {
+            rcc.use_hse(8.MHz()).bypass_hse()
+        } else {
+            rcc
+        };
         // PLL2P: ADC kernel clock; PLL1Q: SPI1 kernel clock (SPI4 runs from PCLK2).
-        let mut ccdr = dp
-            .RCC
-            .constrain()
-            // The ST-LINK's 8 MHz MCO into PH0 (HSE bypass, Nucleo-144 default solder
-            // bridges): a crystal-accurate sample rate instead of HSI's +-1 %.
-            .use_hse(8.MHz())
-            .bypass_hse()
+        let mut ccdr = rcc
             .sys_ck(SYSCLK_HZ.Hz())
             .pll1_q_ck(100.MHz())
             .pll2_p_ck(72.MHz())
             .freeze(pwrcfg, &dp.SYSCFG);
+        if hse {
+            safe::css_on();
+            defmt::info!("clock: HSE 8 MHz (bypass), clock security system on");
+        } else {
+            defmt::warn!("clock: HSE did not start: PLL from HSI 64 MHz, sample rate +-1 %");
+        }
         ccdr.peripheral
             .kernel_adc_clk_mux(stm32h7xx_hal::rcc::rec::AdcClkSel::Pll2P);
 
@@ -358,17 +375,22 @@ mod app {
             use crate::spi::{CycleDelay, Gpio, HardwarePin, SpiDev};
             use crate::spi_pair::{Adc, AdcSetup, Dac, DacSetup};
             use piezo_core::firmware::{ADC_CONFIG, DAC_CONFIG};
+            use stm32h7xx_hal::gpio::Speed;
             use stm32h7xx_hal::spi;
             let gpiob = dp.GPIOB.split(ccdr.peripheral.GPIOB);
             let gpioe = dp.GPIOE.split(ccdr.peripheral.GPIOE);
+            // Every converter line at GPIO speed High (OSPEEDR = 10): the reset speed (Low)
+            // is specified for about 12 MHz at 3.3 V and 10 pF (DS12110, I/O AC
+            // characteristics), short of the 25 MHz SCK; High covers it with edges of a few
+            // ns, Very high would only add ringing on the converters' lines.
             // SYNC and LDAC high (idle) before SPI4 clocks anything.
-            let sync = Gpio(gpioe.pe4.into_push_pull_output());
-            let ldac = Gpio(gpiob.pb3.into_push_pull_output());
+            let sync = Gpio(gpioe.pe4.into_push_pull_output().speed(Speed::High));
+            let ldac = Gpio(gpiob.pb3.into_push_pull_output().speed(Speed::High));
             let dac_bus: spi::Spi<_, _, u8> = dp.SPI4.spi(
                 (
-                    gpioe.pe2.into_alternate::<5>(),
-                    gpioe.pe5.into_alternate::<5>(),
-                    gpioe.pe6.into_alternate::<5>(),
+                    gpioe.pe2.into_alternate::<5>().speed(Speed::High),
+                    gpioe.pe5.into_alternate::<5>().speed(Speed::High),
+                    gpioe.pe6.into_alternate::<5>().speed(Speed::High),
                 ),
                 spi::MODE_1,
                 25.MHz(),
@@ -391,9 +413,9 @@ mod app {
             }
             let adc_bus: spi::Spi<_, _, u8> = dp.SPI1.spi(
                 (
-                    gpioa.pa5.into_alternate::<5>(),
-                    gpioa.pa6.into_alternate::<5>(),
-                    gpiob.pb5.into_alternate::<5>(),
+                    gpioa.pa5.into_alternate::<5>().speed(Speed::High),
+                    gpioa.pa6.into_alternate::<5>().speed(Speed::High),
+                    gpiob.pb5.into_alternate::<5>().speed(Speed::High),
                 ),
                 spi::MODE_0,
                 25.MHz(),
@@ -403,7 +425,7 @@ mod app {
             let spi1_hz = spi::Spi::<pac::SPI1, spi::Enabled, u8>::kernel_clk_unwrap(&ccdr.clocks);
             // CNV (PA0) as a GPIO while configuring: register access needs CNV frames the
             // driver times; then PA0 goes to TIM2 CH1 (AF1) for the loop.
-            let cnv = Gpio(gpioa.pa0.into_push_pull_output());
+            let cnv = Gpio(gpioa.pa0.into_push_pull_output().speed(Speed::High));
             let mut setup = AdcSetup::new(
                 SpiDev::new(adc_bus, HardwarePin, spi1_hz.raw()),
                 cnv,
@@ -416,7 +438,7 @@ mod app {
                 safe::halt();
             }
             let (adc_bus, cnv, delay) = setup.release();
-            let _cnv = cnv.0.into_alternate::<1>();
+            let _cnv = cnv.0.into_alternate::<1>().speed(Speed::High);
             let adc =
                 Adc::new(adc_bus, HardwarePin, delay, ADC_CONFIG).unwrap_or_else(|_| safe::halt());
             // TIM2: CH1 in PWM mode 1 is CNV, high for 1/20 of the period from the update
@@ -441,7 +463,7 @@ mod app {
                 .modify(|_, w| w.oc2m().pwm_mode2().oc2pe().set_bit());
             tim.ccer.modify(|_, w| w.cc2e().set_bit());
             let (dac_bus, ldac, delay) = dac.release();
-            let _ldac = ldac.0.into_alternate::<1>();
+            let _ldac = ldac.0.into_alternate::<1>().speed(Speed::High);
             let dac =
                 Dac::new(dac_bus, HardwarePin, delay, DAC_CONFIG).unwrap_or_else(|_| safe::halt());
             Io {

@@ -37,24 +37,7 @@ pub fn safe_code<C: piezo_core::firmware::Converters>() -> i32 {
         .map_or(0, |o| o.code_in_range(axis.safe_volts) << C::DAC_SHIFT)
 }
 
-/// The reset cause from RCC_RSR flags (RM0433 "RCC reset status register"): the most
-/// specific flag wins.
-pub fn reset_cause(rsr: u32) -> &'static str {
-    const CAUSES: [(u32, &str); 8] = [
-        (1 << 30, "low-power"),
-        (1 << 28, "window-watchdog"),
-        (1 << 26, "independent-watchdog"),
-        (1 << 24, "software"),
-        (1 << 21, "brown-out"),
-        (1 << 23, "power-on"),
-        (1 << 22, "pin"),
-        (1 << 17, "cpu"),
-    ];
-    CAUSES
-        .iter()
-        .find(|(bit, _)| rsr & bit != 0)
-        .map_or("unknown", |(_, name)| name)
-}
+pub use piezo_core::firmware::reset::reset_cause;
 
 /// Boot, before anything that can fail: IWDG1 started at [`BOOT_WATCHDOG_MS`] and frozen
 /// while the core is halted by a debugger (DBGMCU_APB4FZ1.DBG_IWDG1); RCC_RSR kept and
@@ -81,9 +64,74 @@ pub fn early(iwdg: &pac::IWDG, dbgmcu: &pac::DBGMCU, rcc: &pac::RCC, safe_code: 
     let _ = safe_code;
 }
 
+/// Polls of HSERDY before the boot gives HSE up (a poll is a few cycles of the 64 MHz HSI
+/// the boot runs on: a few ms, far under the boot watchdog's 100 ms; an HSE in bypass is
+/// ready within microseconds of a good clock).
+const HSE_POLLS: u32 = 100_000;
+/// RCC_CR bits (RM0433): HSEON, HSERDY, HSEBYP, HSECSSON.
+const CR_HSEON: u32 = 1 << 16;
+const CR_HSERDY: u32 = 1 << 17;
+const CR_HSEBYP: u32 = 1 << 18;
+const CR_HSECSSON: u32 = 1 << 19;
+
+/// HSE in bypass (the ST-LINK's 8 MHz MCO) started with a bounded wait; true when ready.
+/// The HAL's `freeze` waits for HSERDY without a bound, so a missing MCO would hang the
+/// boot until the watchdog resets it, over and over; on false HSE is off again and the
+/// caller runs the PLL from HSI.
+#[allow(unsafe_code)]
+pub fn hse_start(rcc: &pac::RCC) -> bool {
+    // SAFETY: RCC_CR bits of HSE alone; HSEBYP is written while HSE is off (at reset).
+    rcc.cr
+        .modify(|r, w| unsafe { w.bits(r.bits() | CR_HSEBYP) });
+    rcc.cr.modify(|r, w| unsafe { w.bits(r.bits() | CR_HSEON) });
+    let ready = (0..HSE_POLLS).any(|_| rcc.cr.read().bits() & CR_HSERDY != 0);
+    if !ready {
+        // SAFETY: as above.
+        rcc.cr
+            .modify(|r, w| unsafe { w.bits(r.bits() & !(CR_HSEON | CR_HSEBYP)) });
+    }
+    ready
+}
+
+/// The clock security system on HSE (RCC_CR.HSECSSON): a failing HSE raises the NMI, whose
+/// handler takes the safe state ([`NonMaskableInt`]).
+#[allow(unsafe_code)]
+pub fn css_on() {
+    // SAFETY: RCC_CR.HSECSSON alone, after HSE is ready (a write-once-to-set bit).
+    let rcc = unsafe { &*pac::RCC::ptr() };
+    rcc.cr
+        .modify(|r, w| unsafe { w.bits(r.bits() | CR_HSECSSON) });
+}
+
+/// The NMI: the clock security system saw HSE fail (nothing else raises it here). The safe
+/// state, then the watchdog resets the MCU and the next boot falls back to HSI if HSE is
+/// still missing. Never returns (an NMI cannot be masked; returning would re-enter).
+///
+/// # Safety
+/// The NMI preempts everything; it only takes the safe state, whose register writes are
+/// the halt path's own (amplifier line, DAC), and never returns.
+#[cortex_m_rt::exception]
+#[allow(unsafe_code)]
+unsafe fn NonMaskableInt() -> ! {
+    halt()
+}
+
 /// Interrupts off, amplifier off, the safe code out; never returns (the watchdog, no
 /// longer fed, resets the MCU within its timeout).
 pub fn halt() -> ! {
+    safe_out();
+    park()
+}
+
+/// The watchdog's wait.
+fn park() -> ! {
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Interrupts off, amplifier off, the safe code into every DAC.
+fn safe_out() {
     cortex_m::interrupt::disable();
     amp::off();
     let code = SAFE_CODE.load(Relaxed);
@@ -106,19 +154,16 @@ pub fn halt() -> ! {
             dac.set_code(code).ok();
         }
     }
-    loop {
-        cortex_m::asm::wfi();
-    }
 }
 
 /// A panic (thread mode only: no interrupt handler has a panic path, checked by
-/// `.ci/firmware-safety.py`): the safe state first, the message only after, over defmt.
+/// `.ci/firmware-safety.py`): the safe code written first, the message only after, over
+/// defmt (its formatting and transport may take long or fail).
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    cortex_m::interrupt::disable();
-    amp::off();
+    safe_out();
     defmt::error!("panic: {}", defmt::Display2Format(info));
-    halt()
+    park()
 }
 
 /// A HardFault (a bus fault, a stack overflow caught by flip-link, ...): the safe state.

@@ -35,7 +35,7 @@ pub fn run<C: Converters>(r: &mut Reply<REPLY_LEN>) {
     r.push_str(" dac ");
     push_dac_readback(r, done.then(|| (READ.load(Relaxed), WROTE.load(Relaxed))));
     let adc = ADC.load(Relaxed);
-    let s = C::sensor();
+    let s = C::sensor(0.0);
     r.push_str(" adc ");
     r.push_i32(adc);
     let seen = adc >> C::ADC_SHIFT;

@@ -213,8 +213,10 @@ impl OutputPin for HardwarePin {
 }
 
 /// The AD5791's bus at register level, for the panic and HardFault handlers (the HAL's
-/// SPI4 belongs to the control task, out of their reach): SPI4 disabled and enabled again
-/// (whatever was in flight is dropped), SYNC (PE4) low around the frame, each byte through
+/// SPI4 belongs to the control task, out of their reach): SYNC (PE4) raised and held high
+/// for `t6` first (a frame the fault interrupted ends there, and the part ignores a frame
+/// that is not 24 bits long), SPI4 disabled and enabled again (its FIFOs flushed: whatever
+/// was in flight is dropped), SYNC low around the frame, each byte through
 /// `SPI_TXDR`/`SPI_RXDR` after `SPI_SR.TXP`/`RXP` with bounded waits, `SPI_CR1.CSTART`
 /// (RM0433 SPI registers; `GPIOE_BSRR` for SYNC). It keeps the divider the bus had: 25 MHz,
 /// or 6.25 MHz if a read-back was under way, both within the AD5791's write limit.
@@ -265,6 +267,8 @@ impl SpiDevice for PanicSpi4 {
     #[allow(unsafe_code)]
     fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), SpiError> {
         let spi = spi4();
+        gpioe_bsrr(1 << 4); // SYNC high: ends an interrupted frame
+        embedded_hal::delay::DelayNs::delay_ns(&mut CycleDelay, CS_HIGH_NS);
         spi.cr1
             .write(|w| w.ssi().slave_not_selected().spe().disabled());
         spi.cr1

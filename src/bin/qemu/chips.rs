@@ -5,9 +5,13 @@
 //! * AD4020 (data sheet Rev. B): the interface mode latched from SDI at the CNV rising edge
 //!   (SDI low: daisy-chain mode, every frame refused); CNV high for `t_CONV` max 320 ns
 //!   before it falls; no frame while CNV is high; a register command only as the first bits
-//!   of a CNV frame; SCK <= 102 MHz (`t_SCK` >= 9.8 ns).
+//!   of a CNV frame; SCK <= 102 MHz (`t_SCK` >= 9.8 ns); the configuration register resets
+//!   to `0xE1`, its reserved bits 7:5 read 1 and a write must keep them 1; with its status
+//!   bit set, six status bits follow each result (over-voltage flag, the mode bits).
+//!   Fault injection ([`set_fault`]): SDO held low or high, the input floating (the code
+//!   frozen), the sensor disconnected (the input pulled to 97 % of the positive full scale).
 //! * AD5791 (data sheet Rev. D, Table 3, IOVCC 1.71 V to 3.3 V): SCLK <= 25 MHz, <= 10.87 MHz
-//!   in read-back; LDAC low >= 13 ns; power-on clamp (OPGND, DACTRI) until the control
+//!   in read-back; LDAC low >= 13 ns; SYNC high >= 48 ns (`t6`) between frames; power-on clamp (OPGND, DACTRI) until the control
 //!   register clears both; a floating output or a release at the power-on code is refused.
 //!
 //! A broken rule returns an error to the driver and is counted ([`violations`]); the board
@@ -41,6 +45,7 @@ const ADC_SCK_MAX_HZ: u32 = 102_040_816;
 const DAC_SCLK_MAX_HZ: u32 = 25_000_000;
 const DAC_SCLK_READBACK_MAX_HZ: u32 = 10_869_565;
 const LDAC_LOW_MIN_NS: u32 = 13;
+const SYNC_HIGH_MIN_NS: u32 = 48;
 
 /// CMSDK APB timer 1 of the mps2 machines, free-running down from `u32::MAX` at 25 MHz.
 pub mod clock {
@@ -99,7 +104,7 @@ impl DelayNs for TimerDelay {
 }
 
 /// The rules, for [`violations`] (index + 1 is stored).
-const RULES: [&str; 10] = [
+const RULES: [&str; 12] = [
     "AD4020: SPI frame while CNV is high",
     "AD4020: SCK above 102 MHz",
     "AD4020: frame in daisy-chain mode (SDI low at the CNV rising edge)",
@@ -110,6 +115,8 @@ const RULES: [&str; 10] = [
     "AD5791: LDAC low pulse shorter than 13 ns",
     "AD5791: output floating (OPGND cleared while DACTRI is set)",
     "AD5791: output released at the power-on code",
+    "AD4020: configuration write with reserved bits 7:5 not 1",
+    "AD5791: SYNC high shorter than t6 = 48 ns between frames",
 ];
 static VIOLATIONS: AtomicU32 = AtomicU32::new(0);
 static FIRST: AtomicU8 = AtomicU8::new(0);
@@ -152,6 +159,26 @@ pub static AMP_ON: AtomicBool = AtomicBool::new(false);
 
 /// The code axis `a`'s ADC input corresponds to now (the stage writes it every sample).
 static INPUT: [AtomicI32; CHIPS] = [const { AtomicI32::new(0) }; CHIPS];
+
+/// Faults of the position channel ([`set_fault`]).
+pub const FAULT_NONE: u8 = 0;
+/// SDO held low: every bit reads 0 (code 0 is mid-stroke; the status word 0).
+pub const FAULT_STUCK_LOW: u8 = 1;
+/// SDO held high: every bit reads 1 (code -1, mid-stroke; status all ones).
+pub const FAULT_STUCK_HIGH: u8 = 2;
+/// The input floating: every conversion returns the code sampled before the fault.
+pub const FAULT_FLOATING: u8 = 3;
+/// The sensor disconnected: the input at 97 % of the positive full scale (plus the stage's
+/// noise), inside the span (no over-voltage flag).
+pub const FAULT_DISCONNECTED: u8 = 4;
+static FAULT: [AtomicU8; CHIPS] = [const { AtomicU8::new(FAULT_NONE) }; CHIPS];
+
+/// Injects `fault` (a `FAULT_*`) into axis `a`'s ADC from its next conversion on.
+pub fn set_fault(a: usize, fault: u8) {
+    if let Some(f) = at(&FAULT, a) {
+        f.store(fault, Relaxed);
+    }
+}
 /// AD4020 state: CNV level, SDI level (the last MOSI bit), the CNV-low period (0 power-up,
 /// 1 CS frame, 2 daisy-chain), CNV rise tick, bytes clocked since CNV fell, the register,
 /// the code sampled at the last rising edge, the bus rate.
@@ -160,12 +187,17 @@ static SDI_HIGH: [AtomicBool; CHIPS] = [const { AtomicBool::new(false) }; CHIPS]
 static PERIOD: [AtomicU8; CHIPS] = [const { AtomicU8::new(0) }; CHIPS];
 static RISE: [AtomicU32; CHIPS] = [const { AtomicU32::new(0) }; CHIPS];
 static CLOCKED: [AtomicBool; CHIPS] = [const { AtomicBool::new(false) }; CHIPS];
-static ADC_REG: [AtomicU32; CHIPS] = [const { AtomicU32::new(0) }; CHIPS];
+static ADC_REG: [AtomicU32; CHIPS] = [const { AtomicU32::new(ad4000::REG_RESET as u32) }; CHIPS];
 static SAMPLED: [AtomicI32; CHIPS] = [const { AtomicI32::new(0) }; CHIPS];
 static ADC_BUS: [AtomicU32; CHIPS] = [const { AtomicU32::new(BUS_RESET_HZ) }; CHIPS];
 const POWER_UP: u8 = 0;
 const CS: u8 = 1;
 const CHAIN: u8 = 2;
+/// The extreme codes of the AD4020 (an input at or beyond them sets the over-voltage flag).
+const CODE_LO: i32 = -(1 << 19);
+const CODE_HI: i32 = (1 << 19) - 1;
+/// 97 % of the positive full scale.
+const DISCONNECTED_CODE: i32 = CODE_HI / 100 * 97;
 
 /// AD5791 state: DAC register, control register, the code driving the output, written and
 /// loaded since reset, LDAC level and fall tick, pending read-back (bit 31: pending), bus.
@@ -179,6 +211,9 @@ static LDAC_LOW: [AtomicBool; CHIPS] = [const { AtomicBool::new(false) }; CHIPS]
 static LDAC_FALL: [AtomicU32; CHIPS] = [const { AtomicU32::new(0) }; CHIPS];
 static READBACK: [AtomicU32; CHIPS] = [const { AtomicU32::new(0) }; CHIPS];
 static DAC_BUS: [AtomicU32; CHIPS] = [const { AtomicU32::new(BUS_RESET_HZ) }; CHIPS];
+/// The tick SYNC rose at the end of the last frame, and whether there was one.
+static SYNC_RISE: [AtomicU32; CHIPS] = [const { AtomicU32::new(0) }; CHIPS];
+static FRAMED: [AtomicBool; CHIPS] = [const { AtomicBool::new(false) }; CHIPS];
 /// Whether the output was driven (a release is checked once).
 static DRIVEN: [AtomicBool; CHIPS] = [const { AtomicBool::new(false) }; CHIPS];
 const PENDING: u32 = 1 << 31;
@@ -284,7 +319,14 @@ impl<const A: usize> OutputPin for Cnv<A> {
         if !high.swap(true, Relaxed) {
             period.store(if sdi.load(Relaxed) { CS } else { CHAIN }, Relaxed);
             rise.store(clock::now(), Relaxed);
-            s.store(i.load(Relaxed), Relaxed);
+            let input = i.load(Relaxed);
+            let code = match at(&FAULT, A).map_or(FAULT_NONE, |f| f.load(Relaxed)) {
+                FAULT_FLOATING => s.load(Relaxed),
+                // The stage's noise rides on the pulled-up input.
+                FAULT_DISCONNECTED => DISCONNECTED_CODE + (input & 3),
+                _ => input,
+            };
+            s.store(code, Relaxed);
         }
         Ok(())
     }
@@ -383,14 +425,32 @@ impl<const A: usize> SpiDevice for AdcSpi<A> {
         if command && !start {
             return Err(violate(3));
         }
-        let out: [u8; 3] = match mosi[0] {
+        let out: [u8; 4] = match mosi[0] {
             ad4000::CMD_WRITE if command && n >= 2 => {
-                reg.store((mosi[1] & !1) as u32, Relaxed);
-                [0xFF; 3]
+                if mosi[1] & ad4000::REG_RESERVED != ad4000::REG_RESERVED {
+                    return Err(violate(10));
+                }
+                let w = ad4000::REG_WRITABLE as u32;
+                reg.store((reg.load(Relaxed) & !w) | (mosi[1] as u32 & w), Relaxed);
+                [0xFF; 4]
             }
-            ad4000::CMD_READ if command => [0xFF, reg.load(Relaxed) as u8, 0xFF],
-            _ if start || period == POWER_UP => ad4000::encode(&ADC_CONFIG, s.load(Relaxed)),
-            _ => [0; 3],
+            ad4000::CMD_READ if command => [0xFF, reg.load(Relaxed) as u8, 0xFF, 0xFF],
+            _ if start || period == POWER_UP => {
+                let r = reg.load(Relaxed) as u8;
+                let cfg = ad4000::Ad4000Config {
+                    status: r & ad4000::REG_STATUS_BITS != 0,
+                    ..ADC_CONFIG
+                };
+                let code = s.load(Relaxed);
+                let over = code <= CODE_LO || code >= CODE_HI;
+                ad4000::encode(&cfg, code, ad4000::status_of(r, over))
+            }
+            _ => [0; 4],
+        };
+        let out = match at(&FAULT, A).map_or(FAULT_NONE, |f| f.load(Relaxed)) {
+            FAULT_STUCK_LOW => [0; 4],
+            FAULT_STUCK_HIGH => [0xFF; 4],
+            _ => out,
         };
         sdi.store(mosi_high, Relaxed);
         clocked.store(true, Relaxed);
@@ -409,42 +469,66 @@ impl<const A: usize> SpiClock for DacSpi<A> {
 }
 impl<const A: usize> SpiDevice for DacSpi<A> {
     fn transaction(&mut self, ops: &mut [Operation<'_, u8>]) -> Result<(), Violation> {
-        let (Some(bus), Some(readback)) = (at(&DAC_BUS, A), at(&READBACK, A)) else {
+        let (Some(bus), Some(readback), Some(rise), Some(framed)) = (
+            at(&DAC_BUS, A),
+            at(&READBACK, A),
+            at(&SYNC_RISE, A),
+            at(&FRAMED, A),
+        ) else {
             return Ok(());
         };
-        let pending = readback.swap(0, Relaxed);
-        let rb = pending.to_be_bytes();
-        let out = [rb[1], rb[2], rb[3]];
-        let mut word = 0u32;
-        let mut n = 0usize;
-        for op in ops.iter_mut() {
-            let (r, w): (&mut [u8], &[u8]) = match op {
-                Operation::Write(w) => (&mut [], w),
-                Operation::Transfer(r, w) => (r, w),
-                Operation::Read(r) => (r, &[]),
-                Operation::TransferInPlace(_) | Operation::DelayNs(_) => (&mut [], &[]),
-            };
-            for i in 0..r.len().max(w.len()) {
-                word = (word << 8) | w.get(i).copied().unwrap_or(0) as u32;
-                if let Some(x) = r.get_mut(i) {
-                    *x = out.get(n).copied().unwrap_or(0);
-                }
-                n += 1;
-            }
-        }
-        let hz = bus.load(Relaxed);
-        if hz > DAC_SCLK_MAX_HZ {
-            return Err(violate(5));
-        }
-        let read_command = word & (ad5791::READ) != 0 && n == 3;
-        if (pending & PENDING != 0 || read_command) && hz > DAC_SCLK_READBACK_MAX_HZ {
-            return Err(violate(6));
-        }
-        if n != 3 {
-            return Ok(()); // not a 24-bit frame: ignored, as the chip does
-        }
-        frame::<A>(word & 0xFF_FFFF)
+        // SYNC falls now (it rose at the end of the last frame: a frame's own bus time is
+        // not modelled, so the whole gap must be t6).
+        let short = framed.swap(true, Relaxed)
+            && clock::elapsed_min_ns(rise.load(Relaxed)) < SYNC_HIGH_MIN_NS;
+        let r = if short {
+            Err(violate(11))
+        } else {
+            dac_frame::<A>(ops, bus, readback)
+        };
+        rise.store(clock::now(), Relaxed);
+        r
     }
+}
+
+/// One SYNC-low frame of axis `A`'s AD5791 (the bus rules, then [`frame`]).
+fn dac_frame<const A: usize>(
+    ops: &mut [Operation<'_, u8>],
+    bus: &AtomicU32,
+    readback: &AtomicU32,
+) -> Result<(), Violation> {
+    let pending = readback.swap(0, Relaxed);
+    let rb = pending.to_be_bytes();
+    let out = [rb[1], rb[2], rb[3]];
+    let mut word = 0u32;
+    let mut n = 0usize;
+    for op in ops.iter_mut() {
+        let (r, w): (&mut [u8], &[u8]) = match op {
+            Operation::Write(w) => (&mut [], w),
+            Operation::Transfer(r, w) => (r, w),
+            Operation::Read(r) => (r, &[]),
+            Operation::TransferInPlace(_) | Operation::DelayNs(_) => (&mut [], &[]),
+        };
+        for i in 0..r.len().max(w.len()) {
+            word = (word << 8) | w.get(i).copied().unwrap_or(0) as u32;
+            if let Some(x) = r.get_mut(i) {
+                *x = out.get(n).copied().unwrap_or(0);
+            }
+            n += 1;
+        }
+    }
+    let hz = bus.load(Relaxed);
+    if hz > DAC_SCLK_MAX_HZ {
+        return Err(violate(5));
+    }
+    let read_command = word & (ad5791::READ) != 0 && n == 3;
+    if (pending & PENDING != 0 || read_command) && hz > DAC_SCLK_READBACK_MAX_HZ {
+        return Err(violate(6));
+    }
+    if n != 3 {
+        return Ok(()); // not a 24-bit frame: ignored, as the chip does
+    }
+    frame::<A>(word & 0xFF_FFFF)
 }
 
 /// One 24-bit frame into axis `A`'s AD5791.

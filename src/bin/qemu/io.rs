@@ -22,6 +22,18 @@ pub mod selftest {
     pub static ADC: AtomicI32 = AtomicI32::new(0);
 }
 
+/// Sensor fault injection (harness line `sensor <fault>`): samples from the first faulty
+/// conversion to the period that turned the amplifier off (the safe state), inclusive.
+pub mod inject {
+    use core::sync::atomic::{AtomicBool, AtomicU32};
+    /// A fault is injected and the safe state not reached yet.
+    pub static ACTIVE: AtomicBool = AtomicBool::new(false);
+    /// Samples since the injection.
+    pub static SAMPLES: AtomicU32 = AtomicU32::new(0);
+    /// Samples to the safe state (`u32::MAX`: not reached).
+    pub static SAFE_AFTER: AtomicU32 = AtomicU32::new(u32::MAX);
+}
+
 /// The simulated stage and the converter drivers of every axis the build drives (xy build:
 /// two independent, identical stages, each behind its own AD4020/AD5791 pair).
 pub struct SimIo {
@@ -43,6 +55,7 @@ impl SimIo {
                 Error::Spi(v) | Error::Pin(v) => v.0,
                 Error::Verify { .. } => "a register read back differently",
                 Error::Config(m) => m,
+                Error::Status(_) => "the ADC's status bits were wrong",
             }
         }
         let (adc, dac) = chips::drivers_of::<0>(safe_code).map_err(rule)?;
@@ -67,6 +80,9 @@ impl firmware::Io for SimIo {
     /// lost (SysTick paces the stage itself).
     #[inline(always)]
     fn sample(&mut self) -> ([i32; AXES], bool) {
+        if inject::ACTIVE.load(Relaxed) {
+            inject::SAMPLES.fetch_add(1, Relaxed);
+        }
         let mut codes = [i32::MIN; AXES];
         let (mut stage, mut code) = (self.stage.iter_mut(), codes.iter_mut());
         if let (Some(s), Some(c)) = (stage.next(), code.next()) {
@@ -106,6 +122,9 @@ impl firmware::Io for SimIo {
     #[inline(always)]
     fn amplifier(&mut self, on: bool) {
         chips::AMP_ON.store(on, Relaxed);
+        if !on && inject::ACTIVE.swap(false, Relaxed) {
+            inject::SAFE_AFTER.store(inject::SAMPLES.load(Relaxed), Relaxed);
+        }
     }
 }
 

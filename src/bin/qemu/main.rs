@@ -296,6 +296,54 @@ mod board {
         true
     }
 
+    /// The harness line `sensor <fault>`: injects `stuck-low`, `stuck-high`, `floating` or
+    /// `disconnected` into axis 0's ADC (`none`: healthy again) and answers `ok sensor
+    /// <fault>`; `sensor report` answers `sensor: safe after <n> samples` (from the first
+    /// faulty conversion to the period that turned the amplifier off, inclusive) or
+    /// `sensor: not safe`. True when the line is one.
+    fn sensor_line(line: &[u8]) -> bool {
+        use io::inject;
+        let Some(rest) = line.strip_prefix(b"sensor ") else {
+            return false;
+        };
+        let fault = match rest {
+            b"report" => {
+                let n = inject::SAFE_AFTER.load(Relaxed);
+                let mut r = Reply::<REPLY_LEN>::new();
+                if n == u32::MAX {
+                    r.push_str("sensor: not safe");
+                } else {
+                    r.push_str("sensor: safe after ");
+                    r.push_u32(n);
+                    r.push_str(" samples");
+                }
+                uart::line(r.as_str());
+                return true;
+            }
+            b"none" => chips::FAULT_NONE,
+            b"stuck-low" => chips::FAULT_STUCK_LOW,
+            b"stuck-high" => chips::FAULT_STUCK_HIGH,
+            b"floating" => chips::FAULT_FLOATING,
+            b"disconnected" => chips::FAULT_DISCONNECTED,
+            _ => {
+                uart::line(
+                    "err sensor: none, stuck-low, stuck-high, floating, disconnected, report",
+                );
+                return true;
+            }
+        };
+        inject::ACTIVE.store(false, Relaxed);
+        inject::SAMPLES.store(0, Relaxed);
+        inject::SAFE_AFTER.store(u32::MAX, Relaxed);
+        chips::set_fault(0, fault);
+        inject::ACTIVE.store(fault != chips::FAULT_NONE, Relaxed);
+        let mut r = Reply::<REPLY_LEN>::new();
+        r.push_str("ok sensor ");
+        r.push_str(core::str::from_utf8(rest).unwrap_or("?"));
+        uart::line(r.as_str());
+        true
+    }
+
     /// The periods of a `wait <n>` line (decimal, 1 ..= [`PERIODS_MAX`]).
     fn wait_periods(line: &[u8]) -> Option<u32> {
         let digits = line.strip_prefix(WAIT_PREFIX)?;
@@ -328,7 +376,7 @@ mod board {
                 FLOOD_STOP => self.flood = Some(false),
                 _ => match wait_periods(line) {
                     Some(n) => self.wait = Some(n),
-                    None => return set_resonance(line) || set_stage(line),
+                    None => return set_resonance(line) || set_stage(line) || sensor_line(line),
                 },
             }
             true
@@ -352,7 +400,7 @@ mod board {
             r.push_str(" reset n/a dac ");
             push_dac_readback(r, done.then(|| (READ.load(Relaxed), WROTE.load(Relaxed))));
             let adc = io::selftest::ADC.load(Relaxed);
-            let s = <SpiPair as Converters>::sensor();
+            let s = <SpiPair as Converters>::sensor(0.0);
             let seen = adc >> <SpiPair as Converters>::ADC_SHIFT;
             r.push_str(" adc ");
             r.push_i32(adc);

@@ -73,6 +73,8 @@ pub struct SimStage {
     creep: [f32; 2],
     /// [`STAGE_GEN`] of `model` and `creep_gain`.
     stage_generation: u32,
+    /// The sensor's noise: xorshift32 state.
+    noise: u32,
 }
 
 /// The CBW of the firmware's defaults (000 backup slide parameter set 1) with the `stage`
@@ -120,7 +122,19 @@ impl SimStage {
             codes_per_um: (1u32 << SpiPair::ADC_BITS) as f32 / SPI_SPAN_UM as f32,
             resonance: None,
             generation: 0,
+            noise: 0x2545_f491,
         }
+    }
+
+    /// The position sensor's noise (LSB): -3..=3, triangular, mean 0, 1.6 LSB rms (0.2 nm at
+    /// 20 bits over 120 um; a real sensor and the AD4020 never hold one code for long).
+    fn noise_lsb(&mut self) -> f32 {
+        let mut x = self.noise;
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        self.noise = x;
+        ((x >> 30) as i32 - ((x >> 28) & 3) as i32) as f32
     }
 
     /// DAC code in, ADC code out (one sample).
@@ -162,7 +176,7 @@ impl SimStage {
         };
         let half = (1i32 << (SpiPair::ADC_BITS - 1)) as f32;
         let centre = SPI_CENTER_UM as f32;
-        let code = libm::floorf((y_um - centre) * self.codes_per_um + 0.5);
+        let code = libm::floorf((y_um - centre) * self.codes_per_um + 0.5) + self.noise_lsb();
         if code >= half - 1.0 {
             half as i32 - 1
         } else if code >= -half {

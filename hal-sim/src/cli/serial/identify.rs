@@ -125,14 +125,17 @@ pub struct Identified {
     pub diagnosis: Option<String>,
 }
 
+/// A receiver of [`run`]'s progress lines.
+pub type ProgressSink = Box<dyn FnMut(&str)>;
+
 std::thread_local! {
     /// Where the phases' progress goes besides stderr (the console's page).
-    static PROGRESS: std::cell::RefCell<Option<Box<dyn FnMut(&str)>>> =
+    static PROGRESS: std::cell::RefCell<Option<ProgressSink>> =
         const { std::cell::RefCell::new(None) };
 }
 
 /// Sends the progress lines of [`run`] on this thread also to `sink` (`None`: stderr only).
-pub fn progress_to(sink: Option<Box<dyn FnMut(&str)>>) {
+pub fn progress_to(sink: Option<ProgressSink>) {
     PROGRESS.with(|p| *p.borrow_mut() = sink);
 }
 

@@ -1,15 +1,17 @@
 //! The prediction models of the model-based feedback laws (HGO robust law, finite-time law,
 //! NMPC): each law predicts with one hysteresis family, CBW (000 eq. 1; the plain names
-//! `hgo-robust`, `fts`, `nmpc`) or GBW (000 eq. 3; `fts-gbw`, `nmpc-gbw`).
+//! `hgo-robust`, `fts`, `nmpc`) or GBW (000 eq. 3 with its CBW term; `fts-gbw`, `nmpc-gbw`,
+//! `hgo-robust-gbw`).
 //!
-//! The parameters are the stage's own when the stage runs that family (every law then sees
-//! `alpha, beta, gamma` and GBW's `A, B_h` times `1 + model_error`, `d` exact). Otherwise:
-//! * CBW on a stage of another family: the least-squares CBW (`piezo fit --model cbw`, the
-//!   same differential evolution + Levenberg-Marquardt) of the stage's hysteresis alone
-//!   (`y = d*u - h`, without the creep and quadratic terms the laws do not model on a CBW
-//!   stage either) over a quasi-static full-range sweep, then scaled by `1 + model_error`;
-//! * GBW on a stage of another family: the GBW that nests that CBW (`alpha = n = 1`,
-//!   `B_h = beta`, `B = 0`, `G = gamma`, the same loop): there is no asymmetry to model.
+//! * GBW: identified from the stage's own open-loop record, as a user would
+//!   ([`super::identified`]: `piezo fit --model gbw` on the record `piezo sim --controller
+//!   open-loop --out DIR` writes), on every stage; `A, B_h, B, G` then times
+//!   `1 + model_error`.
+//! * CBW: the stage's own parameters when the stage runs CBW (`alpha, beta, gamma` times
+//!   `1 + model_error`, `d` exact); on a stage of another family the least-squares CBW
+//!   (`piezo fit --model cbw`, the same differential evolution + Levenberg-Marquardt) of the
+//!   stage's hysteresis alone (`y = d*u - h`) over a quasi-static full-range sweep, then
+//!   scaled by `1 + model_error`.
 
 use crate::ident::fit::{fit_siso, models as fit_models, FitOptions};
 use crate::scenario::{HysteresisCfg, HysteresisModel};
@@ -36,32 +38,42 @@ pub fn prediction(s: &StageInfo, family: Family) -> Result<ObserverModel<R>> {
     let h = s.hysteresis();
     let k = 1.0 + h.model_error;
     match (family, h.model) {
-        (Family::Gbw, HysteresisModel::Gbw) => Ok(ObserverModel::Gbw(
-            Gbw::with_beta_h(
-                h.d as R,
-                h.alpha as R,
-                (h.a * k) as R,
-                (h.beta_h * k) as R,
-                (h.beta * k) as R,
-                (h.gamma * k) as R,
-                h.n as R,
-            )
-            .map_err(perr)?,
-        )),
-        (family, _) => {
+        (Family::Gbw, _) => {
+            let m = identified_gbw(s)?;
+            Ok(ObserverModel::Gbw(
+                Gbw::with_beta_h(
+                    m.d() as R,
+                    1.0,
+                    (m.a() * k) as R,
+                    (m.beta_h() * k) as R,
+                    (m.b() * k) as R,
+                    (m.g() * k) as R,
+                    1.0,
+                )
+                .map_err(perr)?,
+            ))
+        }
+        (Family::Cbw, _) => {
             let (d, al, be, ga, n) = cbw_of(s)?;
             let (al, be, ga) = (al * k, be * k, ga * k);
-            Ok(match family {
-                Family::Cbw => ObserverModel::Cbw(
-                    Cbw::new(d as R, al as R, be as R, ga as R, n as R).map_err(perr)?,
-                ),
-                Family::Gbw => ObserverModel::Gbw(
-                    Gbw::with_beta_h(d as R, 1.0, al as R, be as R, 0.0, ga as R, n as R)
-                        .map_err(perr)?,
-                ),
-            })
+            Ok(ObserverModel::Cbw(
+                Cbw::new(d as R, al as R, be as R, ga as R, n as R).map_err(perr)?,
+            ))
         }
     }
+}
+
+/// The GBW (`alpha = n = 1`) that `piezo fit --model gbw` identifies from the stage's
+/// open-loop record (before `model_error`).
+pub fn identified_gbw(s: &StageInfo) -> Result<Gbw<f64>> {
+    let f = super::identified::identified(s, "gbw")?;
+    anyhow::ensure!(
+        f.sign > 0.0,
+        "the GBW fit of {} has the wrong orientation (sign {})",
+        s.scenario.name,
+        f.sign
+    );
+    fit_models::gbw(&f.values()).map_err(perr)
 }
 
 /// The stage's CBW (before `model_error`): its own, or the least-squares fit.

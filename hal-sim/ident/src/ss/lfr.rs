@@ -1,0 +1,994 @@
+//! Nonlinear LFR (`piezo fit --model lfr`): the identified modal state space with a static
+//! nonlinearity in feedback around the structure,
+//!
+//! `x[k+1] = A x + B u + E w`, `y = C x + D u`, `z = F x + G u`, `w = N(z)`,
+//!
+//! `N` acting on every channel `z_i` with a few odd basis functions (amplitude-dependent
+//! stiffness and damping: `z^3`, `z |z|`), `w` stacked basis by basis. For small signals
+//! `N` vanishes and the model is its linear part; as the amplitude grows the feedback moves
+//! the resonances, differently per output: what the mirror does and no input-side
+//! hysteresis produces. One model for every level, simulated from rest.
+//!
+//! Identification: the linear part from the BLA (`super::identify`), `z` started as the
+//! outputs of the linear part scaled to unit RMS and `E = 0` (so the start is the linear
+//! model), then Levenberg-Marquardt on the simulation error of the benchmark's scoring rule
+//! (one period of warm-up, every period scored without its first samples). Forward
+//! sensitivities of the state give the Jacobian of the poles, `B`, `E`, `F`, `G`; `C` and
+//! `D`, on which the output depends linearly, are solved by least squares at every
+//! parameter set (variable projection, Kaufman's Jacobian).
+
+use super::model::{Block, Modal, MAX_POLE_RADIUS};
+use super::score;
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// One basis function of `N`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Basis {
+    /// `z^3`: hardening/softening stiffness (Duffing).
+    Cubic,
+    /// `z |z|`: a stiffness that grows linearly with the amplitude.
+    AbsSquare,
+    /// Play (backlash) operator of this half-width in `z`'s unit (the start makes `z` of
+    /// unit RMS): rate-independent hysteresis, the Prandtl-Ishlinskii family's element; in
+    /// feedback an amplitude-dependent stiffness and damping (energy lost per cycle).
+    Play(f64),
+}
+
+impl Basis {
+    pub fn name(self) -> String {
+        match self {
+            Basis::Cubic => "cubic".into(),
+            Basis::AbsSquare => "abs-square".into(),
+            Basis::Play(r) => format!("play:{r}"),
+        }
+    }
+
+    /// `cubic`, `abs-square` or `play:R` (R >= 0, the half-width).
+    pub fn parse(s: &str) -> anyhow::Result<Self> {
+        let s = s.trim();
+        match s {
+            "cubic" => return Ok(Basis::Cubic),
+            "abs-square" => return Ok(Basis::AbsSquare),
+            _ => {}
+        }
+        if let Some(r) = s.strip_prefix("play:") {
+            if let Ok(r) = r.trim().parse::<f64>() {
+                if r.is_finite() && r >= 0.0 {
+                    return Ok(Basis::Play(r));
+                }
+            }
+        }
+        anyhow::bail!("LFR basis `{s}`: expected cubic, abs-square or play:R (half-width R >= 0)")
+    }
+
+    fn valid(self) -> bool {
+        match self {
+            Basis::Play(r) => r.is_finite() && r >= 0.0,
+            _ => true,
+        }
+    }
+
+    /// One step: `(w, dw/dz, moved)` from `z` and the operator's memory (the last `w`;
+    /// updated). `moved` is false where a play holds (then `dw` is the memory's).
+    #[inline]
+    fn step(self, z: f64, mem: &mut f64) -> (f64, f64, bool) {
+        match self {
+            Basis::Cubic => (z * z * z, 3.0 * z * z, true),
+            Basis::AbsSquare => (z * z.abs(), 2.0 * z.abs(), true),
+            Basis::Play(r) => {
+                if *mem < z - r {
+                    *mem = z - r;
+                    (*mem, 1.0, true)
+                } else if *mem > z + r {
+                    *mem = z + r;
+                    (*mem, 1.0, true)
+                } else {
+                    (*mem, 0.0, false)
+                }
+            }
+        }
+    }
+}
+
+/// The model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lfr {
+    /// `A, B, C, D`.
+    pub linear: Modal,
+    pub basis: Vec<Basis>,
+    /// `n x (channels * basis)`, column `b * channels + i` is basis `b` of channel `i`.
+    pub e: DMatrix<f64>,
+    /// `channels x n`.
+    pub f: DMatrix<f64>,
+    /// `channels x m`.
+    pub g: DMatrix<f64>,
+}
+
+/// `fit.json`'s form (the linear part is `linear` beside it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LfrJson {
+    /// Basis functions of `N`, applied to every channel of `z`.
+    pub basis: Vec<Basis>,
+    /// `E` (`states x channels * basis`), `F` (`channels x states`), `G` (`channels x
+    /// inputs`), row-major.
+    pub e: Vec<Vec<f64>>,
+    pub f: Vec<Vec<f64>>,
+    pub g: Vec<Vec<f64>>,
+}
+
+fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| m.row(i).iter().copied().collect())
+        .collect()
+}
+
+fn from_rows(r: &[Vec<f64>], nr: usize, nc: usize, what: &str) -> anyhow::Result<DMatrix<f64>> {
+    anyhow::ensure!(
+        r.len() == nr && r.iter().all(|row| row.len() == nc),
+        "fit.json: LFR `{what}` must be {nr} x {nc}"
+    );
+    anyhow::ensure!(
+        r.iter().flatten().all(|v| v.is_finite()),
+        "fit.json: LFR `{what}` has a non-finite entry"
+    );
+    Ok(DMatrix::from_fn(nr, nc, |i, j| r[i][j]))
+}
+
+/// A state beyond this (model units) counts as a diverged simulation.
+const DIVERGED: f64 = 1e9;
+
+impl Lfr {
+    pub fn channels(&self) -> usize {
+        self.f.nrows()
+    }
+
+    pub fn to_json(&self) -> LfrJson {
+        LfrJson {
+            basis: self.basis.clone(),
+            e: rows(&self.e),
+            f: rows(&self.f),
+            g: rows(&self.g),
+        }
+    }
+
+    pub fn from_json(linear: Modal, j: &LfrJson) -> anyhow::Result<Self> {
+        let (n, m) = (linear.order(), linear.inputs());
+        let nz = j.f.len();
+        anyhow::ensure!(
+            nz > 0 && !j.basis.is_empty() && j.basis.iter().all(|b| b.valid()),
+            "fit.json: the LFR needs at least one channel and one basis function (play half-widths >= 0)"
+        );
+        Ok(Self {
+            e: from_rows(&j.e, n, nz * j.basis.len(), "e")?,
+            f: from_rows(&j.f, nz, n, "f")?,
+            g: from_rows(&j.g, nz, m, "g")?,
+            basis: j.basis.clone(),
+            linear,
+        })
+    }
+
+    /// Runs from rest; `visit(k, x, u_k)` sees the state before sample `k`'s update.
+    fn run(
+        &self,
+        u: &[Vec<f64>],
+        mut visit: impl FnMut(usize, &[f64], &[f64]),
+    ) -> anyhow::Result<()> {
+        let (n, m, nz) = (self.linear.order(), self.linear.inputs(), self.channels());
+        anyhow::ensure!(
+            u.len() == m,
+            "the model has {m} inputs, the record {}",
+            u.len()
+        );
+        let len = u.first().map_or(0, Vec::len);
+        let mut x = vec![0.0; n];
+        let mut xn = vec![0.0; n];
+        let mut uk = vec![0.0; m];
+        let mut mem = vec![0.0; nz * self.basis.len()];
+        // `k` indexes every input channel's series at once.
+        #[allow(clippy::needless_range_loop)]
+        for k in 0..len {
+            for (j, v) in uk.iter_mut().enumerate() {
+                *v = u[j][k];
+            }
+            visit(k, &x, &uk);
+            a_times(&self.linear.blocks, &x, &mut xn);
+            for (s, v) in xn.iter_mut().enumerate() {
+                for (j, uj) in uk.iter().enumerate() {
+                    *v += self.linear.b[(s, j)] * uj;
+                }
+            }
+            self.add_feedback(&x, &uk, &mut mem, &mut xn);
+            std::mem::swap(&mut x, &mut xn);
+            if !x.iter().all(|v| v.abs() < DIVERGED) {
+                anyhow::bail!("the LFR simulation diverged at sample {k}");
+            }
+        }
+        Ok(())
+    }
+
+    /// Simulates from rest (`x = 0`); `u[j][k]` is input `j` at sample `k`.
+    pub fn simulate(&self, u: &[Vec<f64>]) -> anyhow::Result<Vec<Vec<f64>>> {
+        let (p, len) = (self.linear.outputs(), u.first().map_or(0, Vec::len));
+        let mut y = vec![vec![0.0; len]; p];
+        let (c, d) = (&self.linear.c, &self.linear.d);
+        self.run(u, |k, x, uk| {
+            for (o, yo) in y.iter_mut().enumerate() {
+                let mut s = 0.0;
+                for (i, xi) in x.iter().enumerate() {
+                    s += c[(o, i)] * xi;
+                }
+                for (j, v) in uk.iter().enumerate() {
+                    s += d[(o, j)] * v;
+                }
+                yo[k] = s;
+            }
+        })?;
+        Ok(y)
+    }
+}
+
+impl Lfr {
+    /// Memory of the hysteresis operators at rest (`channels * basis`).
+    pub fn rest_memory(&self) -> Vec<f64> {
+        vec![0.0; self.e.ncols()]
+    }
+
+    /// `E N(F x + G v)`, added to `out` (the feedback term of one step); `mem` is the
+    /// operators' memory ([`Self::rest_memory`] at rest), updated.
+    pub fn add_feedback(&self, x: &[f64], v: &[f64], mem: &mut [f64], out: &mut [f64]) {
+        let nz = self.channels();
+        for i in 0..nz {
+            let mut z = 0.0;
+            for (l, xl) in x.iter().enumerate() {
+                z += self.f[(i, l)] * xl;
+            }
+            for (j, vj) in v.iter().enumerate() {
+                z += self.g[(i, j)] * vj;
+            }
+            for (b, basis) in self.basis.iter().enumerate() {
+                let q = b * nz + i;
+                let w = basis.step(z, &mut mem[q]).0;
+                let col = &self.e.as_slice()[q * out.len()..(q + 1) * out.len()];
+                for (o, e) in out.iter_mut().zip(col) {
+                    *o += e * w;
+                }
+            }
+        }
+    }
+}
+
+/// `out = A x` for the block-diagonal `A`.
+#[inline]
+fn a_times(blocks: &[Block], x: &[f64], out: &mut [f64]) {
+    let mut i = 0;
+    for blk in blocks {
+        match *blk {
+            Block::Real(l) => out[i] = l * x[i],
+            Block::Pair(s, w) => {
+                out[i] = s * x[i] + w * x[i + 1];
+                out[i + 1] = -w * x[i] + s * x[i + 1];
+            }
+        }
+        i += blk.states();
+    }
+}
+
+/// A training record prepared for the official rule: input with one period of warm-up,
+/// outputs, and the scored samples of the warmed-up input.
+pub struct Scored {
+    pub u: Vec<Vec<f64>>,
+    /// `y[o][k]` at the warmed-up input's sample `k` (only scored samples are read).
+    pub y: Vec<Vec<f64>>,
+    pub windows: Vec<(usize, usize)>,
+}
+
+impl Scored {
+    pub fn of(rec: &crate::record::Record) -> anyhow::Result<Self> {
+        let n = score::period_of(rec)?;
+        let y = rec
+            .y
+            .iter()
+            .map(|y| y[..n].iter().chain(y.iter()).copied().collect())
+            .collect();
+        Ok(Self {
+            u: score::with_warmup(&rec.u, n),
+            y,
+            windows: score::scored_windows(rec.len(), n)
+                .into_iter()
+                .map(|(a, b)| (a + n, b + n))
+                .collect(),
+        })
+    }
+
+    fn scored(&self, k: usize) -> bool {
+        self.windows.iter().any(|&(a, b)| (a..b).contains(&k))
+    }
+}
+
+/// What one parameter of the vector `theta` is.
+#[derive(Debug, Clone, Copy)]
+enum Param {
+    /// Real pole of the block at state `i`.
+    Real(usize),
+    /// `sigma` / `omega` of the pair at states `i, i + 1`.
+    Sigma(usize),
+    Omega(usize),
+    B(usize, usize),
+    E(usize, usize),
+    F(usize, usize),
+    G(usize, usize),
+}
+
+fn layout(mdl: &Lfr) -> Vec<Param> {
+    let (n, m, nz, nw) = (
+        mdl.linear.order(),
+        mdl.linear.inputs(),
+        mdl.channels(),
+        mdl.e.ncols(),
+    );
+    let mut v = Vec::new();
+    let mut i = 0;
+    for b in &mdl.linear.blocks {
+        match b {
+            Block::Real(_) => v.push(Param::Real(i)),
+            Block::Pair(..) => v.extend([Param::Sigma(i), Param::Omega(i)]),
+        }
+        i += b.states();
+    }
+    v.extend((0..n).flat_map(|s| (0..m).map(move |j| Param::B(s, j))));
+    v.extend((0..n).flat_map(|s| (0..nw).map(move |q| Param::E(s, q))));
+    v.extend((0..nz).flat_map(|c| (0..n).map(move |l| Param::F(c, l))));
+    v.extend((0..nz).flat_map(|c| (0..m).map(move |j| Param::G(c, j))));
+    v
+}
+
+fn pack(mdl: &Lfr) -> Vec<f64> {
+    let mut v = Vec::new();
+    for b in &mdl.linear.blocks {
+        match *b {
+            Block::Real(l) => v.push(l),
+            Block::Pair(s, w) => v.extend([s, w]),
+        }
+    }
+    for mat in [&mdl.linear.b, &mdl.e, &mdl.f, &mdl.g] {
+        for i in 0..mat.nrows() {
+            v.extend(mat.row(i).iter());
+        }
+    }
+    v
+}
+
+/// Inverse of [`pack`] with the structure of `like`; poles pulled inside the stability
+/// radius.
+fn unpack(like: &Lfr, v: &[f64]) -> Lfr {
+    let mut out = like.clone();
+    let mut i = 0;
+    for b in out.linear.blocks.iter_mut() {
+        match b {
+            Block::Real(l) => {
+                *l = v[i];
+                i += 1;
+            }
+            Block::Pair(s, w) => {
+                *s = v[i];
+                *w = v[i + 1].abs().max(1e-9);
+                i += 2;
+            }
+        }
+        b.clamp_radius(MAX_POLE_RADIUS);
+    }
+    for mat in [&mut out.linear.b, &mut out.e, &mut out.f, &mut out.g] {
+        for r in 0..mat.nrows() {
+            for c in 0..mat.ncols() {
+                mat[(r, c)] = v[i];
+                i += 1;
+            }
+        }
+    }
+    out
+}
+
+/// Sums over the scored samples for the least-squares `C, D`: `R = sum phi phi^T`,
+/// `Q = sum phi y^T`, `syy = sum |y|^2`, `phi = [x; u]`.
+struct Gram {
+    r: DMatrix<f64>,
+    q: DMatrix<f64>,
+    syy: f64,
+}
+
+impl Gram {
+    fn zeros(nphi: usize, p: usize) -> Self {
+        Self {
+            r: DMatrix::zeros(nphi, nphi),
+            q: DMatrix::zeros(nphi, p),
+            syy: 0.0,
+        }
+    }
+    fn plus(mut self, o: Self) -> Self {
+        self.r += o.r;
+        self.q += o.q;
+        self.syy += o.syy;
+        self
+    }
+}
+
+fn gram(mdl: &Lfr, rec: &Scored) -> anyhow::Result<Gram> {
+    let (n, m, p) = (
+        mdl.linear.order(),
+        mdl.linear.inputs(),
+        mdl.linear.outputs(),
+    );
+    let nphi = n + m;
+    let mut g = Gram::zeros(nphi, p);
+    let mut phi = vec![0.0; nphi];
+    // Upper triangle only, mirrored at the end.
+    let r = g.r.as_mut_slice();
+    let q = g.q.as_mut_slice();
+    let mut syy = 0.0;
+    mdl.run(&rec.u, |k, x, uk| {
+        if !rec.scored(k) {
+            return;
+        }
+        phi[..n].copy_from_slice(x);
+        phi[n..].copy_from_slice(uk);
+        for c in 0..nphi {
+            let pc = phi[c];
+            let col = &mut r[c * nphi..c * nphi + c + 1];
+            for (a, ra) in col.iter_mut().enumerate() {
+                *ra += phi[a] * pc;
+            }
+        }
+        for o in 0..p {
+            let yo = rec.y[o][k];
+            syy += yo * yo;
+            for a in 0..nphi {
+                q[o * nphi + a] += phi[a] * yo;
+            }
+        }
+    })?;
+    g.syy = syy;
+    for c in 0..nphi {
+        for a in 0..c {
+            g.r[(c, a)] = g.r[(a, c)];
+        }
+    }
+    Ok(g)
+}
+
+/// `C, D` by least squares from the summed Gram matrices, and the cost (sum of squared
+/// errors over scored samples and outputs).
+fn solve_cd(mdl: &mut Lfr, g: &Gram) -> anyhow::Result<f64> {
+    let n = mdl.linear.order();
+    let nphi = g.r.nrows();
+    let tr = g.r.trace() / nphi as f64;
+    let mut r = g.r.clone();
+    for i in 0..nphi {
+        r[(i, i)] += 1e-12 * tr.max(f64::MIN_POSITIVE);
+    }
+    let ch = r.cholesky().ok_or_else(|| {
+        anyhow::anyhow!("the LFR's states are degenerate (no least-squares C, D)")
+    })?;
+    let theta = ch.solve(&g.q); // nphi x p
+    let cost = g.syy - 2.0 * theta.dot(&g.q) + (theta.transpose() * &g.r * &theta).trace();
+    for o in 0..theta.ncols() {
+        for i in 0..n {
+            mdl.linear.c[(o, i)] = theta[(i, o)];
+        }
+        for j in 0..nphi - n {
+            mdl.linear.d[(o, j)] = theta[(n + j, o)];
+        }
+    }
+    Ok(cost.max(0.0))
+}
+
+/// Sets `C, D` by least squares over `recs` and returns the cost.
+fn project(mdl: &mut Lfr, recs: &[Scored]) -> anyhow::Result<f64> {
+    let (nphi, p) = (
+        mdl.linear.order() + mdl.linear.inputs(),
+        mdl.linear.outputs(),
+    );
+    let m: &Lfr = mdl;
+    let g = recs
+        .par_iter()
+        .map(|r| gram(m, r))
+        .try_reduce(|| Gram::zeros(nphi, p), |a, b| Ok(a.plus(b)))?;
+    let c = solve_cd(mdl, &g)?;
+    anyhow::ensure!(c.is_finite(), "the LFR cost is not finite");
+    Ok(c)
+}
+
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for l in 0..4 {
+            s[l] += x[l] * y[l];
+        }
+    }
+    let mut t = (s[0] + s[1]) + (s[2] + s[3]);
+    for (x, y) in ra.iter().zip(rb) {
+        t += x * y;
+    }
+    t
+}
+
+/// Gauss-Newton normal equations of one record: `(J^T J, J^T e)`, `J` the output's
+/// derivative by `theta` (forward sensitivities), `e` the output error; `J^T J` from every
+/// `stride`-th scored sample (scaled), `J^T e` from all.
+fn normal_record(
+    mdl: &Lfr,
+    params: &[Param],
+    rec: &Scored,
+    stride: usize,
+) -> anyhow::Result<(DMatrix<f64>, DVector<f64>)> {
+    let (n, m, p, nz) = (
+        mdl.linear.order(),
+        mdl.linear.inputs(),
+        mdl.linear.outputs(),
+        mdl.channels(),
+    );
+    let nb = mdl.basis.len();
+    let nw = nz * nb;
+    let np = params.len();
+    // Row-major copies for contiguous dots / column-major E for axpys.
+    let f_rows: Vec<Vec<f64>> = (0..nz)
+        .map(|i| mdl.f.row(i).iter().copied().collect())
+        .collect();
+    let c_rows: Vec<Vec<f64>> = (0..p)
+        .map(|o| mdl.linear.c.row(o).iter().copied().collect())
+        .collect();
+    let e_cols: Vec<&[f64]> = (0..nw)
+        .map(|q| &mdl.e.as_slice()[q * n..(q + 1) * n])
+        .collect();
+    // S = dx/dtheta, column-major n x np.
+    let mut s = vec![0.0; n * np];
+    let mut sn = vec![0.0; n * np];
+    let mut x = vec![0.0; n];
+    let mut xn = vec![0.0; n];
+    let mut uk = vec![0.0; m];
+    let mut z = vec![0.0; nz];
+    let mut w = vec![0.0; nw];
+    let mut dw = vec![0.0; nw];
+    let mut moved = vec![true; nw];
+    let mut mem = vec![0.0; nw];
+    // dw/dtheta of the operators with memory (plays), column-major nw x np.
+    let mut sw = vec![0.0; nw * np];
+    let mut dz = vec![0.0; nz];
+    let mut ys = vec![0.0; p * np]; // dy/dtheta, row-major p x np
+    let batch = 128;
+    let mut jbuf = DMatrix::<f64>::zeros(batch * p, np);
+    let mut rows_in = 0;
+    let mut h = DMatrix::<f64>::zeros(np, np);
+    let mut g = DVector::<f64>::zeros(np);
+    let mut scored_count = 0usize;
+    let len = rec.u[0].len();
+    let flush = |h: &mut DMatrix<f64>, jbuf: &DMatrix<f64>, rows: usize| {
+        if rows > 0 {
+            let j = jbuf.rows(0, rows);
+            let jt = j.transpose();
+            h.gemm(stride as f64, &jt, &j, 1.0);
+        }
+    };
+    for k in 0..len {
+        for (j, v) in uk.iter_mut().enumerate() {
+            *v = rec.u[j][k];
+        }
+        for i in 0..nz {
+            z[i] = dot(&f_rows[i], &x) + (0..m).map(|j| mdl.g[(i, j)] * uk[j]).sum::<f64>();
+            for (b, basis) in mdl.basis.iter().enumerate() {
+                let q = b * nz + i;
+                (w[q], dw[q], moved[q]) = basis.step(z[i], &mut mem[q]);
+            }
+        }
+        let scored = rec.scored(k);
+        for (c, par) in params.iter().enumerate() {
+            let col = &s[c * n..(c + 1) * n];
+            // dz = F dx (+ the parameter's own term)
+            for i in 0..nz {
+                dz[i] = dot(&f_rows[i], col);
+            }
+            match *par {
+                Param::F(i, l) => dz[i] += x[l],
+                Param::G(i, j) => dz[i] += uk[j],
+                _ => {}
+            }
+            if scored {
+                for o in 0..p {
+                    ys[o * np + c] = dot(&c_rows[o], col);
+                }
+            }
+            let out = &mut sn[c * n..(c + 1) * n];
+            a_times(&mdl.linear.blocks, col, out);
+            let swc = &mut sw[c * nw..(c + 1) * nw];
+            for b in 0..nb {
+                for (i, &dzi) in dz.iter().enumerate() {
+                    let q = b * nz + i;
+                    // A holding play keeps its sensitivity; a moving one follows z.
+                    let a = if moved[q] { dw[q] * dzi } else { swc[q] };
+                    swc[q] = a;
+                    if a != 0.0 {
+                        for (o, e) in out.iter_mut().zip(e_cols[q]) {
+                            *o += e * a;
+                        }
+                    }
+                }
+            }
+            match *par {
+                Param::Real(i) => out[i] += x[i],
+                Param::Sigma(i) => {
+                    out[i] += x[i];
+                    out[i + 1] += x[i + 1];
+                }
+                Param::Omega(i) => {
+                    out[i] += x[i + 1];
+                    out[i + 1] -= x[i];
+                }
+                Param::B(r, j) => out[r] += uk[j],
+                Param::E(r, q) => out[r] += w[q],
+                _ => {}
+            }
+        }
+        if scored {
+            for o in 0..p {
+                let yhat =
+                    dot(&c_rows[o], &x) + (0..m).map(|j| mdl.linear.d[(o, j)] * uk[j]).sum::<f64>();
+                let e = rec.y[o][k] - yhat;
+                let row = &ys[o * np..(o + 1) * np];
+                for (gc, r) in g.iter_mut().zip(row) {
+                    *gc += r * e;
+                }
+            }
+            if scored_count.is_multiple_of(stride) {
+                for o in 0..p {
+                    let row = &ys[o * np..(o + 1) * np];
+                    for (c, v) in row.iter().enumerate() {
+                        jbuf[(rows_in, c)] = *v;
+                    }
+                    rows_in += 1;
+                }
+                if rows_in == batch * p {
+                    flush(&mut h, &jbuf, rows_in);
+                    rows_in = 0;
+                }
+            }
+            scored_count += 1;
+        }
+        // State update.
+        a_times(&mdl.linear.blocks, &x, &mut xn);
+        for (r, v) in xn.iter_mut().enumerate() {
+            for (j, uj) in uk.iter().enumerate() {
+                *v += mdl.linear.b[(r, j)] * uj;
+            }
+        }
+        for (q, wq) in w.iter().enumerate() {
+            for (v, e) in xn.iter_mut().zip(e_cols[q]) {
+                *v += e * wq;
+            }
+        }
+        std::mem::swap(&mut x, &mut xn);
+        std::mem::swap(&mut s, &mut sn);
+        if k % 1024 == 0 || k + 1 == len {
+            anyhow::ensure!(
+                x.iter().chain(s.iter()).all(|v| v.is_finite()),
+                "the LFR sensitivities diverged at sample {k}"
+            );
+        }
+    }
+    flush(&mut h, &jbuf, rows_in);
+    Ok((h, g))
+}
+
+/// Settings of [`identify`].
+#[derive(Debug, Clone)]
+pub struct LfrOptions {
+    pub basis: Vec<Basis>,
+    /// Levenberg-Marquardt iterations.
+    pub iterations: usize,
+    /// `J^T J` from every `stride`-th scored sample (the gradient from all).
+    pub stride: usize,
+    /// Stop when an accepted step lowers the cost by less than this (relative).
+    pub ftol: f64,
+    pub progress: bool,
+}
+
+impl Default for LfrOptions {
+    fn default() -> Self {
+        Self {
+            basis: vec![Basis::Cubic],
+            iterations: 4,
+            stride: 2,
+            ftol: 1e-6,
+            progress: false,
+        }
+    }
+}
+
+/// Outcome of [`identify`].
+#[derive(Debug, Clone)]
+pub struct LfrFit {
+    pub model: Lfr,
+    /// RMS output error on the scored training samples: the linear start (with
+    /// least-squares `C, D`) and the LFR.
+    pub start_rms: f64,
+    pub rms: f64,
+    pub iterations: usize,
+}
+
+/// The start: `linear` with `z` = its outputs scaled to unit RMS over `recs`, `E = 0`.
+pub fn start(linear: &Modal, basis: &[Basis], recs: &[Scored]) -> anyhow::Result<Lfr> {
+    let (n, p) = (linear.order(), linear.outputs());
+    let mut ms = vec![0.0; p];
+    let mut cnt = 0usize;
+    for r in recs {
+        let y = linear.simulate(&r.u)?;
+        for (o, yo) in y.iter().enumerate() {
+            ms[o] += yo.iter().map(|v| v * v).sum::<f64>();
+        }
+        cnt += r.u[0].len();
+    }
+    let scale: Vec<f64> = ms
+        .iter()
+        .map(|s| {
+            let rms = (s / cnt.max(1) as f64).sqrt();
+            if rms > 0.0 {
+                1.0 / rms
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    Ok(Lfr {
+        f: DMatrix::from_fn(p, n, |o, i| linear.c[(o, i)] * scale[o]),
+        g: DMatrix::from_fn(p, linear.inputs(), |o, j| linear.d[(o, j)] * scale[o]),
+        e: DMatrix::zeros(n, p * basis.len()),
+        basis: basis.to_vec(),
+        linear: linear.clone(),
+    })
+}
+
+/// Identifies the LFR on `recs` (periodic records), started from the linear model.
+pub fn identify(
+    linear: &Modal,
+    recs: &[crate::record::Record],
+    opts: &LfrOptions,
+) -> anyhow::Result<LfrFit> {
+    anyhow::ensure!(
+        !opts.basis.is_empty() && opts.basis.iter().all(|b| b.valid()),
+        "the LFR needs basis functions (play half-widths >= 0)"
+    );
+    let data = recs
+        .iter()
+        .map(Scored::of)
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let samples: usize = data
+        .iter()
+        .map(|d| d.windows.iter().map(|w| w.1 - w.0).sum::<usize>())
+        .sum::<usize>()
+        * linear.outputs();
+    let rms = |c: f64| (c / samples.max(1) as f64).sqrt();
+    let mut mdl = start(linear, &opts.basis, &data)?;
+    let mut c = project(&mut mdl, &data)?;
+    let start_rms = rms(c);
+    if opts.progress {
+        eprintln!(
+            "lfr: start (linear, least-squares C, D): RMS {:.4e} on {} scored samples",
+            start_rms,
+            samples / linear.outputs()
+        );
+    }
+    let params = layout(&mdl);
+    let stride = opts.stride.max(1);
+    let mut lambda = 1e-3;
+    let mut it = 0;
+    while it < opts.iterations {
+        it += 1;
+        let (h, g) = data
+            .par_iter()
+            .map(|r| normal_record(&mdl, &params, r, stride))
+            .try_reduce(
+                || {
+                    (
+                        DMatrix::zeros(params.len(), params.len()),
+                        DVector::zeros(params.len()),
+                    )
+                },
+                |a, b| Ok((a.0 + b.0, a.1 + b.1)),
+            )?;
+        let z0 = pack(&mdl);
+        let mut improved = None;
+        for _ in 0..10 {
+            let mut damped = h.clone();
+            for i in 0..damped.nrows() {
+                let d = h[(i, i)];
+                damped[(i, i)] = d + lambda * d.max(1e-12 * (1.0 + d));
+            }
+            let Some(ch) = damped.cholesky() else {
+                lambda *= 10.0;
+                continue;
+            };
+            let dz = ch.solve(&g);
+            let zt: Vec<f64> = z0.iter().zip(dz.iter()).map(|(z, d)| z + d).collect();
+            let mut mt = unpack(&mdl, &zt);
+            match project(&mut mt, &data) {
+                Ok(ct) if ct < c => {
+                    improved = Some((mt, ct));
+                    lambda = (lambda / 3.0).max(1e-12);
+                    break;
+                }
+                _ => lambda *= 4.0,
+            }
+        }
+        let Some((mt, ct)) = improved else { break };
+        let rel = (c - ct) / c.max(f64::MIN_POSITIVE);
+        mdl = mt;
+        c = ct;
+        if opts.progress {
+            eprintln!(
+                "lfr: iteration {it}: RMS {:.4e} (lambda {lambda:.1e})",
+                rms(c)
+            );
+        }
+        if rel < opts.ftol {
+            break;
+        }
+    }
+    Ok(LfrFit {
+        model: mdl,
+        start_rms,
+        rms: rms(c),
+        iterations: it,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::Record;
+
+    fn linear() -> Modal {
+        Modal {
+            blocks: vec![Block::Pair(0.95, 0.2), Block::Real(0.6)],
+            b: DMatrix::from_row_slice(3, 1, &[0.3, -0.2, 0.5]),
+            c: DMatrix::from_row_slice(1, 3, &[1.0, 0.4, 0.7]),
+            d: DMatrix::from_row_slice(1, 1, &[0.05]),
+        }
+    }
+
+    fn multisine(period: usize, periods: usize, amp: f64, seed: u64) -> Vec<f64> {
+        let mut rng = seed;
+        let phases: Vec<f64> = (1..period / 4)
+            .map(|_| {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (rng >> 11) as f64 / (1u64 << 53) as f64 * std::f64::consts::TAU
+            })
+            .collect();
+        let one: Vec<f64> = (0..period)
+            .map(|k| {
+                phases
+                    .iter()
+                    .enumerate()
+                    .map(|(l, ph)| {
+                        (std::f64::consts::TAU * (l + 1) as f64 * k as f64 / period as f64 + ph)
+                            .cos()
+                    })
+                    .sum::<f64>()
+            })
+            .collect();
+        let rms = (one.iter().map(|v| v * v).sum::<f64>() / period as f64).sqrt();
+        (0..period * periods)
+            .map(|k| amp * one[k % period] / rms)
+            .collect()
+    }
+
+    fn record(mdl: &Lfr, amp: f64, seed: u64) -> Record {
+        let (period, periods) = (512, 2);
+        let u = vec![multisine(period, periods, amp, seed)];
+        // Steady state: simulate a period ahead and drop it.
+        let uw = score::with_warmup(&u, period);
+        let y = mdl.simulate(&uw).unwrap();
+        Record {
+            comments: Vec::new(),
+            t: (0..period * periods).map(|k| k as f64 / 1000.0).collect(),
+            u,
+            y: y.into_iter().map(|v| v[period..].to_vec()).collect(),
+            extra: Vec::new(),
+            unit_note: None,
+        }
+    }
+
+    fn truth() -> Lfr {
+        let lin = linear();
+        Lfr {
+            e: DMatrix::from_row_slice(3, 1, &[-0.05, 0.03, 0.0]),
+            f: DMatrix::from_row_slice(1, 3, &[1.0, 0.0, 0.0]),
+            g: DMatrix::zeros(1, 1),
+            basis: vec![Basis::Cubic],
+            linear: lin,
+        }
+    }
+
+    #[test]
+    fn sensitivities_match_finite_differences() {
+        let mut mdl = truth();
+        mdl.f[(0, 1)] = 0.3;
+        mdl.g[(0, 0)] = 0.2;
+        let rec = Scored::of(&record(&mdl, 1.0, 3)).unwrap();
+        let params = layout(&mdl);
+        // g = J^T e = -1/2 d(cost)/dtheta with fixed C, D; a shifted target so that the
+        // error is not zero.
+        let cost = |m: &Lfr| -> f64 {
+            let y = m.simulate(&rec.u).unwrap();
+            (0..rec.u[0].len())
+                .filter(|&k| rec.scored(k))
+                .map(|k| (rec.y[0][k] + 0.1 - y[0][k]).powi(2))
+                .sum::<f64>()
+        };
+        let shifted = Scored {
+            u: rec.u.clone(),
+            y: vec![rec.y[0].iter().map(|v| v + 0.1).collect()],
+            windows: rec.windows.clone(),
+        };
+        let (_, g) = normal_record(&mdl, &params, &shifted, 1).unwrap();
+        let z = pack(&mdl);
+        for (i, _) in params.iter().enumerate() {
+            let hstep = 1e-6 * (1.0 + z[i].abs());
+            let mut zp = z.clone();
+            zp[i] += hstep;
+            let mut zm = z.clone();
+            zm[i] -= hstep;
+            let d = (cost(&unpack(&mdl, &zp)) - cost(&unpack(&mdl, &zm))) / (2.0 * hstep);
+            let want = -0.5 * d;
+            assert!(
+                (g[i] - want).abs() <= 1e-5 * (1.0 + want.abs()),
+                "param {i} ({:?}): {} vs {want}",
+                params[i],
+                g[i]
+            );
+        }
+    }
+
+    #[test]
+    fn recovers_a_cubic_feedback_the_linear_model_misses() {
+        let t = truth();
+        let recs: Vec<Record> = [(0.5, 1), (1.5, 2), (2.5, 3)]
+            .iter()
+            .map(|&(a, s)| record(&t, a, s))
+            .collect();
+        let opts = LfrOptions {
+            iterations: 40,
+            stride: 1,
+            ..Default::default()
+        };
+        // Start from the true linear part (the BLA would be near it).
+        let fit = identify(&t.linear, &recs, &opts).unwrap();
+        assert!(
+            fit.rms < 0.05 * fit.start_rms,
+            "LFR {} vs linear {}",
+            fit.rms,
+            fit.start_rms
+        );
+        // Held-out amplitude.
+        let v = record(&t, 2.0, 9);
+        let s = score::official(&v, |u| fit.model.simulate(u)).unwrap();
+        let lin = score::official(&v, |u| t.linear.simulate(u)).unwrap();
+        assert!(s.mean < 0.1 * lin.mean, "{} vs {}", s.mean, lin.mean);
+    }
+
+    #[test]
+    fn json_round_trip() {
+        let t = truth();
+        let j = t.to_json();
+        let back = Lfr::from_json(t.linear.clone(), &j).unwrap();
+        assert_eq!(back, t);
+        let mut bad = j.clone();
+        bad.e.pop();
+        assert!(Lfr::from_json(t.linear.clone(), &bad).is_err());
+    }
+}
