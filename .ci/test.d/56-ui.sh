@@ -6,7 +6,8 @@
 # (read back with `get`); an out-of-range value shows the range and sends nothing; the
 # firmware's `err N` shows by its field; a mode change is reflected; bode finds the resonance
 # within 50 Hz and applies the notch; Stop leaves the DAC at the safe code; a lost link is
-# shown. Screenshots in out/ui/. Every wait is on a condition (page state, a reply); the
+# shown; a report (`piezo demo --out`'s index.html) opens from the console. Screenshots in
+# out/ui/. Every wait is on a condition (page state, a reply); the
 # wall-clock caps only end a run whose emulator, server or browser stopped.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -32,7 +33,11 @@ printf 'resonance 2500 0.05\n' >&3
 exec 3>&-
 s ping >/dev/null
 
-"$piezo" ui --tcp "127.0.0.1:$port" --timeout-s 60 --listen 0 --work "$work/ui" >"$work/ui.txt" 2>&1 &
+# A report for the console to open (`piezo demo`'s index.html; 100 Hz keeps it small).
+"$piezo" demo --rate-hz 100 --out "$work/demo" >/dev/null
+
+"$piezo" ui --tcp "127.0.0.1:$port" --timeout-s 60 --listen 0 --work "$work/ui" \
+  --report "$work/demo" >"$work/ui.txt" 2>&1 &
 ui_pid=$!
 start=$SECONDS
 until grep -q '^piezo ui: http://' "$work/ui.txt"; do
@@ -56,7 +61,7 @@ done
 mkdir -p out/ui
 timeout 1200 target/debug/examples/ui_browser --ui "$url" --webdriver "http://127.0.0.1:$wd_port" \
   --out out/ui --chromium "$(command -v chromium)" --resonance-hz 2500 --safe-code 0 \
-  --kill-pid "$qemu" | tee "$work/browser.txt" || { tail -20 "$work/ui.txt"; fail "browser checks"; }
+  --kill-pid "$qemu" --report "piezo demo: hysteresis loops" | tee "$work/browser.txt" || { tail -20 "$work/ui.txt"; fail "browser checks"; }
 grep -q '^ui: [0-9]* browser checks passed$' "$work/browser.txt" || fail "no summary line"
 # The example ended QEMU on purpose (the lost-link check).
 wait "$qemu" 2>/dev/null || true

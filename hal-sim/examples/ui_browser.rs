@@ -4,7 +4,8 @@
 //!
 //! ```text
 //! cargo run -p hal-sim --example ui_browser -- --ui http://127.0.0.1:8080/ \
-//!     --webdriver http://127.0.0.1:9515 --out out/ui [--resonance-hz 2500]
+//!     --webdriver http://127.0.0.1:9515 --out out/ui [--resonance-hz 2500] \
+//!     [--kill-pid <qemu>] [--report "piezo demo: hysteresis loops"]
 //! ```
 //!
 //! Every wait is on a condition of the page (its `window.consoleState`, an element's text),
@@ -26,6 +27,8 @@ struct Opts {
     timeout: Duration,
     /// The emulator's process: ended at the end to see the page show the lost link.
     kill_pid: Option<u32>,
+    /// The title of the report `piezo ui --report` was given (opened from the Tools tab).
+    report: Option<String>,
 }
 
 fn opts() -> Result<Opts> {
@@ -38,6 +41,7 @@ fn opts() -> Result<Opts> {
         safe_code: 0.0,
         timeout: Duration::from_secs(600),
         kill_pid: None,
+        report: None,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -51,6 +55,7 @@ fn opts() -> Result<Opts> {
             "--safe-code" => o.safe_code = v()?.parse()?,
             "--timeout-s" => o.timeout = Duration::from_secs_f64(v()?.parse()?),
             "--kill-pid" => o.kill_pid = Some(v()?.parse()?),
+            "--report" => o.report = Some(v()?),
             other => bail!("unknown argument {other}"),
         }
     }
@@ -455,6 +460,34 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
             .await?;
         r.shot("link-lost.png").await?;
         r.pass(&format!("the firmware ended: the page shows {text}"));
+    }
+
+    // 9. A report (`piezo ui --report DIR`) opens from the Tools tab, its plots load.
+    if let Some(title) = &o.report {
+        r.tab("tools").await?;
+        let url = r
+            .until(
+                "the report listed",
+                "const a = document.querySelector('#reports a'); return a ? a.href : null;",
+            )
+            .await?;
+        let url = url.as_str().unwrap_or_default().to_string();
+        r.c.goto(&url).await?;
+        let rows = r
+            .until(
+                "the report's page with its table and plots loaded",
+                &format!(
+                    "const h = document.querySelector('h1'); if (!h || h.textContent !== {title:?}) return null;
+                     const imgs = [...document.querySelectorAll('details[open] img')];
+                     if (!imgs.length || !imgs.every(i => i.complete && i.naturalWidth > 0)) return null;
+                     return document.querySelectorAll('tbody tr').length;"
+                ),
+            )
+            .await?;
+        r.shot("report.png").await?;
+        r.pass(&format!(
+            "the report `{title}` opens from the console ({url}): {rows} table rows, its plots loaded"
+        ));
     }
     Ok(())
 }

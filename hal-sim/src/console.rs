@@ -72,13 +72,17 @@ pub struct App {
     runs: Arc<AtomicU64>,
     exe: Arc<PathBuf>,
     conn: Arc<String>,
+    /// Report folders (`--out` of sim, demo, fit, diagnose) served below `/reports/<n>/`.
+    reports: Arc<Vec<PathBuf>>,
 }
 
-/// Serves the console on `listener` until the process ends.
+/// Serves the console on `listener` until the process ends; `reports` are folders with an
+/// `index.html` ([`crate::report`]) the page links.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     conn: crate::cli::serial::Conn,
     work: PathBuf,
+    reports: Vec<PathBuf>,
 ) -> Result<()> {
     std::fs::create_dir_all(&work).with_context(|| format!("creating {}", work.display()))?;
     let describe = match (&conn.port, &conn.tcp) {
@@ -92,6 +96,7 @@ pub async fn serve(
         runs: Arc::default(),
         exe: Arc::new(std::env::current_exe().context("the console's own executable")?),
         conn: Arc::new(describe),
+        reports: Arc::new(reports),
     };
     let mut router = Router::new();
     for (path, mime, body) in ASSETS {
@@ -118,6 +123,8 @@ pub async fn serve(
         .route("/api/diagnose", post(diagnose))
         .route("/api/wire", get(wire))
         .route("/files/{*path}", get(file))
+        .route("/reports/{n}/", get(report_index))
+        .route("/reports/{n}/{*path}", get(report_file))
         .with_state(app);
     axum::serve(listener, router)
         .await
@@ -217,6 +224,10 @@ async fn info(State(app): State<App>) -> Reply {
         "ffs": FFS,
         "signals": Signal::ALL.map(|s| s.name()),
         "conn": *app.conn,
+        "reports": app.reports.iter().enumerate().map(|(n, d)| json!({
+            "dir": d.display().to_string(),
+            "url": format!("/reports/{n}/"),
+        })).collect::<Vec<_>>(),
         "version": env!("CARGO_PKG_VERSION"),
     }))
 }
@@ -487,16 +498,41 @@ fn files_in(work: &Path, rel: &str) -> Vec<String> {
 
 /// A file the tools wrote (only below the console's folder).
 async fn file(State(app): State<App>, UrlPath(path): UrlPath<String>) -> Response {
-    let rel = Path::new(&path);
+    file_below(&app.work, &path)
+}
+
+/// A report's page.
+async fn report_index(State(app): State<App>, UrlPath(n): UrlPath<usize>) -> Response {
+    match app.reports.get(n) {
+        Some(dir) => file_below(dir, crate::report::INDEX),
+        None => (StatusCode::NOT_FOUND, "no such report").into_response(),
+    }
+}
+
+/// A file of a report folder (its page links them relatively).
+async fn report_file(
+    State(app): State<App>,
+    UrlPath((n, path)): UrlPath<(usize, String)>,
+) -> Response {
+    match app.reports.get(n) {
+        Some(dir) => file_below(dir, &path),
+        None => (StatusCode::NOT_FOUND, "no such report").into_response(),
+    }
+}
+
+/// `root/rel`, for a relative path of plain names only (no `..`, no root).
+fn file_below(root: &Path, rel: &str) -> Response {
+    let rel = Path::new(rel);
     if !rel.components().all(|c| matches!(c, Component::Normal(_))) {
         return refused("not a file of the console").into_response();
     }
-    let p = app.work.join(rel);
+    let p = root.join(rel);
     let mime = match p.extension().and_then(|e| e.to_str()) {
         Some("svg") => "image/svg+xml",
         Some("csv") | Some("txt") => "text/plain; charset=utf-8",
         Some("json") => "application/json",
         Some("html") => "text/html; charset=utf-8",
+        Some("png") => "image/png",
         _ => "application/octet-stream",
     };
     match std::fs::read(&p) {

@@ -13,6 +13,7 @@ pub mod independent;
 pub mod manipulation;
 pub mod mock;
 pub mod object;
+pub mod report;
 pub mod scenario;
 pub mod serial;
 pub mod sim;

@@ -1,6 +1,7 @@
 //! The lab console's link thread (`hal_sim::console::worker`) against the firmware's own
 //! executor behind TCP (as `tests/serial.rs` runs it): jobs from many tasks never
 //! interleave, the scope's captures arrive, a lost link is reported and opened again.
+//! The server itself (`hal_sim::console::serve`) for the report folders it serves.
 
 mod control {
     pub use piezo_core::firmware::*;
@@ -292,4 +293,88 @@ fn the_pages_waves_pass_the_firmwares_parser_and_bad_scopes_are_refused() {
         .unwrap_err()
         .contains("read-only"));
     assert!(check_setting("notch_q", f64::NAN).is_err());
+}
+
+/// One HTTP/1.1 GET on the console: status line, `content-type`, body.
+async fn get(addr: std::net::SocketAddr, path: &str) -> (String, String, String) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let req = format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n");
+    s.write_all(req.as_bytes()).await.unwrap();
+    let mut text = String::new();
+    tokio::time::timeout(Duration::from_secs(30), s.read_to_string(&mut text))
+        .await
+        .expect("an answer within 30 s")
+        .unwrap();
+    let (head, body) = text.split_once("\r\n\r\n").unwrap();
+    let status = head.lines().next().unwrap().to_string();
+    let mime = head
+        .lines()
+        .find_map(|l| {
+            l.to_ascii_lowercase()
+                .strip_prefix("content-type: ")
+                .map(String::from)
+        })
+        .unwrap_or_default();
+    (status, mime, body.to_string())
+}
+
+/// `piezo ui --report DIR`: the folder's page and files are served below `/reports/<n>/`
+/// and listed by `/api/info`; nothing outside the folder is.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn report_folders_are_served_and_nothing_outside_them() {
+    let root = std::env::temp_dir().join(format!("console_reports_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let dir = root.join("sim");
+    std::fs::create_dir_all(dir.join("sub")).unwrap();
+    std::fs::write(root.join("secret.txt"), "outside").unwrap();
+    let mut r = hal_sim::report::Report::start("test report");
+    std::fs::write(
+        dir.join("sub/a b.svg"),
+        "<svg xmlns=\"http://www.w3.org/2000/svg\"/>",
+    )
+    .unwrap();
+    r.section("plots").plot("sub/a b.svg");
+    r.write(&dir).unwrap();
+
+    let listener = hal_sim::console::bind("127.0.0.1:0".parse().unwrap())
+        .await
+        .unwrap();
+    let addr = listener.local_addr().unwrap();
+    let work = root.join("work");
+    tokio::spawn(hal_sim::console::serve(
+        listener,
+        conn(&spawn_firmware(None)),
+        work,
+        vec![dir.clone()],
+    ));
+
+    let (status, mime, body) = get(addr, "/api/info").await;
+    assert!(status.contains("200"), "{status}");
+    let info: Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(info["reports"][0]["url"], "/reports/0/");
+    assert_eq!(info["reports"][0]["dir"], dir.display().to_string());
+    assert!(mime.starts_with("application/json"), "{mime}");
+
+    let (status, mime, body) = get(addr, "/reports/0/").await;
+    assert!(status.contains("200"), "{status}");
+    assert!(mime.starts_with("text/html"), "{mime}");
+    assert!(body.contains("<h1>test report</h1>") && body.contains("src=\"sub/a%20b.svg\""));
+    // The page's relative link, resolved against /reports/0/.
+    let (status, mime, body) = get(addr, "/reports/0/sub/a%20b.svg").await;
+    assert!(status.contains("200"), "{status}");
+    assert_eq!(mime, "image/svg+xml");
+    assert!(body.starts_with("<svg"));
+
+    for bad in [
+        "/reports/0/..%2Fsecret.txt",
+        "/reports/0/sub/..%2F..%2Fsecret.txt",
+    ] {
+        let (status, _, body) = get(addr, bad).await;
+        assert!(status.contains("400"), "{bad}: {status}");
+        assert!(!body.contains("outside"), "{bad}");
+    }
+    let (status, _, _) = get(addr, "/reports/1/").await;
+    assert!(status.contains("404"), "{status}");
+    let _ = std::fs::remove_dir_all(&root);
 }

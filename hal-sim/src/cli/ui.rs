@@ -4,6 +4,7 @@
 //! ```text
 //! piezo ui --port /dev/ttyACM0                 # http://127.0.0.1:8080
 //! piezo ui --tcp 127.0.0.1:4444 --listen 8081  # the QEMU firmware's UART on TCP
+//! piezo ui --port /dev/ttyACM0 --report out/sim # with the report of `piezo sim --out out/sim`
 //! ```
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
@@ -27,11 +28,24 @@ pub struct Args {
     /// temporary directory.
     #[arg(long)]
     pub work: Option<PathBuf>,
+    /// A report to link from the page (a folder with the `index.html` that `piezo sim`,
+    /// `demo`, `fit` or `diagnose` write with `--out`).
+    #[arg(long = "report", value_name = "DIR")]
+    pub reports: Vec<PathBuf>,
 }
 
 pub fn run(args: Args) -> Result<()> {
     if args.conn.port.is_none() && args.conn.tcp.is_none() {
         bail!("say where the firmware is: --port <device> or --tcp <host:port>");
+    }
+    for r in &args.reports {
+        let index = r.join(crate::report::INDEX);
+        anyhow::ensure!(
+            index.is_file(),
+            "--report {}: no {} there (written by piezo sim, demo, fit or diagnose with --out)",
+            r.display(),
+            crate::report::INDEX
+        );
     }
     let ip = args.bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST));
     let work = args
@@ -45,6 +59,6 @@ pub fn run(args: Args) -> Result<()> {
         let listener = crate::console::bind(SocketAddr::new(ip, args.listen)).await?;
         // The line the CI step and a person look for.
         println!("piezo ui: http://{}/", listener.local_addr()?);
-        crate::console::serve(listener, args.conn, work).await
+        crate::console::serve(listener, args.conn, work, args.reports).await
     })
 }

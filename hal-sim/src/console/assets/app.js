@@ -362,7 +362,8 @@ function onProgress(ev) {
 function filesList(files) {
   const d = el("div");
   for (const f of files) {
-    if (f.endsWith(".svg")) d.appendChild(el("img", { src: "/files/" + f, class: "plot" }));
+    if (f.endsWith("/index.html")) { d.appendChild(el("a", { href: "/files/" + f, target: "_blank", class: "report" }, "open the report")); d.appendChild(document.createTextNode(" ")); }
+    else if (f.endsWith(".svg")) d.appendChild(el("img", { src: "/files/" + f, class: "plot" }));
     else { const a = el("a", { href: "/files/" + f, download: f.split("/").pop() }, f.split("/").pop()); d.appendChild(a); d.appendChild(document.createTextNode(" ")); }
   }
   return d;
@@ -435,6 +436,12 @@ async function main() {
   $("mode-ff").appendChild(el("option", { value: "" }, "(keep)"));
   for (const f of info.ffs) $("mode-ff").appendChild(el("option", { value: f }, f));
   buildWave();
+  for (const r of info.reports || []) {
+    const li = el("li");
+    li.appendChild(el("a", { href: r.url, target: "_blank" }, r.dir));
+    $("reports").appendChild(li);
+  }
+  if (!(info.reports || []).length) $("reports").appendChild(el("li", { class: "note" }, "none given (piezo ui --report DIR)"));
   document.querySelectorAll(".tab").forEach((t) => t.addEventListener("click", () => {
     document.querySelectorAll(".tab").forEach((u) => u.classList.toggle("active", u === t));
     document.querySelectorAll(".tabpanel").forEach((p) => (p.hidden = p.id !== "tab-" + t.dataset.tab));
