@@ -5,6 +5,7 @@
 
 pub mod beam;
 pub mod cli;
+pub mod console;
 pub mod docs;
 pub mod faults;
 pub mod ident;
@@ -12,6 +13,7 @@ pub mod independent;
 pub mod manipulation;
 pub mod mock;
 pub mod object;
+pub mod report;
 pub mod scenario;
 pub mod serial;
 pub mod sim;

@@ -33,6 +33,8 @@ enum Cmd {
     Faults(hal_sim::cli::faults::Args),
     /// Talk to the firmware over its serial command port (or QEMU's, over TCP).
     Serial(hal_sim::cli::serial::Args),
+    /// Lab console in the browser: scope, settings, mode, wave, Stop, bode, identify.
+    Ui(hal_sim::cli::ui::Args),
 }
 
 fn main() {
@@ -47,6 +49,7 @@ fn main() {
         Cmd::DiagnoseBench(a) => hal_sim::cli::diagnose_bench::run(a),
         Cmd::Faults(a) => hal_sim::cli::faults::run(a),
         Cmd::Serial(a) => hal_sim::cli::serial::run(a),
+        Cmd::Ui(a) => hal_sim::cli::ui::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -10,10 +10,11 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::plot::{write_grid, Plot};
+use crate::report::{self, Report, Table};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Output folder for the CSV files and plots.
+    /// Output folder for the CSV files, plots and index.html, the report linking them.
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
     /// Sample rate (Hz).
@@ -169,6 +170,7 @@ pub fn run(args: Args) -> Result<()> {
     );
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let mut report = Report::start("piezo demo: hysteresis loops");
     let dt = 1.0 / args.rate_hz;
     let (t, u100) = decaying_sine(100.0, args.rate_hz);
     let (_, u5) = decaying_sine(5.0, args.rate_hz);
@@ -298,6 +300,15 @@ pub fn run(args: Args) -> Result<()> {
     });
 
     let mut plots = Vec::new();
+    let mut table = Table::new(&[
+        "model", "output", "u min", "u max", "y min", "y max", "files",
+    ]);
+    let range = |v: &[f64]| {
+        v.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            })
+    };
     for l in &loops {
         let csv = args.out.join(format!("{}.csv", l.name));
         write_csv(&csv, &t, l)?;
@@ -316,10 +327,35 @@ pub fn run(args: Args) -> Result<()> {
             .with_context(|| format!("cannot write {}", svg.display()))?;
         plots.push(plot);
         println!("{:13} {} {}", l.name, csv.display(), svg.display());
+        let ((u0, u1), (y0, y1)) = (range(&l.u), range(&l.y));
+        table.row(vec![
+            l.name.into(),
+            l.ylabel.into(),
+            u0.into(),
+            u1.into(),
+            y0.into(),
+            y1.into(),
+            report::links(
+                &args.out,
+                &[
+                    ("plot", format!("{}.svg", l.name)),
+                    ("csv", format!("{}.csv", l.name)),
+                ],
+            ),
+        ]);
     }
     let svg = args.out.join("loops.svg");
     write_grid(&svg, &plots, 4).with_context(|| format!("cannot write {}", svg.display()))?;
     println!("plot: {}", svg.display());
+    report
+        .section("Loops")
+        .text(format!(
+            "Every hysteresis model driven from rest by a decaying sine, {} Hz sample rate; input u in V (multi_bw_x: U_x), output in the unit of its column.",
+            args.rate_hz
+        ))
+        .table(table)
+        .plot("loops.svg");
+    println!("report: {}", report.write(&args.out)?.display());
     Ok(())
 }
 

@@ -20,6 +20,7 @@ use super::fit_args::{Columns, Records, Window};
 use crate::ident::diagnose::consistency::{self, Arrangement, SPLITS};
 pub use crate::ident::diagnose::report::summary;
 use crate::ident::diagnose::{self, report, Diagnosis, Options, Signals};
+use crate::report::Report;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -34,7 +35,8 @@ pub struct Args {
     /// samples to this CSV (several validation records: a first column `record`, 1-based).
     #[arg(long)]
     pub predict: Option<PathBuf>,
-    /// Write plots (loops before/after, residual against the cause's signal) into this folder.
+    /// Write plots (loops before/after, residual against the cause's signal) and index.html
+    /// (the report with them) into this folder.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Skip the consistency check (the same rule run on the other splits of 0.5 / 0.65 / 0.8,
@@ -52,6 +54,7 @@ fn read(path: &Path, columns: &Columns) -> Result<Signals> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let report_start = args.out.as_ref().map(|_| Report::start("piezo diagnose"));
     let load = |p: &PathBuf| read(p, &args.columns);
     let rs = &args.records;
     anyhow::ensure!(!rs.train.is_empty(), "--train is required (see --help)");
@@ -147,42 +150,70 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(path) = &args.predict {
         write_predict(path, &d, &valid)?;
     }
+    let files = |ps: &[PathBuf]| {
+        ps.iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+    };
+    let train_files = files(&rs.train);
+    let valid_files = if rs.valid.is_empty() {
+        train_files.clone()
+    } else {
+        files(&rs.valid)
+    };
+    let mut j = report::json(
+        &d,
+        split_note.as_deref(),
+        &train_files,
+        &valid_files,
+        &files(&plots),
+    );
+    if let Some(c) = &consistency {
+        j["consistency"] = c.json();
+    }
+    let mut text = report::summary(&d, split_note.as_deref());
+    if let Some(c) = &consistency {
+        text += &format!("{}\n", c.text());
+    }
+    let index = match (&args.out, report_start) {
+        (Some(dir), Some(r)) => Some(write_report(r, dir, &text, &j, &plots)?),
+        _ => None,
+    };
     if args.json {
-        let files = |ps: &[PathBuf]| {
-            ps.iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-        };
-        let train_files = files(&rs.train);
-        let valid_files = if rs.valid.is_empty() {
-            train_files.clone()
-        } else {
-            files(&rs.valid)
-        };
-        let mut j = report::json(
-            &d,
-            split_note.as_deref(),
-            &train_files,
-            &valid_files,
-            &files(&plots),
-        );
-        if let Some(c) = &consistency {
-            j["consistency"] = c.json();
-        }
         println!("{}", serde_json::to_string_pretty(&j)?);
     } else {
-        print!("{}", report::summary(&d, split_note.as_deref()));
-        if let Some(c) = &consistency {
-            println!("{}", c.text());
-        }
+        print!("{text}");
         for p in &plots {
             println!("plot: {}", p.display());
         }
         if let Some(p) = &args.predict {
             println!("predictions: {}", p.display());
         }
+        if let Some(i) = index {
+            println!("report: {}", i.display());
+        }
     }
     Ok(())
+}
+
+/// `index.html`: the report as printed, its plots, the causes tried and the models as
+/// tables (the `--json` document's).
+fn write_report(
+    mut r: Report,
+    dir: &Path,
+    text: &str,
+    j: &serde_json::Value,
+    plots: &[PathBuf],
+) -> Result<PathBuf> {
+    let s = r.section("Diagnosis");
+    s.pre(text);
+    for p in plots {
+        if let Ok(rel) = p.strip_prefix(dir) {
+            s.plot(rel.to_string_lossy().into_owned());
+        }
+    }
+    r.json("The report in numbers (piezo diagnose --json)", j);
+    r.write(dir)
 }
 
 /// The samples of `r` inside `w`, the model starting at rest at the first.

@@ -7,6 +7,7 @@ pub use crate::ident::identify::{
 pub use crate::ident::saved::{simulate, write_fit_json, ChannelMetrics, Part, Report, FORMAT};
 use crate::plot::{write_grid, Plot};
 use crate::record::{Quantity, Record};
+use crate::report::Report as HtmlReport;
 use anyhow::{Context, Result};
 use std::path::Path;
 
@@ -25,12 +26,32 @@ pub fn run(args: Args) -> Result<()> {
         }
         return Ok(());
     }
+    let report = args.out.as_ref().map(|_| HtmlReport::start("piezo fit"));
+    fit_and_write(&args)?;
+    if let (Some(dir), Some(mut report)) = (&args.out, report) {
+        // fit.json is the model and its scores, whichever model family wrote it.
+        let path = dir.join("fit.json");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not JSON", path.display()))?;
+        report.json("Model (fit.json)", &v);
+        let index = report.write(dir)?;
+        if !args.json {
+            println!("report: {}", index.display());
+        }
+    }
+    Ok(())
+}
+
+/// The fit itself: the model family's own path, its files in `--out`.
+fn fit_and_write(args: &Args) -> Result<()> {
     let Some(model) = &args.model else {
         anyhow::bail!("--model and --train are required (see --help)");
     };
     args.records.no_windows("piezo fit")?;
     if super::fit_ss::handles(model) {
-        return super::fit_ss::run(&args);
+        return super::fit_ss::run(args);
     }
     let rs = &args.records;
     let train_path = match rs.train.as_slice() {

@@ -227,7 +227,8 @@ pub struct Args {
     /// without --valid) as CSV: `y` simulated, measured output kept as `y_meas`.
     #[arg(long)]
     pub predict: Option<PathBuf>,
-    /// Folder for plots (loops, time series, residuals) and fit.json.
+    /// Folder for plots (loops, time series, residuals), fit.json and index.html (the report
+    /// with them).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Global search: differential evolution or particle swarm (002 sec. 3).

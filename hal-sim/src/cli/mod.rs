@@ -10,3 +10,4 @@ pub mod predict;
 pub mod score;
 pub mod serial;
 pub mod sim;
+pub mod ui;

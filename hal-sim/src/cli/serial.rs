@@ -177,16 +177,20 @@ pub fn connect(conn: &Conn) -> Result<Client> {
         );
     }
     let timeout = Duration::from_secs_f64(conn.timeout_s);
-    let link: Box<dyn Link> = match (&conn.port, &conn.tcp) {
-        (Some(p), None) => open_serial(p, conn.baud, timeout)?,
-        (None, Some(a)) => Box::new(connect_tcp(a, timeout)?),
-        _ => bail!("say where the firmware is: --port <device> or --tcp <host:port>"),
-    };
-    let mut client = Client::new(link, timeout);
+    let mut client = Client::new(open_link(conn, timeout)?, timeout);
     if !conn.no_sync {
         client.sync().context("no answer to ping")?;
     }
     Ok(client)
+}
+
+/// The byte stream of `conn`: its serial port or TCP address.
+pub fn open_link(conn: &Conn, timeout: Duration) -> Result<Box<dyn Link>> {
+    Ok(match (&conn.port, &conn.tcp) {
+        (Some(p), None) => open_serial(p, conn.baud, timeout)?,
+        (None, Some(a)) => Box::new(connect_tcp(a, timeout)?),
+        _ => bail!("say where the firmware is: --port <device> or --tcp <host:port>"),
+    })
 }
 
 pub fn run(args: Args) -> Result<()> {

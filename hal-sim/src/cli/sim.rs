@@ -2,13 +2,15 @@
 //! metrics; `--json` for machines, `--out DIR` for CSV time series, SVG plots and each run
 //! as a `piezo fit` record (`<scenario>_<controller>_record.csv`: `t_s,u_V,y_um`, applied
 //! volts and measured position in the convention of `crate::record`; the time series
-//! `<scenario>_<controller>.csv` names its units the same way).
+//! `<scenario>_<controller>.csv` names its units the same way), with `index.html` linking
+//! them per scenario (`crate::report`).
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::plot::{write_grid, Plot};
+use crate::report::{self, Report, Table};
 use crate::scenario::Scenario;
 use crate::sim::controllers::{registry, Entry};
 use crate::sim::{calibrate, default_scenarios, run_calibrated, Record, RunResult};
@@ -34,7 +36,7 @@ pub struct Args {
     /// Print `{"runs":[...]}` instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Write time series (CSV) and plots (SVG) here.
+    /// Write time series (CSV), plots (SVG) and index.html, the report linking them, here.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// List scenarios and controllers, then exit.
@@ -161,6 +163,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
+    let report = args.out.as_ref().map(|_| Report::start("piezo sim"));
     // Calibrate each scenario once, then every (scenario, controller) in parallel.
     let cals: Vec<_> = scenarios.par_iter().map(calibrate).collect::<Result<_>>()?;
     let jobs: Vec<(usize, Entry)> = scenarios
@@ -235,11 +238,102 @@ pub fn run(args: Args) -> Result<()> {
         let path = dir.join("summary.json");
         std::fs::write(&path, serde_json::to_string_pretty(&Runs { runs: &all })?)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        if !args.json {
-            println!("wrote {}", dir.display());
+        if let Some(report) = report {
+            let index = write_report(report, dir, &runs, &manip_rows)?;
+            if !args.json {
+                println!("wrote {}; report {}", dir.display(), index.display());
+            }
         }
     }
     Ok(())
+}
+
+/// `index.html`: the best controller per scenario, then a section per scenario (its runs'
+/// metrics, their files and plots), the manipulation runs, and every other file written.
+fn write_report(
+    mut report: Report,
+    dir: &Path,
+    runs: &[&RunResult],
+    manip: &[crate::manipulation::ManipRow],
+) -> Result<PathBuf> {
+    let mut scenarios: Vec<&str> = Vec::new();
+    for r in runs {
+        if !scenarios.contains(&r.scenario.as_str()) {
+            scenarios.push(&r.scenario);
+        }
+    }
+    let mut best = Table::new(&["scenario", "runs", "best controller", "rmse_um", "rmse_%"]);
+    for s in &scenarios {
+        let of: Vec<&&RunResult> = runs.iter().filter(|r| r.scenario == *s).collect();
+        if let Some(b) = of
+            .iter()
+            .filter(|r| r.rmse_um.is_finite())
+            .min_by(|a, b| a.rmse_um.total_cmp(&b.rmse_um))
+        {
+            best.row(vec![
+                (*s).into(),
+                of.len().into(),
+                b.controller.as_str().into(),
+                b.rmse_um.into(),
+                b.rmse_pct.into(),
+            ]);
+        }
+    }
+    report
+        .section("Scenarios")
+        .text("The controller with the smallest RMS tracking error per scenario; each scenario's section below has every run, its files and plots.")
+        .table(best);
+    let many = scenarios.len() > 3;
+    for s in &scenarios {
+        let mut t = Table::new(&[
+            "controller",
+            "rmse_um",
+            "rmse_%",
+            "max_err_%",
+            "saturated",
+            "faults",
+            "files",
+        ]);
+        let mut plots = Vec::new();
+        for r in runs.iter().filter(|r| r.scenario == *s) {
+            let stem = format!("{}_{}", r.scenario, r.controller);
+            t.row(vec![
+                r.controller.as_str().into(),
+                r.rmse_um.into(),
+                r.rmse_pct.into(),
+                r.max_err_pct.into(),
+                r.saturated_samples.to_string().into(),
+                (r.sensor_faults + r.nonfinite_commands).to_string().into(),
+                report::links(
+                    dir,
+                    &[
+                        ("plots", format!("{stem}.svg")),
+                        ("time series", format!("{stem}.csv")),
+                        ("record", format!("{stem}_record.csv")),
+                    ],
+                ),
+            ]);
+            if dir.join(format!("{stem}.svg")).is_file() {
+                plots.push(format!("{stem}.svg"));
+            }
+        }
+        let sec = report.section(format!("Scenario {s}"));
+        sec.table(t)
+            .plots_folded(format!("plots of the {} runs", plots.len()), plots);
+        if many {
+            sec.folded();
+        }
+    }
+    if !manip.is_empty() {
+        let rows: Vec<serde_json::Value> = manip
+            .iter()
+            .map(serde_json::to_value)
+            .collect::<Result<_, _>>()?;
+        report
+            .section("Manipulation")
+            .table(Table::from_objects(&rows));
+    }
+    report.write(dir)
 }
 
 /// The `--json` document: `{"runs":[...]}`, fields in [`RunResult`] order (manipulation rows:

@@ -405,8 +405,59 @@ fn settle(c: &mut Client, periods: u64) -> Result<()> {
     Ok(())
 }
 
+/// A measured frequency response.
+#[derive(Debug, Clone)]
+pub struct Measured {
+    pub lines: Vec<Line>,
+    /// `open loop, u_volts -> y_um` or `closed loop, ref_um -> y_um`.
+    pub what: &'static str,
+    /// Unit of the magnitude (`um/V`, `um/um`).
+    pub unit: &'static str,
+}
+
+impl Measured {
+    /// Phase in degrees, unwrapped along frequency.
+    pub fn phase_deg(&self) -> Vec<f64> {
+        unwrapped_deg(&self.lines)
+    }
+}
+
 /// `bode`: excite, record, estimate, find the resonance, write CSV and SVG.
 pub fn run(c: &mut Client, a: &BodeArgs, out: &mut impl Write) -> Result<()> {
+    let Measured { lines, what, unit } = measure(c, a, out)?;
+    write_csv(&a.out, &lines, what, unit)?;
+    writeln!(out, "wrote {} ({} lines)", a.out.display(), lines.len())?;
+    if let Some(svg) = &a.svg {
+        write_svg(svg, &lines, what, unit)?;
+        writeln!(out, "wrote {}", svg.display())?;
+    }
+    match find_resonance(&lines) {
+        Some(r) => {
+            let (hz, q) = suggest_notch(&r);
+            writeln!(
+                out,
+                "resonance: {:.1} Hz, {:.1} dB above its neighbours, Q {:.2}",
+                r.f_hz, r.prominence_db, r.q
+            )?;
+            writeln!(out, "suggested notch: notch_hz {hz:.1} notch_q {q:.2}")?;
+            if a.apply {
+                for (name, v) in [("notch_hz", hz), ("notch_q", q)] {
+                    let r = c.send(&Command::Set(name, f32_of(v)))?;
+                    writeln!(out, "{}", r.reply_line())?;
+                }
+            }
+        }
+        None => writeln!(
+            out,
+            "resonance: none found (no line 3 dB above its neighbours)"
+        )?,
+    }
+    Ok(())
+}
+
+/// Excites, records and estimates (the progress on `out`); leaves the stage holding
+/// `--offset` in the loop measured. Writes no file (`a.out` is not used).
+pub fn measure(c: &mut Client, a: &BodeArgs, out: &mut impl Write) -> Result<Measured> {
     if !(a.amplitude.is_finite() && a.amplitude > 0.0) {
         bail!("--amplitude must be positive");
     }
@@ -465,34 +516,7 @@ pub fn run(c: &mut Client, a: &BodeArgs, out: &mut impl Write) -> Result<()> {
     c.send(&Command::WaveHold(f32_of(a.offset)))?;
     let hann = a.excitation != Excitation::Multisine;
     let lines = h1(&records, sample_hz, f_max, step, hann)?;
-    write_csv(&a.out, &lines, what, unit)?;
-    writeln!(out, "wrote {} ({} lines)", a.out.display(), lines.len())?;
-    if let Some(svg) = &a.svg {
-        write_svg(svg, &lines, what, unit)?;
-        writeln!(out, "wrote {}", svg.display())?;
-    }
-    match find_resonance(&lines) {
-        Some(r) => {
-            let (hz, q) = suggest_notch(&r);
-            writeln!(
-                out,
-                "resonance: {:.1} Hz, {:.1} dB above its neighbours, Q {:.2}",
-                r.f_hz, r.prominence_db, r.q
-            )?;
-            writeln!(out, "suggested notch: notch_hz {hz:.1} notch_q {q:.2}")?;
-            if a.apply {
-                for (name, v) in [("notch_hz", hz), ("notch_q", q)] {
-                    let r = c.send(&Command::Set(name, f32_of(v)))?;
-                    writeln!(out, "{}", r.reply_line())?;
-                }
-            }
-        }
-        None => writeln!(
-            out,
-            "resonance: none found (no line 3 dB above its neighbours)"
-        )?,
-    }
-    Ok(())
+    Ok(Measured { lines, what, unit })
 }
 
 #[cfg(test)]

@@ -125,8 +125,28 @@ pub struct Identified {
     pub diagnosis: Option<String>,
 }
 
+/// A receiver of [`run`]'s progress lines.
+pub type ProgressSink = Box<dyn FnMut(&str)>;
+
+std::thread_local! {
+    /// Where the phases' progress goes besides stderr (the console's page).
+    static PROGRESS: std::cell::RefCell<Option<ProgressSink>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// Sends the progress lines of [`run`] on this thread also to `sink` (`None`: stderr only).
+pub fn progress_to(sink: Option<ProgressSink>) {
+    PROGRESS.with(|p| *p.borrow_mut() = sink);
+}
+
 fn progress(step: usize, what: &str) {
-    eprintln!("identify [{step}/6] {what}");
+    let line = format!("identify [{step}/6] {what}");
+    eprintln!("{line}");
+    PROGRESS.with(|p| {
+        if let Some(f) = p.borrow_mut().as_mut() {
+            f(&line)
+        }
+    });
 }
 
 /// The firmware's CBW (`cbw_d`, `cbw_alpha`, `cbw_beta`, `cbw_gamma`).

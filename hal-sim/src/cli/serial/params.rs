@@ -81,6 +81,15 @@ const HEADER: &str = "name,value,unit";
 /// Writes every settable parameter (the settings table's limit and model settings) as
 /// `name,value,unit` lines to `path`.
 pub fn save(c: &mut Client, path: &Path, out: &mut impl Write) -> Result<()> {
+    let (text, n) = settings_file(c)?;
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    writeln!(out, "saved {n} settings to {}", path.display())?;
+    Ok(())
+}
+
+/// The text of a settings file (`name,value,unit` of every settable parameter, read from
+/// the firmware) and the number of settings in it.
+pub fn settings_file(c: &mut Client) -> Result<(String, usize)> {
     let mut text = format!("# piezo serial params --save\n{HEADER}\n");
     let mut n = 0;
     for s in settable() {
@@ -88,9 +97,7 @@ pub fn save(c: &mut Client, path: &Path, out: &mut impl Write) -> Result<()> {
         text += &format!("{},{v},{}\n", s.name, s.unit);
         n += 1;
     }
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
-    writeln!(out, "saved {n} settings to {}", path.display())?;
-    Ok(())
+    Ok((text, n))
 }
 
 /// The settings of a `--save` file, each checked against the table: a known, settable name,
@@ -98,6 +105,11 @@ pub fn save(c: &mut Client, path: &Path, out: &mut impl Write) -> Result<()> {
 pub fn read_settings(path: &Path) -> Result<Vec<(&'static str, f64)>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    parse_settings(&text, &path.display().to_string())
+}
+
+/// [`read_settings`] of a file's text; `origin` names it in the errors.
+pub fn parse_settings(text: &str, origin: &str) -> Result<Vec<(&'static str, f64)>> {
     let mut lines = text
         .lines()
         .enumerate()
@@ -106,13 +118,13 @@ pub fn read_settings(path: &Path) -> Result<Vec<(&'static str, f64)>> {
         Some((_, h)) if h.trim() == HEADER => {}
         other => bail!(
             "{}: expected the header `{HEADER}`, found {:?}",
-            path.display(),
+            origin,
             other.map(|(_, l)| l)
         ),
     }
     let mut v: Vec<(&'static str, f64)> = Vec::new();
     for (i, line) in lines {
-        let at = || format!("{} line {}", path.display(), i + 1);
+        let at = || format!("{} line {}", origin, i + 1);
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
         let (name, value, unit) = match f[..] {
             [n, v, u] => (n, v, Some(u)),
@@ -129,7 +141,7 @@ pub fn read_settings(path: &Path) -> Result<Vec<(&'static str, f64)>> {
         v.push((s.name, x));
     }
     if v.is_empty() {
-        bail!("{}: no settings", path.display());
+        bail!("{}: no settings", origin);
     }
     Ok(v)
 }
@@ -151,7 +163,7 @@ pub fn restore(c: &mut Client, path: &Path, out: &mut impl Write) -> Result<()> 
 
 /// Sends checked settings: the limits first (widening first), the CBW model as one `cbw`
 /// line when all four are there, the rest one `set` at a time.
-fn apply(c: &mut Client, all: &[(&'static str, f64)]) -> Result<()> {
+pub fn apply(c: &mut Client, all: &[(&'static str, f64)]) -> Result<()> {
     let get = |n: &str| all.iter().find(|(k, _)| *k == n).map(|(_, v)| *v);
     limits(
         c,
@@ -177,7 +189,7 @@ fn apply(c: &mut Client, all: &[(&'static str, f64)]) -> Result<()> {
 
 /// The settings table's check of one value: a known, settable name, the table's unit (if
 /// one is given), a finite value inside the table's range.
-fn check(name: &str, x: f64, unit: Option<&str>) -> Result<&'static Setting, String> {
+pub fn check(name: &str, x: f64, unit: Option<&str>) -> Result<&'static Setting, String> {
     let s = setting(name).ok_or_else(|| {
         format!(
             "unknown setting {name:?} (settable: {})",

@@ -56,6 +56,18 @@ impl Recording {
     /// end in their units (`ref_um`, `u_volts`), so `piezo fit` reads `t_s`, `u_volts` and
     /// `y_um` as time, input and output; the `# units:` line repeats them for a reader.
     pub fn write_csv(&self, path: &Path) -> Result<()> {
+        let s = self.csv();
+        if let Some(dir) = path.parent() {
+            if !dir.as_os_str().is_empty() {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+            }
+        }
+        std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+    }
+
+    /// The text of [`Recording::write_csv`].
+    pub fn csv(&self) -> String {
         use std::fmt::Write as _;
         let mut s = String::new();
         let _ = writeln!(
@@ -80,13 +92,7 @@ impl Recording {
             }
             s.push('\n');
         }
-        if let Some(dir) = path.parent() {
-            if !dir.as_os_str().is_empty() {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {}", dir.display()))?;
-            }
-        }
-        std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+        s
     }
 
     /// One panel per unit (positions together, voltages together, codes together).

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# The lab console in a real browser: the QEMU firmware (stage with the 2.5 kHz resonance of
+# 39-bode), `piezo ui` connected to it over the same TCP link `piezo serial` uses, and headless
+# Chromium driven through chromedriver (WebDriver) by hal-sim/examples/ui_browser.rs: the
+# scope receives frames and triggers on the wave's start; a valid setting reaches the firmware
+# (read back with `get`); an out-of-range value shows the range and sends nothing; the
+# firmware's `err N` shows by its field; a mode change is reflected; bode finds the resonance
+# within 50 Hz and applies the notch; Stop leaves the DAC at the safe code; a lost link is
+# shown; a report (`piezo demo --out`'s index.html) opens from the console. Screenshots in
+# out/ui/. Every wait is on a condition (page state, a reply); the
+# wall-clock caps only end a run whose emulator, server or browser stopped.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
+  (apt-get update -qq && apt-get install -y -qq --no-install-recommends chromium chromium-driver) >/dev/null
+fi
+. .ci/qemu-serial.sh
+qemu_session 56-ui
+cargo build -q -p hal-sim --example ui_browser
+ui_pid= driver_pid=
+cleanup() {
+  [ -z "$ui_pid" ] || kill "$ui_pid" 2>/dev/null || true
+  [ -z "$driver_pid" ] || kill "$driver_pid" 2>/dev/null || true
+  qemu_cleanup
+}
+trap cleanup EXIT
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
+listening() { python3 -c 'import socket,sys; socket.create_connection(("127.0.0.1", int(sys.argv[1])), 1)' "$1" 2>/dev/null; }
+
+# The stage's mechanical resonance (QEMU harness line; no reply, the next ping answers after it).
+exec 3<>"/dev/tcp/127.0.0.1/$port"
+printf 'resonance 2500 0.05\n' >&3
+exec 3>&-
+s ping >/dev/null
+
+# A report for the console to open (`piezo demo`'s index.html; 100 Hz keeps it small).
+"$piezo" demo --rate-hz 100 --out "$work/demo" >/dev/null
+
+"$piezo" ui --tcp "127.0.0.1:$port" --timeout-s 60 --listen 0 --work "$work/ui" \
+  --report "$work/demo" >"$work/ui.txt" 2>&1 &
+ui_pid=$!
+start=$SECONDS
+until grep -q '^piezo ui: http://' "$work/ui.txt"; do
+  kill -0 "$ui_pid" 2>/dev/null || { cat "$work/ui.txt"; fail "piezo ui exited"; }
+  [ $((SECONDS - start)) -lt 120 ] || fail "piezo ui did not start listening"
+  sleep 0.1
+done
+url=$(sed -n 's/^piezo ui: \(http:[^ ]*\)$/\1/p' "$work/ui.txt")
+echo "$url"
+
+wd_port=$(free_port)
+chromedriver --port="$wd_port" >"$work/chromedriver.txt" 2>&1 &
+driver_pid=$!
+start=$SECONDS
+until listening "$wd_port"; do
+  kill -0 "$driver_pid" 2>/dev/null || { cat "$work/chromedriver.txt"; fail "chromedriver exited"; }
+  [ $((SECONDS - start)) -lt 60 ] || fail "chromedriver did not start listening"
+  sleep 0.1
+done
+
+mkdir -p out/ui
+timeout 1200 target/debug/examples/ui_browser --ui "$url" --webdriver "http://127.0.0.1:$wd_port" \
+  --out out/ui --chromium "$(command -v chromium)" --resonance-hz 2500 --safe-code 0 \
+  --kill-pid "$qemu" --report "piezo demo: hysteresis loops" | tee "$work/browser.txt" || { tail -20 "$work/ui.txt"; fail "browser checks"; }
+grep -q '^ui: [0-9]* browser checks passed$' "$work/browser.txt" || fail "no summary line"
+# The example ended QEMU on purpose (the lost-link check).
+wait "$qemu" 2>/dev/null || true
+qemu=
+echo "56-ui: ok"
