@@ -15,8 +15,18 @@ piezo_cli() {
   if [ -n "${PIEZO_BIN:-}" ]; then
     piezo=$PIEZO_BIN
   else
-    # Built by 10-host's `cargo test` already.
-    cargo build -q -p hal-sim --bin piezo
+    # 10-host's `cargo test --workspace` built it (integration tests run the binary): the same
+    # command finds everything fresh. (`cargo build -p hal-sim --bin piezo` would rebuild
+    # hal-sim: without the dev-dependencies its dependencies' features differ.)
+    local log
+    log=$(mktemp)
+    if ! cargo test -q --workspace --no-run >"$log" 2>&1; then
+      cat "$log"
+      rm -f "$log"
+      echo "piezo_cli: cargo test --workspace --no-run failed"
+      exit 1
+    fi
+    rm -f "$log"
     piezo=target/debug/piezo
   fi
 }

@@ -56,11 +56,8 @@ pub const WORST_M4F_XY: [[u32; FFS.len()]; LAWS.len()] = [
 ];
 
 /// The worst-case table of this build's axis count: [`WORST_M4F`] or [`WORST_M4F_XY`].
-pub const WORST_M4F_BUILD: [[u32; FFS.len()]; LAWS.len()] = if AXES == 2 {
-    WORST_M4F_XY
-} else {
-    WORST_M4F
-};
+pub const WORST_M4F_BUILD: [[u32; FFS.len()]; LAWS.len()] =
+    if AXES == 2 { WORST_M4F_XY } else { WORST_M4F };
 
 /// The share of the period a step may use: the rest is the interrupt's entry and exit, the
 /// converters, the recorder and the timing ([`Budget::overhead`] on top), and the command
