@@ -6,7 +6,7 @@
 # (every case exact) is far above them. See docs/src/diagnose-independent.md.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-cargo build --profile host -p hal-sim --bin piezo
+. .ci/host-piezo.sh
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cases=()

@@ -6,7 +6,7 @@
 # Issue 19: the same on the asymmetric GBW stage and the Dahl stage, where the GBW laws
 # (nmpc-gbw, fts-gbw), ADRC and the CBW variants must all have run (about 15 s).
 set -euo pipefail
-cargo build --profile host -q -p hal-sim --bin piezo
+. .ci/host-piezo.sh
 field() { echo "$1" | sed -E "s/.*\"$2\":\"?([^,\"}]*).*/\1/"; }
 # Checks every run of a `piezo sim --json` document; prints "scenario/controller" per run.
 check_runs() {

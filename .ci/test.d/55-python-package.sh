@@ -11,7 +11,7 @@ export PIEZO_DATA="${PIEZO_DATA:-$repo/../shared/data}"
 [ -d "$PIEZO_DATA" ] || { echo "55-python-package: no records at $PIEZO_DATA"; exit 1; }
 # The CLI the answers are compared with, built from this checkout (50-feedback-sim built it
 # already: a no-op then).
-cargo build --profile host -q -p hal-sim --bin piezo
+. .ci/host-piezo.sh
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 if ! python3 -m venv "$work/venv" >/dev/null 2>&1; then

@@ -12,7 +12,7 @@ if [ ! -d "$D" ]; then
 fi
 # PIEZO=path skips the build (to try the script with another build of the binary).
 if [ -z "${PIEZO:-}" ]; then
-    cargo build --profile host -p hal-sim --bin piezo
+    . .ci/host-piezo.sh
 fi
 P=${PIEZO:-target/host/piezo}
 OUT=$(mktemp -d)

@@ -89,14 +89,7 @@ fn spawn_firmware(drop_after: Option<usize>) -> String {
 }
 
 fn conn(addr: &str) -> Conn {
-    Conn {
-        port: None,
-        baud: 115_200,
-        tcp: Some(addr.to_string()),
-        timeout_s: 5.0,
-        no_sync: false,
-        keep_going: false,
-    }
+    Conn::tcp(addr, 5.0)
 }
 
 /// The next event of `type` (within `limit` events).

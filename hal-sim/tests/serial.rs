@@ -117,14 +117,7 @@ fn spawn_firmware_with(mut fake: Fake) -> String {
 }
 
 fn conn(addr: &str) -> Conn {
-    Conn {
-        port: None,
-        baud: 115_200,
-        tcp: Some(addr.to_string()),
-        timeout_s: 5.0,
-        no_sync: false,
-        keep_going: false,
-    }
+    Conn::tcp(addr, 5.0)
 }
 
 fn run(addr: &str, action: Action) -> anyhow::Result<String> {

@@ -79,6 +79,21 @@ pub struct Conn {
     pub keep_going: bool,
 }
 
+impl Conn {
+    /// A TCP link (the QEMU firmware's UART, a fake firmware in tests) with the command
+    /// line's defaults and `timeout_s` per reply line.
+    pub fn tcp(addr: &str, timeout_s: f64) -> Self {
+        Self {
+            port: None,
+            baud: 115_200,
+            tcp: Some(addr.to_string()),
+            timeout_s,
+            no_sync: false,
+            keep_going: false,
+        }
+    }
+}
+
 #[derive(clap::Subcommand, Debug)]
 pub enum Action {
     /// Send raw command lines, print every reply.
