@@ -187,6 +187,20 @@ fn confidence(scored: &[Signals], before: &[Vec<Vec<f64>>], after: &[Vec<Vec<f64
     }
 }
 
+/// A lag in the records that a sensor delay and a structural mode explain alike: kept in
+/// the model (as a delay), not named.
+#[derive(Debug, Clone, Serialize)]
+pub struct Lag {
+    /// The delay in the final model (first output), s; with `as_mode` the delay the mode
+    /// stands in for.
+    pub delay_s: f64,
+    /// Validation RMSE with the delay and with a mode instead.
+    pub rmse_valid_delay: f64,
+    pub rmse_valid_mode: f64,
+    /// Kept as the mode (it gains over the delay by the rule for a gain), not the delay.
+    pub as_mode: bool,
+}
+
 /// One validation record's RMSE under the base and the extended model.
 #[derive(Debug, Clone, Serialize)]
 pub struct RecordScore {
@@ -216,6 +230,8 @@ pub struct Diagnosis {
     pub per_valid: Vec<RecordScore>,
     /// The structured residual no named cause explains, if significant.
     pub unexplained: Option<Unexplained>,
+    /// A lag taken into the model unnamed (stage 4c), if any.
+    pub lag: Option<Lag>,
 }
 
 impl Diagnosis {
@@ -272,6 +288,7 @@ impl Diagnosis {
             "dropped": self.dropped.iter().map(|c| c.name()).collect::<Vec<_>>(),
             "refused": self.refused.iter().map(|(c, g)| json!({"cause": c.name(), "swapped_gain": g})).collect::<Vec<_>>(),
             "unexplained": self.unexplained,
+            "lag": self.lag,
             "rule": {
                 "min_gain": MIN_GAIN,
                 "min_abs_gain_of_span": MIN_ABS_GAIN,
@@ -447,11 +464,16 @@ pub fn diagnose_records(
     let setup = Setup::new(train, valid, opt);
     let base = setup.base()?;
     let mut state = State::new(base);
-    for round in 1..=MAX_ROUNDS {
+    let mut round = 0;
+    // The lag the base takes in (stage 4c) does not use up a round.
+    while round < MAX_ROUNDS + usize::from(state.lag.is_some()) {
+        round += 1;
         if state.current.valid <= NOISE_FLOOR * setup.noise_rms {
             break;
         }
-        let todo = candidates(&state.current.fit, &train[0]);
+        let unnamed_mode = state.lag.as_ref().is_some_and(|l| l.as_mode)
+            && !state.findings.iter().any(|f| f.cause == Cause::Dynamics);
+        let todo = candidates(&state.current.fit, unnamed_mode, &train[0]);
         if todo.is_empty() {
             break;
         }
@@ -463,6 +485,13 @@ pub fn diagnose_records(
         let (Some(k), Some(evidence)) = (chosen, evidence) else {
             break;
         };
+        let lag = (state.lag.is_none())
+            .then(|| setup.lag_unattributable(&todo, &tried, k))
+            .flatten();
+        if let Some((lag, next)) = lag {
+            state.take_lag(lag, next);
+            continue;
+        }
         let Some(next) = tried.into_iter().nth(k) else {
             break;
         };
@@ -490,6 +519,7 @@ struct State {
     candidates: Vec<Candidate>,
     dropped: Vec<Cause>,
     refused: Vec<(Cause, f64)>,
+    lag: Option<Lag>,
 }
 
 impl State {
@@ -501,7 +531,18 @@ impl State {
             candidates: Vec::new(),
             dropped: Vec::new(),
             refused: Vec::new(),
+            lag: None,
         }
+    }
+
+    /// Stage 4c: a lag the record cannot attribute goes into the model unnamed, and into
+    /// the base while no cause is named, so that no later cause stands in for it.
+    fn take_lag(&mut self, lag: Lag, next: Scored) {
+        if self.findings.is_empty() {
+            self.base = next.clone();
+        }
+        self.current = next;
+        self.lag = Some(lag);
     }
 
     /// Takes `cause` (its extension `next`) into the model.
@@ -740,6 +781,53 @@ impl<'a> Setup<'a> {
         None
     }
 
+    /// Whether the chosen candidate `k` is a lag the record cannot attribute, and the model
+    /// that takes it in unnamed. In the drive's band a well-damped mode above it lags like a
+    /// delay of `2 zeta/omega_n` (every real stage has one, with its amplifier and sensor
+    /// filters), so `delay` is named only when it gains by the rule for a gain over the mode
+    /// that lags alike ([`fitting::lag_as_mode`]), and `dynamics` only when it gains so over
+    /// the delay. Otherwise the lag goes in as the delay (fewer parameters), or as the mode
+    /// when that gains over the delay.
+    fn lag_unattributable(
+        &self,
+        todo: &[Cause],
+        tried: &[Scored],
+        k: usize,
+    ) -> Option<(Lag, Scored)> {
+        let d = todo.iter().position(|&t| t == Cause::Delay)?;
+        let delay = &tried[d];
+        let (mode, chosen) = match todo[k] {
+            // (A model with a mode already has no second one to offer.)
+            Cause::Delay
+                if !delay.fit.causes.has(Cause::Dynamics)
+                    && !delay.fit.causes.has(Cause::AmplitudeDynamics) =>
+            {
+                (
+                    self.scored(fitting::lag_as_mode(&delay.fit, &self.tiers)),
+                    delay,
+                )
+            }
+            Cause::Dynamics => (tried[k].clone(), &tried[k]),
+            _ => return None,
+        };
+        let other = if todo[k] == Cause::Delay {
+            &mode
+        } else {
+            delay
+        };
+        if gains_by_rule(other.valid, chosen.valid, self.y_span) {
+            return None;
+        }
+        let as_mode = gains_by_rule(delay.valid, mode.valid, self.y_span);
+        let lag = Lag {
+            delay_s: delay.fit.outputs.first()?.shape.delay_s,
+            rmse_valid_delay: delay.valid,
+            rmse_valid_mode: mode.valid,
+            as_mode,
+        };
+        Some((lag, if as_mode { mode } else { delay.clone() }))
+    }
+
     /// A finding: `cause` took the model from `before` to `after`.
     fn finding(
         &self,
@@ -877,6 +965,13 @@ impl<'a> Setup<'a> {
             .collect();
         Diagnosis {
             unexplained: unexplained::find(&self.scored, &residual, self.noise_rms),
+            // The lag as the final model has it (refined with the causes named after it).
+            lag: state.lag.map(|mut l| {
+                if let (false, Some(o)) = (l.as_mode, state.current.fit.outputs.first()) {
+                    l.delay_s = o.shape.delay_s;
+                }
+                l
+            }),
             dropped: state.dropped,
             refused: state.refused,
             base_valid: state.base.valid,
@@ -892,16 +987,22 @@ impl<'a> Setup<'a> {
     }
 }
 
-/// Stage 2: the causes to try on a model with `current`'s causes, for records like `train`.
-fn candidates(current: &Fitted, train: &Signals) -> Vec<Cause> {
+/// Stage 2: the causes to try on a model with `current`'s causes, for records like `train`;
+/// `unnamed_mode`: its mode is a lag taken in unnamed (stage 4c), so `dynamics` is still
+/// searched (afresh) and the amplitude upgrade is not.
+fn candidates(current: &Fitted, unnamed_mode: bool, train: &Signals) -> Vec<Cause> {
     let has = |c: Cause| current.causes.has(c);
     applicable(train)
         .into_iter()
         .filter(|&c| match c {
             // An upgrade of the plain dynamics, once they are found: searched only where a
             // resonance is, and from its fitted frequency and damping.
-            Cause::AmplitudeDynamics => has(Cause::Dynamics) && !has(Cause::AmplitudeDynamics),
-            Cause::Dynamics => !has(Cause::Dynamics) && !has(Cause::AmplitudeDynamics),
+            Cause::AmplitudeDynamics => {
+                has(Cause::Dynamics) && !has(Cause::AmplitudeDynamics) && !unnamed_mode
+            }
+            Cause::Dynamics => {
+                unnamed_mode || !has(Cause::Dynamics) && !has(Cause::AmplitudeDynamics)
+            }
             c => !has(c),
         })
         .collect()
@@ -1052,6 +1153,28 @@ mod tests {
         .unwrap();
         assert_eq!(d.cause(), "dynamics", "{:#}", d.json());
         assert!(d.gain() > 0.5);
+    }
+
+    /// A well-damped mode far above the drive lags like a delay of `2 zeta/omega_n`: neither
+    /// `delay` nor `dynamics` may be named, and the lag is reported, in the model.
+    #[test]
+    fn a_lag_the_drive_cannot_place_is_kept_unnamed() {
+        let lagged = |seed| {
+            let mut r = record(seed, 20_000, 1e-4, false);
+            model::dynamics(&mut r.y[0], 1000.0, 0.7, 1e-4);
+            r
+        };
+        let d = diagnose(&lagged(1), &lagged(2), &Options::default()).unwrap();
+        assert_eq!(d.cause(), "none", "{:#}", d.json());
+        let lag = d.lag.as_ref().expect("the lag is reported");
+        // 2 zeta/omega_n = 0.22 ms, less the half sample the held input's mode lags itself.
+        assert!((1e-4..2.5e-4).contains(&lag.delay_s), "{:#}", d.json());
+        // No cause named: the base itself carries the lag.
+        assert!(
+            d.base.causes.has(Cause::Delay) || d.base.causes.has(Cause::Dynamics),
+            "{:#}",
+            d.json()
+        );
     }
 
     #[test]

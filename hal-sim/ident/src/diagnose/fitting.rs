@@ -521,6 +521,53 @@ pub(super) fn extend(
     assemble(causes, outputs, scales, current.taus.clone(), tiers.full)
 }
 
+/// `with_delay` (a fit with `delay`, no dynamics) with each output's delay `tau` replaced by
+/// the linear mode that lags alike in the drive's band (group delay `2 zeta/omega_n`),
+/// damping 0.4, 0.7 or 1 (the best on the training records), the CBW shape kept and the
+/// linear coefficients solved again: the structure's explanation of the same lag.
+pub(super) fn lag_as_mode(with_delay: &Fitted, tiers: &Tiers) -> Fitted {
+    let causes = with_delay
+        .causes
+        .without(Cause::Delay)
+        .with(Cause::Dynamics);
+    let outputs: Vec<(OutputModel, f64)> = (0..with_delay.outputs.len())
+        .into_par_iter()
+        .map(|i| {
+            let shape = with_delay.outputs[i].shape;
+            // The mode runs on the held input and is read at the hold's end: it lags
+            // `2 zeta/omega_n - dt/2` behind the samples.
+            let tau = shape.delay_s.max(0.0) + 0.5 * with_delay.scales[i].dt;
+            [0.4, 0.7, 1.0]
+                .into_iter()
+                .map(|zeta| {
+                    let s = Shape {
+                        delay_s: 0.0,
+                        wn_hz: zeta / (std::f64::consts::PI * tau),
+                        zeta,
+                        ..shape
+                    };
+                    fit_linear(
+                        tiers.full,
+                        i,
+                        causes,
+                        &s,
+                        &with_delay.scales[i],
+                        &with_delay.taus,
+                    )
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("three dampings")
+        })
+        .collect();
+    assemble(
+        causes,
+        outputs,
+        with_delay.scales.clone(),
+        with_delay.taus.clone(),
+        tiers.full,
+    )
+}
+
 /// `current` refitted without `cause`, from its current shapes.
 pub(super) fn reduce(current: &Fitted, cause: Cause, tiers: &Tiers, opt: &Options) -> Fitted {
     refit(

@@ -134,6 +134,15 @@ pub fn summary(d: &Diagnosis, split_note: Option<&str>) -> String {
             100.0 * g
         );
     }
+    if let Some(l) = &d.lag {
+        let _ = writeln!(
+            s,
+            "lag: {:.3} ms kept in the model, not named: a sensor delay and a structural mode fit it alike (valid rmse {:.4} / {:.4}); a drive reaching towards the mode would tell them apart",
+            1e3 * l.delay_s,
+            l.rmse_valid_delay,
+            l.rmse_valid_mode
+        );
+    }
     if let Some(u) = &d.unexplained {
         let _ = writeln!(s, "unexplained: {}", u.text);
     }
