@@ -230,14 +230,18 @@ class Piezo:
         """Frames 0..n of a finished capture as an array (n x channels). Binary: damaged
         packets are counted in `self.damaged` and their frames asked for again (at most
         `MAX_ROUNDS` times, then `LinkError`). Values are the f32 the firmware recorded, as
-        the float of their shortest decimal form (what `rec read` prints), either way."""
+        the float of their shortest decimal form, either way: `rec read` prints a decimal
+        that reads back to the same f32 but is not always the shortest (up to 6 digits, or
+        the shortest's count), so the text is read as that f32 first."""
         if not binary:
             rows = []
             for start in range(0, n, 64):
                 lines = []
                 self.command(f"rec read {start} {min(64, n - start)}", data=lines)
                 rows += [[float(v) for v in l.split()[1:]] for l in lines]
-            return np.array(rows)
+            # Decimal -> f64 -> f32 rounds as decimal -> f32 here: the printed decimal lies
+            # within a few units of its f32's last digit, far from any rounding midpoint.
+            return np.array(rows, dtype=np.float32).astype(str).astype(np.float64)
         out = np.full((n, channels), np.nan, dtype=np.float32)
         have = np.zeros(n, dtype=bool)
         self.damaged = 0
