@@ -15,8 +15,10 @@
 //!    [`MIN_R2`] of the residual its extension removes ([`evidence`]); whether its gain is
 //!    worth its extra parameters in the residual's effective number of independent samples
 //!    ([`criterion`]) is reported with it. Of those, the one that removes most of the
-//!    residual on both records is taken. Rounds repeat until nothing counts or the residual is at the noise floor the
-//!    record shows ([`NOISE_FLOOR`]). Then a backward check drops causes a later one made
+//!    residual on both records is taken; (4c, `Setup::lag_unattributable`) a `delay` or
+//!    `dynamics` taken that does not gain over the other explanation of the same lag goes
+//!    into the model unnamed. Rounds repeat until nothing counts or the residual is at the
+//!    noise floor the record shows ([`NOISE_FLOOR`]). Then a backward check drops causes a later one made
 //!    redundant (`Setup::backward`), and a swap check refuses causes that do not gain with
 //!    the records' roles swapped (`Setup::swap_check`).
 //! 5. **Consistency** ([`consistency`], run by the caller): the same rule on other
@@ -188,7 +190,7 @@ fn confidence(scored: &[Signals], before: &[Vec<Vec<f64>>], after: &[Vec<Vec<f64
 }
 
 /// A lag in the records that a sensor delay and a structural mode explain alike: kept in
-/// the model (as a delay), not named.
+/// the model (as the delay, or as the mode when that gains over it), not named.
 #[derive(Debug, Clone, Serialize)]
 pub struct Lag {
     /// The delay in the final model (first output), s; with `as_mode` the delay the mode
@@ -796,24 +798,24 @@ impl<'a> Setup<'a> {
     ) -> Option<(Lag, Scored)> {
         let d = todo.iter().position(|&t| t == Cause::Delay)?;
         let delay = &tried[d];
-        let (mode, chosen) = match todo[k] {
+        let alike;
+        let mode = match todo[k] {
             // (A model with a mode already has no second one to offer.)
             Cause::Delay
                 if !delay.fit.causes.has(Cause::Dynamics)
                     && !delay.fit.causes.has(Cause::AmplitudeDynamics) =>
             {
-                (
-                    self.scored(fitting::lag_as_mode(&delay.fit, &self.tiers)),
-                    delay,
-                )
+                alike = self.scored(fitting::lag_as_mode(&delay.fit, &self.tiers));
+                &alike
             }
-            Cause::Dynamics => (tried[k].clone(), &tried[k]),
+            Cause::Dynamics => &tried[k],
             _ => return None,
         };
-        let other = if todo[k] == Cause::Delay {
-            &mode
+        // The chosen one must gain over the other explanation of the same lag.
+        let (chosen, other) = if todo[k] == Cause::Delay {
+            (delay, mode)
         } else {
-            delay
+            (mode, delay)
         };
         if gains_by_rule(other.valid, chosen.valid, self.y_span) {
             return None;
@@ -825,7 +827,7 @@ impl<'a> Setup<'a> {
             rmse_valid_mode: mode.valid,
             as_mode,
         };
-        Some((lag, if as_mode { mode } else { delay.clone() }))
+        Some((lag, if as_mode { mode } else { delay }.clone()))
     }
 
     /// A finding: `cause` took the model from `before` to `after`.
