@@ -74,7 +74,7 @@ fn run(seed: u64, hidden: &[Cause]) -> Result<(), String> {
     Ok(())
 }
 
-/// Seeds per case: `DIAGNOSE_SEEDS` (CI runs 5 in release, `.ci/test.d/45-diagnose.sh`);
+/// Seeds per case: `DIAGNOSE_SEEDS` (CI runs 5, `.ci/test.d/45-diagnose.sh`);
 /// the plain dev-profile `cargo test` runs 2 to stay quick.
 fn seed_count() -> u64 {
     std::env::var("DIAGNOSE_SEEDS")
