@@ -9,7 +9,8 @@
 //! 3. **Fitting** (`Setup::fit_round`): the model extended by each candidate, and the
 //!    controls a candidate must beat: the named causes refitted by the same search, refined
 //!    (each named cause's nonlinear coordinates searched again from either side) and each
-//!    candidate's fit with its cause switched off. The best control becomes the model.
+//!    candidate's fit with its cause switched off. The control best on the validation
+//!    records becomes the model, if it beats the model so far there.
 //! 4. **Selection** (`Setup::weigh`, `Setup::select`): a candidate counts when it gains
 //!    at least [`MIN_GAIN`] of the validation RMSE and its signature explains at least
 //!    [`MIN_R2`] of the residual its extension removes ([`evidence`]); whether its gain is
@@ -666,17 +667,23 @@ impl<'a> Setup<'a> {
             .zip(todo)
             .map(|(t, &c)| ablate(&t.fit, current.causes, c, &self.tiers))
             .collect();
-        let best_same = std::iter::once(control.fit.clone())
-            .chain(refined)
-            .chain(ablated)
-            .min_by(|a, b| a.rmse_train.total_cmp(&b.rmse_train))
-            .expect("control is always there");
-        let control = if best_same.rmse_train < control.fit.rmse_train {
-            self.scored(best_same)
-        } else {
-            control
-        };
-        if control.fit.rmse_train < current.rmse_train && control.valid.is_finite() {
+        // The control a candidate must beat is the same causes' fit that does best on the
+        // validation records: chosen by training RMSE, a refit that fitted training better
+        // and validation worse (a linear mode fitted to one record's amplitudes) let any
+        // candidate that undid it gain.
+        let control = std::iter::once(control)
+            .chain(
+                refined
+                    .into_iter()
+                    .chain(ablated)
+                    .collect::<Vec<_>>()
+                    .into_par_iter()
+                    .map(|f| self.scored(f))
+                    .collect::<Vec<_>>(),
+            )
+            .filter(|s| s.valid.is_finite())
+            .min_by(|a, b| a.valid.total_cmp(&b.valid));
+        if let Some(control) = control.filter(|c| c.valid < state.current.valid) {
             if state.findings.is_empty() {
                 // Still the base model, only better converged.
                 state.base = control.clone();
