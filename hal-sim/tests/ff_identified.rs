@@ -34,6 +34,11 @@ fn compensators_on_identified_models_track_the_stage() {
         );
         assert!(f.sign > 0.0, "{m}: {f:?}");
     }
+    // The identified models invert: no fallback to the linear feedforward.
+    for name in ["wpmbw", "pi-inverse", "ppi-inverse", "dpi-inverse"] {
+        let c = (find(name).unwrap().one_axis)(&info).unwrap();
+        assert_ne!(c.feedforward.name(), "linear", "{name} fell back to linear");
+    }
     let run = |name: &str| {
         let (r, rec) = run_calibrated(&sc, &find(name).unwrap(), &linear, true).unwrap();
         eprintln!(

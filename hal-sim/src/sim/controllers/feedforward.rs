@@ -46,10 +46,10 @@ pub fn entries() -> Vec<Entry> {
         entry!(ImsCbwOff20, "ims-cbw with every hysteresis/creep/coupling parameter +20 % (d from calibration)", ims_off20),
         entry!(ImsCbwBare, "IMS on the hysteresis model only (no quadratic, creep, decoupler)", ims_bare),
         entry!(Mbw, "002 feedforward without inversion (eq. 8-12, k_p = 1), MBW identified by piezo fit from the open-loop record", mbw_no_inverse),
-        entry!(Wpmbw, "004 direct WPMBW inverse + inverse resonance + prefilter; WPMBW identified by piezo fit from the open-loop record, resonance the stage's", wpmbw),
-        entry!(PiInverse, "exact PI inverse; PI identified by piezo fit from the open-loop record", pi_inverse),
-        entry!(PpiInverse, "PPI inverse by bounded solve; PPI identified by piezo fit from the open-loop record (c1 < 0 taken as 0)", ppi),
-        entry!(DpiInverse, "exact DPI inverse; DPI identified by piezo fit from the open-loop record", dpi),
+        entry!(Wpmbw, "004 direct WPMBW inverse + inverse resonance + prefilter; WPMBW identified by piezo fit from the open-loop record (linear if not invertible), resonance the stage's", wpmbw),
+        entry!(PiInverse, "exact PI inverse; PI identified by piezo fit from the open-loop record (linear if not invertible)", pi_inverse),
+        entry!(PpiInverse, "PPI inverse by bounded solve; PPI identified by piezo fit from the open-loop record (c1 < 0 taken as 0; linear if not invertible)", ppi),
+        entry!(DpiInverse, "exact DPI inverse; DPI identified by piezo fit from the open-loop record (linear if not invertible)", dpi),
         entry!(MultiIms, "multivariable IMS U = D^-1(y+h) (003 eq. 16) with D, A, B, Gamma = C*diag(.)", multi_ims),
     ]
 }
@@ -285,6 +285,23 @@ fn fit_of(s: &StageInfo, name: &str, len: usize) -> Result<(Fitted, Vec<f64>)> {
     Ok((f, p))
 }
 
+/// The compensator `built`, or, when the identified model cannot be inverted (a record that
+/// does not excite the stage, e.g. a hold, or a fit outside the inverse's conditions), the
+/// linear feedforward of the calibrated stage, said on stderr.
+fn or_linear<const N: usize>(
+    s: &StageInfo,
+    name: &str,
+    built: Result<Controller<N>>,
+) -> Result<Controller<N>> {
+    built.or_else(|err| {
+        eprintln!(
+            "{name} on {}: {err:#}; running the linear feedforward instead",
+            s.scenario.name
+        );
+        Ok(controller(MultiFeedforward::PerAxis(super::linear_ff(s))))
+    })
+}
+
 fn r_array<const K: usize>(a: &[f64; K]) -> [R; K] {
     a.map(|x| x as R)
 }
@@ -293,6 +310,10 @@ fn r_array<const K: usize>(a: &[f64; K]) -> [R; K] {
 /// wpmbw` identifies from the scenario's open-loop record ([`identified`]); the inverse
 /// resonance is the stage's (the open-loop record, slow, does not excite it).
 fn wpmbw<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    or_linear(s, "wpmbw", wpmbw_identified(s))
+}
+
+fn wpmbw_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     let (_, p) = fit_of(s, "wpmbw", 7)?;
     let m = fit_models::wpmbw(&p).map_err(e)?;
     let rlm = m.mbw();
@@ -331,6 +352,10 @@ const PI_LEN: usize = fit_models::PI_OPERATORS + 2;
 /// Exact inverse (Kuhnen) of the PI that `piezo fit --model pi` identifies from the
 /// scenario's open-loop record.
 fn pi_inverse<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    or_linear(s, "pi-inverse", pi_inverse_identified(s))
+}
+
+fn pi_inverse_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     let (f, p) = fit_of(s, "pi", PI_LEN)?;
     let m = fit_models::pi(&p).map_err(e)?;
     let pi = Pi::new(m.w0() as R, r_array(m.weights()), r_array(m.thresholds())).map_err(e)?;
@@ -349,6 +374,10 @@ fn pi_inverse<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
 /// --model ppi` identifies from the scenario's open-loop record. The inverse needs
 /// `c1 >= 0` (`y` increasing for every `u`); a negative fitted `c1` is taken as 0.
 fn ppi<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    or_linear(s, "ppi-inverse", ppi_identified(s))
+}
+
+fn ppi_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     let (fit, p) = fit_of(s, "ppi", PI_LEN + 1)?;
     let f = fit_models::ppi(&p).map_err(e)?;
     let m = Ppi::new(
@@ -378,6 +407,10 @@ fn ppi<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
 /// inverts the same model written invertibly: the PI `ws_1*P` behind the dead zones
 /// `[1, 0, 0]` (same thresholds). Otherwise the fit is refused.
 fn dpi<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    or_linear(s, "dpi-inverse", dpi_identified(s))
+}
+
+fn dpi_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     let (fit, p) = fit_of(
         s,
         "dpi",
