@@ -346,6 +346,7 @@ impl<T: Real> Ims<T, Cbw<T>> {
         self.closure == ImsLoop::Solved
             && self.model.n() == T::ONE
             && self.quad == T::ZERO
+            && self.offset_um == T::ZERO
             && self.creep.is_none()
     }
 
@@ -391,6 +392,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     creep: Option<CreepInverse<T>>,
     /// Largest voltage change per sample (the pipeline's slew limit), `T::MAX`: none.
     max_step_volts: T,
+    /// Output offset of the model (`y = offset_um + model(u)`, see [`Ims::with_offset`]).
+    offset_um: T,
     /// Secant slope of the last solved step (first trial of the next solve).
     slope_hint: T,
     /// [`Inverted::hint`] of the last direct inversion (`T::ONE`: none).
@@ -411,6 +414,7 @@ where
             && self.volts_min == o.volts_min
             && self.volts_max == o.volts_max
             && self.dt_s == o.dt_s
+            && self.offset_um == o.offset_um
             && self.state == o.state
             && self.u == o.u
             && self.y == o.y
@@ -447,6 +451,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             quad: T::ZERO,
             creep: None,
             max_step_volts: T::MAX,
+            offset_um: T::ZERO,
             slope_hint,
             step_hint: T::ONE,
             state,
@@ -482,6 +487,14 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u = self.u;
         self.reset_volts(u);
         self
+    }
+
+    /// The same IMS for a model `y = offset_um + model(u)` (`piezo fit` fits an output
+    /// offset): the reference is taken relative to it.
+    pub fn with_offset(mut self, offset_um: T) -> Result<Self, FfError> {
+        super::ensure(offset_um.is_finite(), "IMS: offset_um must be finite")?;
+        self.offset_um = offset_um;
+        Ok(self)
     }
 
     /// Limits the voltage slew as the pipeline does, so the internal model follows the
@@ -526,6 +539,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         if !y_ref_um.is_finite() {
             return self.u;
         }
+        let y_ref_um = y_ref_um - self.offset_um;
         let y_ref_um = match &self.creep {
             Some(c) => c.static_target(y_ref_um),
             None => y_ref_um,
@@ -633,7 +647,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     pub fn reset(&mut self, y_um: T) {
         let dc = self.creep.as_ref().map_or(T::ONE, |c| c.dc_gain());
         let u0 = if y_um.is_finite() {
-            y_um / (dc * self.model.d())
+            (y_um - self.offset_um) / (dc * self.model.d())
         } else {
             T::ZERO
         };

@@ -84,6 +84,8 @@ pub struct PiInverse<T: Real> {
     inv: PiBank<T>,
     /// Forward slope at rest `w0 + sum w_i`.
     fwd_gain: T,
+    /// Output offset of the model (`y = offset_um + PI[u]`, see [`PiInverse::with_offset`]).
+    offset_um: T,
     volts_min: T,
     volts_max: T,
     state: PiState<T, MAX_OPS>,
@@ -101,6 +103,7 @@ impl<T: Real> PiInverse<T> {
         let mut s = Self {
             inv,
             fwd_gain,
+            offset_um: T::ZERO,
             volts_min,
             volts_max,
             state: inv.init(T::ZERO),
@@ -108,6 +111,19 @@ impl<T: Real> PiInverse<T> {
         };
         s.reset(T::ZERO);
         Ok(s)
+    }
+
+    /// The same inverse for a model `y = offset_um + PI[u]` (`piezo fit` fits an output
+    /// offset); restarts at rest at the voltage it last commanded.
+    pub fn with_offset(mut self, offset_um: T) -> Result<Self, FfError> {
+        ensure(
+            offset_um.is_finite(),
+            "PI inverse: offset_um must be finite",
+        )?;
+        self.offset_um = offset_um;
+        let u = self.u;
+        self.reset_volts(u);
+        Ok(self)
     }
 
     /// The inverse bank (for inspection and tests).
@@ -120,7 +136,9 @@ impl<T: Real> PiInverse<T> {
         if !y_ref_um.is_finite() {
             return self.u;
         }
-        let u = self.inv.step(&mut self.state, y_ref_um, T::ONE);
+        let u = self
+            .inv
+            .step(&mut self.state, y_ref_um - self.offset_um, T::ONE);
         self.u = if u.is_finite() {
             u.clamp_to(self.volts_min, self.volts_max)
         } else {
@@ -137,12 +155,21 @@ impl<T: Real> PiInverse<T> {
     /// Restart at rest at voltage `u0` (the forward model's operators centred there).
     pub fn reset_volts(&mut self, u0: T) {
         let u0 = if u0.is_finite() { u0 } else { T::ZERO };
-        self.reset(self.fwd_gain * u0);
+        self.reset_model(self.fwd_gain * u0);
     }
 
     /// Restart at rest (operators centred) at output `y_um`.
     pub fn reset(&mut self, y_um: T) {
-        let y = if y_um.is_finite() { y_um } else { T::ZERO };
+        let y = if y_um.is_finite() {
+            y_um
+        } else {
+            self.offset_um
+        };
+        self.reset_model(y - self.offset_um);
+    }
+
+    /// Restart at rest at the model output `y` (offset excluded).
+    fn reset_model(&mut self, y: T) {
         self.state = self.inv.init(y);
         self.u = self
             .inv
@@ -167,6 +194,8 @@ pub struct DpiInverse<T: Real> {
     r1: T,
     /// Slope `sum w_i` of the DPI's PI at rest.
     pi_gain: T,
+    /// Output offset of the model (`y = offset_um + DPI[u]`, see [`DpiInverse::with_offset`]).
+    offset_um: T,
     volts_min: T,
     volts_max: T,
     state: PiState<T, MAX_OPS>,
@@ -234,6 +263,7 @@ impl<T: Real> DpiInverse<T> {
             inv,
             r1,
             pi_gain: w.iter().fold(T::ZERO, |a, &w| a + w),
+            offset_um: T::ZERO,
             volts_min,
             volts_max,
             state: inv.init(T::ZERO),
@@ -243,6 +273,19 @@ impl<T: Real> DpiInverse<T> {
         };
         s.reset(T::ZERO);
         Ok(s)
+    }
+
+    /// The same inverse for a model `y = offset_um + DPI[u]` (`piezo fit` fits an output
+    /// offset); restarts at rest at the voltage it last commanded.
+    pub fn with_offset(mut self, offset_um: T) -> Result<Self, FfError> {
+        ensure(
+            offset_um.is_finite(),
+            "DPI inverse: offset_um must be finite",
+        )?;
+        self.offset_um = offset_um;
+        let u = self.u;
+        self.reset_volts(u);
+        Ok(self)
     }
 
     /// Inverse of the dead-zone sum: the PI output `p` with `sum ws_k*S_dk[p] = y`.
@@ -277,7 +320,7 @@ impl<T: Real> DpiInverse<T> {
     /// Restart at rest at voltage `u0`.
     pub fn reset_volts(&mut self, u0: T) {
         let u0 = if u0.is_finite() { u0 } else { T::ZERO };
-        self.reset(self.dead_zones(self.pi_gain * u0));
+        self.reset_model(self.dead_zones(self.pi_gain * u0));
     }
 
     #[inline]
@@ -285,7 +328,7 @@ impl<T: Real> DpiInverse<T> {
         if !y_ref_um.is_finite() {
             return self.u;
         }
-        let p = self.dead_zone_inverse(y_ref_um);
+        let p = self.dead_zone_inverse(y_ref_um - self.offset_um);
         let v = self.inv.step(&mut self.state, p, T::ONE);
         if !v.is_finite() {
             return self.u;
@@ -301,7 +344,16 @@ impl<T: Real> DpiInverse<T> {
 
     /// Restart at rest at output `y_um` (operators centred).
     pub fn reset(&mut self, y_um: T) {
-        let y = if y_um.is_finite() { y_um } else { T::ZERO };
+        let y = if y_um.is_finite() {
+            y_um
+        } else {
+            self.offset_um
+        };
+        self.reset_model(y - self.offset_um);
+    }
+
+    /// Restart at rest at the model output `y` (offset excluded).
+    fn reset_model(&mut self, y: T) {
         let p = self.dead_zone_inverse(y);
         self.state = self.inv.init(p);
         self.v = self.inv.step(&mut self.state, p, T::ONE);
@@ -431,6 +483,55 @@ mod tests {
             .unwrap_err()
             .0
             .contains("PPI inverse"));
+    }
+
+    /// An inverse built for `y = offset + model(u)` commands, for `y_ref + offset`, what
+    /// the plain inverse commands for `y_ref` (PI, DPI and PPI alike).
+    #[test]
+    fn offset_shifts_the_reference() {
+        let off = 7.5;
+        let refs = |k: usize| 20.0 * (0.01 * k as f64).sin() + 0.1 * k as f64 % 3.0;
+        let same = |mut a: Box<dyn FnMut(f64) -> f64>, mut b: Box<dyn FnMut(f64) -> f64>| {
+            for k in 0..3000 {
+                let (ua, ub) = (a(refs(k)), b(refs(k) + off));
+                assert!((ua - ub).abs() < 1e-9, "sample {k}: {ua} vs {ub}");
+            }
+        };
+        let m = pi_model();
+        let mut p0 = PiInverse::new(&m, -1e3, 1e3).unwrap();
+        let mut p1 = PiInverse::new(&m, -1e3, 1e3)
+            .unwrap()
+            .with_offset(off)
+            .unwrap();
+        assert_eq!(p0.volts(), p1.volts());
+        same(
+            Box::new(move |y| p0.compensate(y)),
+            Box::new(move |y| p1.compensate(y)),
+        );
+        let d = Dpi::new([0.6, 0.2], [0.5, 2.0], [1.0, 0.3], [0.0, 10.0]).unwrap();
+        let mut d0 = DpiInverse::new(&d, -1e3, 1e3).unwrap();
+        let mut d1 = DpiInverse::new(&d, -1e3, 1e3)
+            .unwrap()
+            .with_offset(off)
+            .unwrap();
+        same(
+            Box::new(move |y| d0.compensate(y)),
+            Box::new(move |y| d1.compensate(y)),
+        );
+        let q = Ppi::new(1e-4, 0.4, [0.3, 0.2], [1.0, 4.0]).unwrap();
+        let mut q0 = ppi_inverse(&q, -1e3, 1e3, 1e-3).unwrap();
+        let mut q1 = ppi_inverse(&q, -1e3, 1e3, 1e-3)
+            .unwrap()
+            .with_offset(off)
+            .unwrap();
+        same(
+            Box::new(move |y| q0.compensate(y)),
+            Box::new(move |y| q1.compensate(y)),
+        );
+        assert!(PiInverse::new(&m, -1.0, 1.0)
+            .unwrap()
+            .with_offset(f64::NAN)
+            .is_err());
     }
 
     #[test]

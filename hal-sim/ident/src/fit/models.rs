@@ -298,13 +298,19 @@ fn wpmbw_specs(s: &Scales) -> Vec<ParamSpec> {
     v
 }
 
+/// `wpmbw_specs`' vector as the model.
+pub fn wpmbw(p: &[f64]) -> Result<Wpmbw<f64, 3>, ParamError> {
+    Wpmbw::new(rlm(p, p[3])?, [p[4], p[5], p[6]])
+}
+
 fn sim_wpmbw(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
-    run(&Wpmbw::new(rlm(p, p[3])?, [p[4], p[5], p[6]])?, u, dt, y);
+    run(&wpmbw(p)?, u, dt, y);
     Ok(())
 }
 
-/// PI thresholds evenly over half the input range (the widest play a sweep opens).
-fn pi_thresholds(u_range: f64) -> [f64; PI_OPERATORS] {
+/// PI thresholds evenly over half the input range (the widest play a sweep opens): the
+/// thresholds of the `pi`, `ppi` and `dpi` fits, from their fixed `u_range` parameter.
+pub fn pi_thresholds(u_range: f64) -> [f64; PI_OPERATORS] {
     core::array::from_fn(|i| (i as f64 + 0.5) / PI_OPERATORS as f64 * 0.5 * u_range)
 }
 
@@ -321,10 +327,14 @@ fn pi_specs(s: &Scales) -> Vec<ParamSpec> {
     v
 }
 
-fn sim_pi(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+/// `pi_specs`' vector as the model.
+pub fn pi(p: &[f64]) -> Result<Pi<f64, PI_OPERATORS>, ParamError> {
     let w: [f64; PI_OPERATORS] = core::array::from_fn(|i| p[1 + i]);
-    let r = pi_thresholds(p[1 + PI_OPERATORS]);
-    run(&Pi::new(p[0], w, r)?, u, dt, y);
+    Pi::new(p[0], w, pi_thresholds(p[1 + PI_OPERATORS]))
+}
+
+fn sim_pi(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+    run(&pi(p)?, u, dt, y);
     Ok(())
 }
 
@@ -339,10 +349,14 @@ fn ppi_specs(s: &Scales) -> Vec<ParamSpec> {
     v
 }
 
-fn sim_ppi(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+/// `ppi_specs`' vector as the model.
+pub fn ppi(p: &[f64]) -> Result<Ppi<f64, PI_OPERATORS>, ParamError> {
     let w: [f64; PI_OPERATORS] = core::array::from_fn(|i| p[2 + i]);
-    let r = pi_thresholds(p[2 + PI_OPERATORS]);
-    run(&Ppi::new(p[0], p[1], w, r)?, u, dt, y);
+    Ppi::new(p[0], p[1], w, pi_thresholds(p[2 + PI_OPERATORS]))
+}
+
+fn sim_ppi(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+    run(&ppi(p)?, u, dt, y);
     Ok(())
 }
 
@@ -363,16 +377,24 @@ fn dpi_specs(s: &Scales) -> Vec<ParamSpec> {
     v
 }
 
-fn sim_dpi(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+/// `dpi_specs`' vector as the model.
+pub fn dpi(p: &[f64]) -> Result<Dpi<f64, PI_OPERATORS, DPI_DEAD_ZONES>, ParamError> {
     let n = PI_OPERATORS;
     let w: [f64; PI_OPERATORS] = core::array::from_fn(|i| p[i]);
     let ws: [f64; DPI_DEAD_ZONES] = core::array::from_fn(|k| p[n + k]);
     let r = pi_thresholds(p[n + DPI_DEAD_ZONES]);
-    // Dead zones at 0, 1/3, 2/3 of the output range (one-sided, 001 eq. 9).
-    let yr = p[n + DPI_DEAD_ZONES + 1];
-    let d: [f64; DPI_DEAD_ZONES] = core::array::from_fn(|k| k as f64 / DPI_DEAD_ZONES as f64 * yr);
-    run(&Dpi::new(w, r, ws, d)?, u, dt, y);
+    Dpi::new(w, r, ws, dpi_dead_zones(p[n + DPI_DEAD_ZONES + 1]))
+}
+
+fn sim_dpi(p: &[f64], u: &[f64], dt: f64, y: &mut [f64]) -> Result<(), ParamError> {
+    run(&dpi(p)?, u, dt, y);
     Ok(())
+}
+
+/// Dead-zone thresholds of the `dpi` fit from its fixed `y_range` parameter: 0, 1/3, 2/3 of
+/// the output range (one-sided, 001 eq. 9).
+pub fn dpi_dead_zones(y_range: f64) -> [f64; DPI_DEAD_ZONES] {
+    core::array::from_fn(|k| k as f64 / DPI_DEAD_ZONES as f64 * y_range)
 }
 
 /// Structural BW parameters: `[m, c, k, alpha, beta*gamma, beta*delta, nu]` (beta = 1; only

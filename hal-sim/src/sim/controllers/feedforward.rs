@@ -3,12 +3,14 @@
 //! (or 20 % off them), pipeline in `Mode::Feedforward`, no feedback.
 //!
 //! Only the IMS entries share the stage's model structure (hysteresis family, static
-//! quadratic, creep, coupling); `mbw` runs the MBW identified from the stage's
-//! open-loop record; the others are built by mapping the stage's parameters into their own
-//! model (documented per builder), i.e. they run with a structure mismatch.
+//! quadratic, creep, coupling). `mbw`, `wpmbw`, `pi-inverse`, `ppi-inverse` and
+//! `dpi-inverse` run on the model `piezo fit` identifies from the stage's open-loop record
+//! ([`identified`]), with the fit's output offset, i.e. with a structure mismatch a user
+//! would have too; `multi-ims` maps the stage's CBW and coupling into 003's matrices.
 
-use super::identified::identified;
+use super::identified::{identified, open_loop_record};
 use super::{Controller, Entry, R};
+use crate::ident::fit::{models as fit_models, Fitted};
 use crate::scenario::HysteresisModel;
 use crate::sim::StageInfo;
 use anyhow::{anyhow, Result};
@@ -44,10 +46,10 @@ pub fn entries() -> Vec<Entry> {
         entry!(ImsCbwOff20, "ims-cbw with every hysteresis/creep/coupling parameter +20 % (d from calibration)", ims_off20),
         entry!(ImsCbwBare, "IMS on the hysteresis model only (no quadratic, creep, decoupler)", ims_bare),
         entry!(Mbw, "002 feedforward without inversion (eq. 8-12, k_p = 1), MBW identified by piezo fit from the open-loop record", mbw_no_inverse),
-        entry!(Wpmbw, "004 direct WPMBW inverse + inverse resonance + prefilter; MBW mapped from the CBW loop", wpmbw),
-        entry!(PiInverse, "exact PI inverse; PI fitted to the stage's major loop (Masing)", pi_inverse),
-        entry!(PpiInverse, "PPI inverse by bounded solve; same fit, c1 = 0", ppi),
-        entry!(DpiInverse, "exact DPI inverse; same fit, one dead zone at 0", dpi),
+        entry!(Wpmbw, "004 direct WPMBW inverse + inverse resonance + prefilter; WPMBW identified by piezo fit from the open-loop record (linear if not invertible), resonance the stage's", wpmbw),
+        entry!(PiInverse, "exact PI inverse; PI identified by piezo fit from the open-loop record (linear if not invertible)", pi_inverse),
+        entry!(PpiInverse, "PPI inverse by bounded solve; PPI identified by piezo fit from the open-loop record (c1 < 0 taken as 0; linear if not invertible)", ppi),
+        entry!(DpiInverse, "exact DPI inverse; DPI identified by piezo fit from the open-loop record (linear if not invertible)", dpi),
         entry!(MultiIms, "multivariable IMS U = D^-1(y+h) (003 eq. 16) with D, A, B, Gamma = C*diag(.)", multi_ims),
     ]
 }
@@ -267,24 +269,57 @@ fn mbw_no_inverse<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     Ok(controller(ff))
 }
 
-/// MBW (004 eq. 6) with the CBW loop's saturated slope `d`, half width `h_max` and slope
-/// after a reversal `d - 2*alpha*beta/(beta+gamma)` (004 eq. 16: `k_w = lambda/mu`,
-/// `b_w = (lambda - rho*mu)/(rho*mu*lambda)`; after a reversal from the band edge
-/// `dw/du = rho/(2 - rho*mu/lambda)`); `c2` from the stage's quadratic term.
+/// The fit `piezo fit --model name` makes of the scenario's open-loop record
+/// ([`identified`]) and its parameter vector, checked for the stage's orientation (`y`
+/// rising with `u`) and for the vector's length.
+fn fit_of(s: &StageInfo, name: &str, len: usize) -> Result<(Fitted, Vec<f64>)> {
+    let f = identified(s, name)?;
+    let p = f.values();
+    anyhow::ensure!(
+        f.sign > 0.0 && p.len() == len,
+        "the {name} fit of {} has the wrong orientation (sign {}) or shape ({} parameters)",
+        s.scenario.name,
+        f.sign,
+        p.len()
+    );
+    Ok((f, p))
+}
+
+/// The compensator `built`, or, when the identified model cannot be inverted (a record that
+/// does not excite the stage, e.g. a hold, or a fit outside the inverse's conditions), the
+/// linear feedforward of the calibrated stage, said on stderr.
+fn or_linear<const N: usize>(
+    s: &StageInfo,
+    name: &str,
+    built: Result<Controller<N>>,
+) -> Result<Controller<N>> {
+    built.or_else(|err| {
+        eprintln!(
+            "{name} on {}: {err:#}; running the linear feedforward instead",
+            s.scenario.name
+        );
+        Ok(controller(MultiFeedforward::PerAxis(super::linear_ff(s))))
+    })
+}
+
+fn r_array<const K: usize>(a: &[f64; K]) -> [R; K] {
+    a.map(|x| x as R)
+}
+
+/// 004's direct inverse (eq. 17-18, 27-28) of the WPMBW (`L = 3`) that `piezo fit --model
+/// wpmbw` identifies from the scenario's open-loop record ([`identified`]); the inverse
+/// resonance is the stage's (the open-loop record, slow, does not excite it).
 fn wpmbw<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
-    let m = stage_cbw(s)?;
-    let kw = m.d();
-    let bw = m.h_bound();
-    let rev = m.d() - m.max_h_slope();
-    // rev = rho/(2 - rho/kw)  =>  rho = 2*rev*kw/(kw + rev)
-    let rho = 2.0 * rev * kw / (kw + rev);
-    // bw = (lambda - rho*mu)/(rho*mu*lambda) with lambda = kw*mu  =>  mu = (kw - rho)/(rho*kw*bw)
-    let mu = (kw - rho) / (rho * kw * bw);
-    let lambda = kw * mu;
-    let c2 = s.hysteresis().asym_um_per_v2 / (kw * kw);
+    or_linear(s, "wpmbw", wpmbw_identified(s))
+}
+
+fn wpmbw_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    let (_, p) = fit_of(s, "wpmbw", 7)?;
+    let m = fit_models::wpmbw(&p).map_err(e)?;
+    let rlm = m.mbw();
     let model = Wpmbw::new(
-        MbwRlm::new(rho as R, lambda as R, mu as R).map_err(e)?,
-        [1.0 as R, c2 as R],
+        MbwRlm::new(rlm.rho() as R, rlm.lambda() as R, rlm.mu() as R).map_err(e)?,
+        r_array(m.coefficients()),
     )
     .map_err(e)?;
     let res = &s.scenario.stage.resonance;
@@ -311,94 +346,111 @@ fn wpmbw<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     Ok(controller(ff))
 }
 
-/// Operators of the PI fit.
-const PI_OPS: usize = 12;
+/// Parameters of the `pi` fit: `w0`, the weights, the fixed `u_range`.
+const PI_LEN: usize = fit_models::PI_OPERATORS + 2;
 
-/// PI (001 eq. 4-5) fitted to the stage's static part by the Masing rule: a PI's branch
-/// after a reversal is `2*phi(du/2)`, `phi` its loading curve, so
-/// `phi(x) = R(2x)/2` with `R` the stage's descending major branch from the top. Slopes
-/// of `phi` on `PI_OPS` equal intervals give `w0` and the weights.
-fn pi_fit(s: &StageInfo) -> Result<(R, [R; PI_OPS], [R; PI_OPS])> {
-    let hy = s.hysteresis();
-    let (lo, hi) = s.volts_range();
-    let m = stage_cbw(s)?;
-    let q = hy.asym_um_per_v2;
-    let y = |st: &mut BwState<f64>, u: f64| m.step(st, u, 1.0) + q * u * u;
-    // Major loop: rise to the top twice, then sample the descent.
-    let mut st = m.init(lo);
-    for _ in 0..2 {
-        for k in 0..=1000 {
-            y(&mut st, lo + (hi - lo) * k as f64 / 1000.0);
-        }
-        for k in 0..=1000 {
-            y(&mut st, hi - (hi - lo) * k as f64 / 1000.0);
-        }
-    }
-    for k in 0..=1000 {
-        y(&mut st, lo + (hi - lo) * k as f64 / 1000.0);
-    }
-    let top = y(&mut st, hi);
-    let half = 0.5 * (hi - lo);
-    let dx = half / PI_OPS as f64;
-    // phi at the interval ends x_j = j*dx
-    let mut phi = [0.0f64; PI_OPS + 1];
-    let mut stc = st;
-    for (j, p) in phi.iter_mut().enumerate().skip(1) {
-        *p = 0.5 * (top - y(&mut stc, hi - 2.0 * dx * j as f64));
-    }
-    let slope = |j: usize| (phi[j + 1] - phi[j]) / dx;
-    let w0 = slope(0);
-    let mut w = [0.0 as R; PI_OPS];
-    let mut r = [0.0 as R; PI_OPS];
-    for j in 1..PI_OPS {
-        w[j - 1] = (slope(j) - slope(j - 1)) as R;
-        r[j - 1] = (dx * j as f64) as R;
-    }
-    // Last operator: a zero-weight placeholder past the fitted range.
-    w[PI_OPS - 1] = 0.0;
-    r[PI_OPS - 1] = (dx * PI_OPS as f64) as R;
-    Ok((w0 as R, w, r))
+/// Exact inverse (Kuhnen) of the PI that `piezo fit --model pi` identifies from the
+/// scenario's open-loop record.
+fn pi_inverse<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    or_linear(s, "pi-inverse", pi_inverse_identified(s))
 }
 
-fn pi_inverse<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
-    let (w0, w, r) = pi_fit(s)?;
-    let pi = Pi::new(w0, w, r).map_err(e)?;
+fn pi_inverse_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    let (f, p) = fit_of(s, "pi", PI_LEN)?;
+    let m = fit_models::pi(&p).map_err(e)?;
+    let pi = Pi::new(m.w0() as R, r_array(m.weights()), r_array(m.thresholds())).map_err(e)?;
     let (lo, hi) = volts(s);
     let ff = per_axis_or_decoupled(s, NOMINAL, true, || {
         Ok(Feedforward::PiInverse(
-            PiInverse::new(&pi, lo, hi).map_err(e)?,
+            PiInverse::new(&pi, lo, hi)
+                .and_then(|c| c.with_offset(f.offset as R))
+                .map_err(e)?,
         ))
     })?;
     Ok(controller(ff))
 }
 
+/// Inverse by bounded solve of the PPI (cubic `c1*u^3 + c2*u` and PI) that `piezo fit
+/// --model ppi` identifies from the scenario's open-loop record. The inverse needs
+/// `c1 >= 0` (`y` increasing for every `u`); a negative fitted `c1` is taken as 0.
 fn ppi<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
-    let (w0, w, r) = pi_fit(s)?;
-    let m = Ppi::new(0.0, w0, w, r).map_err(e)?;
+    or_linear(s, "ppi-inverse", ppi_identified(s))
+}
+
+fn ppi_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    let (fit, p) = fit_of(s, "ppi", PI_LEN + 1)?;
+    let f = fit_models::ppi(&p).map_err(e)?;
+    let m = Ppi::new(
+        f.c1().max(0.0) as R,
+        f.c2() as R,
+        r_array(f.pi().weights()),
+        r_array(f.pi().thresholds()),
+    )
+    .map_err(e)?;
     let (lo, hi) = volts(s);
     let ff = per_axis_or_decoupled(s, NOMINAL, true, || {
         Ok(Feedforward::PpiInverse(
-            ppi_inverse(&m, lo, hi, dt(s)).map_err(e)?,
+            ppi_inverse(&m, lo, hi, dt(s))
+                .and_then(|c| c.with_offset(fit.offset as R))
+                .map_err(e)?,
         ))
     })?;
     Ok(controller(ff))
 }
 
+/// Exact inverse of the DPI (PI, then three one-sided dead zones) that `piezo fit --model
+/// dpi` identifies from the scenario's open-loop record.
+///
+/// The fit may land on the mirrored form the inverse refuses: a decreasing PI `P` behind a
+/// negative first (linear) dead-zone weight `ws_1`. When `P` stays below the second dead
+/// zone all over that record, the fitted model there is `ws_1*P`, so the compensator
+/// inverts the same model written invertibly: the PI `ws_1*P` behind the dead zones
+/// `[1, 0, 0]` (same thresholds). Otherwise the fit is refused.
 fn dpi<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
-    let (w0, w, r) = pi_fit(s)?;
-    // DPI's PI has no linear term: carry w0 on a 1 mV operator.
-    let mut wd = [0.0 as R; PI_OPS];
-    let mut rd = [0.0 as R; PI_OPS];
-    wd[0] = w0;
-    rd[0] = 1e-3;
-    wd[1..].copy_from_slice(&w[..PI_OPS - 1]);
-    rd[1..].copy_from_slice(&r[..PI_OPS - 1]);
-    let m = Dpi::new(wd, rd, [1.0 as R], [0.0 as R]).map_err(e)?;
+    or_linear(s, "dpi-inverse", dpi_identified(s))
+}
+
+fn dpi_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    let (fit, p) = fit_of(
+        s,
+        "dpi",
+        fit_models::PI_OPERATORS + fit_models::DPI_DEAD_ZONES + 2,
+    )?;
+    let f = fit_models::dpi(&p).map_err(e)?;
     let (lo, hi) = volts(s);
+    let build = |w: [f64; fit_models::PI_OPERATORS], ws: [f64; fit_models::DPI_DEAD_ZONES]| {
+        Dpi::new(
+            w.map(|x| x as R),
+            r_array(f.pi().thresholds()),
+            ws.map(|x| x as R),
+            r_array(f.dead_zone_thresholds()),
+        )
+        .and_then(|m| DpiInverse::new(&m, lo, hi))
+        .and_then(|c| c.with_offset(fit.offset as R))
+        .map_err(e)
+    };
+    let inverse = match build(*f.pi().weights(), *f.dead_zone_weights()) {
+        Ok(c) => c,
+        Err(refused) => {
+            let ws1 = f.dead_zone_weights()[0];
+            let rec = open_loop_record(s)?;
+            let mut pi_out = vec![0.0; rec.u[0].len()];
+            fit_models::run(f.pi(), &rec.u[0], rec.dt(), &mut pi_out);
+            let p_max = pi_out.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let d2 = f.dead_zone_thresholds()[1];
+            anyhow::ensure!(
+                ws1 < 0.0 && p_max < d2,
+                "the identified DPI of {} is not invertible ({refused}) and not its mirror \
+                 (ws_1 {ws1}, PI output up to {p_max} against the second dead zone at {d2})",
+                s.scenario.name
+            );
+            let mut ws = [0.0; fit_models::DPI_DEAD_ZONES];
+            ws[0] = 1.0;
+            build(f.pi().weights().map(|w| ws1 * w), ws)?
+        }
+    };
     let ff = per_axis_or_decoupled(s, NOMINAL, true, || {
-        Ok(Feedforward::DpiInverse(
-            DpiInverse::new(&m, lo, hi).map_err(e)?,
-        ))
+        Ok(Feedforward::DpiInverse(inverse.clone()))
     })?;
     Ok(controller(ff))
 }
