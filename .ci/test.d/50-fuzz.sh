@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# Short fuzz runs (20 s each) of the serial command parser, the CSV record reader and the
+# Short fuzz runs (10 s each) of the serial command parser, the CSV record reader and the
 # stored-settings reader (decode, then all-or-nothing install) and the recorder's bulk-transfer
 # packet decoder.
 # The full campaign (10 min each): FUZZ_SECONDS=600 bash .ci/test.d/50-fuzz.sh
 # cargo-fuzz needs a nightly toolchain; where none is installed (and none can be fetched)
 # this step says so and skips.
 set -euo pipefail
-secs=${FUZZ_SECONDS:-20}
+secs=${FUZZ_SECONDS:-10}
 if ! rustup run nightly rustc --version >/dev/null 2>&1; then
   echo "fuzz: skipped, no nightly toolchain on this machine"
   exit 0
