@@ -1,7 +1,8 @@
-# Sourced by the steps that run the release-speed CLI: builds it as 45-diagnose's
-# `cargo test --profile host -p hal-sim` did (integration tests build the `piezo` binary with
-# the dev-dependencies' features), so after that step it is fresh; `cargo build -p hal-sim
-# --bin piezo` would compile hal-sim again with other dependency features. Sets $piezo.
+# Sourced by the steps that run the release-speed CLI: builds it as 60-fit-benchmark's
+# `cargo test --profile host -p hal-sim` does (integration tests build the `piezo` binary with
+# the dev-dependencies' features), so one host-profile build serves every step; `cargo build
+# -p hal-sim --bin piezo` would compile hal-sim again with other dependency features. The
+# first step that sources it (46) pays that build: about 300 s of a clean CI run. Sets $piezo.
 host_piezo_log=$(mktemp)
 if ! cargo test --profile host -q -p hal-sim --test diagnose_rate --no-run >"$host_piezo_log" 2>&1; then
   cat "$host_piezo_log"
