@@ -536,10 +536,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Voltage (V) for the reference `y_ref_um`. A non-finite reference holds the output.
     #[inline]
     pub fn compensate(&mut self, y_ref_um: T) -> T {
+        // Checked after the offset: a finite reference far out may overflow with it.
+        let y_ref_um = y_ref_um - self.offset_um;
         if !y_ref_um.is_finite() {
             return self.u;
         }
-        let y_ref_um = y_ref_um - self.offset_um;
         let y_ref_um = match &self.creep {
             Some(c) => c.static_target(y_ref_um),
             None => y_ref_um,

@@ -92,6 +92,17 @@ pub struct PiInverse<T: Real> {
     u: T,
 }
 
+/// The model output (offset excluded) an inverse of `y = offset_um + M[u]` restarts at for
+/// the output `y_um`; a non-finite `y_um` restarts at the model's zero.
+fn model_output<T: Real>(y_um: T, offset_um: T) -> T {
+    let y = y_um - offset_um;
+    if y.is_finite() {
+        y
+    } else {
+        T::ZERO
+    }
+}
+
 impl<T: Real> PiInverse<T> {
     /// Inverse of `pi` for voltages in `volts_min..volts_max`; starts at rest at 0 V.
     pub fn new<const N: usize>(pi: &Pi<T, N>, volts_min: T, volts_max: T) -> Result<Self, FfError> {
@@ -133,12 +144,11 @@ impl<T: Real> PiInverse<T> {
 
     #[inline]
     pub fn compensate(&mut self, y_ref_um: T) -> T {
-        if !y_ref_um.is_finite() {
+        let y = y_ref_um - self.offset_um;
+        if !y.is_finite() {
             return self.u;
         }
-        let u = self
-            .inv
-            .step(&mut self.state, y_ref_um - self.offset_um, T::ONE);
+        let u = self.inv.step(&mut self.state, y, T::ONE);
         self.u = if u.is_finite() {
             u.clamp_to(self.volts_min, self.volts_max)
         } else {
@@ -160,12 +170,7 @@ impl<T: Real> PiInverse<T> {
 
     /// Restart at rest (operators centred) at output `y_um`.
     pub fn reset(&mut self, y_um: T) {
-        let y = if y_um.is_finite() {
-            y_um
-        } else {
-            self.offset_um
-        };
-        self.reset_model(y - self.offset_um);
+        self.reset_model(model_output(y_um, self.offset_um));
     }
 
     /// Restart at rest at the model output `y` (offset excluded).
@@ -325,10 +330,11 @@ impl<T: Real> DpiInverse<T> {
 
     #[inline]
     pub fn compensate(&mut self, y_ref_um: T) -> T {
-        if !y_ref_um.is_finite() {
+        let y = y_ref_um - self.offset_um;
+        if !y.is_finite() {
             return self.u;
         }
-        let p = self.dead_zone_inverse(y_ref_um - self.offset_um);
+        let p = self.dead_zone_inverse(y);
         let v = self.inv.step(&mut self.state, p, T::ONE);
         if !v.is_finite() {
             return self.u;
@@ -344,12 +350,7 @@ impl<T: Real> DpiInverse<T> {
 
     /// Restart at rest at output `y_um` (operators centred).
     pub fn reset(&mut self, y_um: T) {
-        let y = if y_um.is_finite() {
-            y_um
-        } else {
-            self.offset_um
-        };
-        self.reset_model(y - self.offset_um);
+        self.reset_model(model_output(y_um, self.offset_um));
     }
 
     /// Restart at rest at the model output `y` (offset excluded).
