@@ -107,6 +107,8 @@ pub struct MultiIms<T, const N: usize, const K: usize> {
     volts_min: T,
     volts_max: T,
     dt_s: T,
+    /// Output offsets of the model (`y = offset_um + model(U)`, see [`MultiIms::with_offset`]).
+    offset_um: [T; N],
     state: MultiBwState<T, N, K>,
     iters: usize,
 }
@@ -130,8 +132,20 @@ impl<T: Real, const N: usize, const K: usize> MultiIms<T, N, K> {
             volts_min,
             volts_max,
             dt_s,
+            offset_um: [T::ZERO; N],
             iters: 0,
         })
+    }
+
+    /// The same IMS for a model `y = offset_um + model(U)` (`piezo fit` fits an output
+    /// offset per output): the references are taken relative to it.
+    pub fn with_offset(mut self, offset_um: [T; N]) -> Result<Self, FfError> {
+        super::ensure(
+            offset_um.iter().all(|o| o.is_finite()),
+            "multivariable IMS: offset_um must be finite",
+        )?;
+        self.offset_um = offset_um;
+        Ok(self)
     }
 
     /// The pseudo-inverse `D^+` computed at construction.
@@ -173,9 +187,15 @@ impl<T: Real, const N: usize, const K: usize> MultiIms<T, N, K> {
 
     /// Voltages (V) for the references (um). Any non-finite reference holds the output.
     pub fn compensate(&mut self, y_ref: &[T; N]) -> [T; K] {
-        if !y_ref.iter().all(|y| y.is_finite()) {
+        let mut rel = *y_ref;
+        for (r, &o) in rel.iter_mut().zip(self.offset_um.iter()) {
+            *r -= o;
+        }
+        // Checked after the subtraction: an overflowing reference holds the output too.
+        if !rel.iter().all(|y| y.is_finite()) {
             return self.state.u;
         }
+        let y_ref = &rel;
         let mut u = self.ims(y_ref, &self.state.h);
         self.iters = 0;
         if self.closure == ImsLoop::Solved {
@@ -255,7 +275,8 @@ impl<T: Real, const N: usize, const K: usize> MultiIms<T, N, K> {
     /// Restart relaxed at the voltages that give `y` with `h = 0`.
     pub fn reset(&mut self, y: &[T; N]) {
         let mut y0 = *y;
-        for v in y0.iter_mut() {
+        for (v, &o) in y0.iter_mut().zip(self.offset_um.iter()) {
+            *v -= o;
             if !v.is_finite() {
                 *v = T::ZERO;
             }
@@ -358,6 +379,32 @@ mod tests {
         assert!(solved < 1e-9, "{solved}");
         assert!(iters <= MAX_MULTI_ITER);
         assert!(delayed > 100.0 * solved, "{delayed}");
+    }
+
+    #[test]
+    fn offset_shifts_the_reference_and_an_overflow_holds() {
+        let m = coupled_2x2();
+        let mk = || MultiIms::new(m, ImsLoop::Solved, -500.0, 500.0, 1e-4).unwrap();
+        let mut plain = mk();
+        let mut shifted = mk().with_offset([3.0, -2.0]).unwrap();
+        for k in 0..200 {
+            let y = [0.0625 * k as f64, -0.03125 * k as f64]; // exact in f64 with the offsets
+            let u = plain.compensate(&y);
+            // The model with the offset gives `offset + y` for the same voltages.
+            assert_eq!(shifted.compensate(&[y[0] + 3.0, y[1] - 2.0]), u);
+        }
+        let held = shifted.volts();
+        assert_eq!(
+            shifted.compensate(&[f64::MAX, 0.0]),
+            held,
+            "finite reference"
+        );
+        let mut neg = mk().with_offset([f64::MAX, 0.0]).unwrap();
+        assert_eq!(neg.compensate(&[-f64::MAX, 0.0]), neg.volts(), "overflow");
+        assert!(mk().with_offset([f64::NAN, 0.0]).is_err());
+        // Reset relative to the offset: y = offset is the relaxed zero-voltage state.
+        shifted.reset(&[3.0, -2.0]);
+        assert_eq!(shifted.volts(), [0.0, 0.0]);
     }
 
     #[test]

@@ -6,9 +6,10 @@
 //! quadratic, creep, coupling). `mbw`, `wpmbw`, `pi-inverse`, `ppi-inverse` and
 //! `dpi-inverse` run on the model `piezo fit` identifies from the stage's open-loop record
 //! ([`identified`]), with the fit's output offset, i.e. with a structure mismatch a user
-//! would have too; `multi-ims` maps the stage's CBW and coupling into 003's matrices.
+//! would have too; `multi-ims` runs on 003's multivariable Bouc-Wen identified the same
+//! way from the record of every axis (`piezo fit --model cbw`).
 
-use super::identified::{identified, open_loop_record};
+use super::identified::{identified, identified_multibw, open_loop_record};
 use super::{Controller, Entry, R};
 use crate::ident::fit::{models as fit_models, Fitted};
 use crate::scenario::HysteresisModel;
@@ -50,7 +51,7 @@ pub fn entries() -> Vec<Entry> {
         entry!(PiInverse, "exact PI inverse; PI identified by piezo fit from the open-loop record (linear if not invertible)", pi_inverse),
         entry!(PpiInverse, "PPI inverse by bounded solve; PPI identified by piezo fit from the open-loop record (c1 < 0 taken as 0; linear if not invertible)", ppi),
         entry!(DpiInverse, "exact DPI inverse; DPI identified by piezo fit from the open-loop record (linear if not invertible)", dpi),
-        entry!(MultiIms, "multivariable IMS U = D^-1(y+h) (003 eq. 16) with D, A, B, Gamma = C*diag(.)", multi_ims),
+        entry!(MultiIms, "multivariable IMS U = D^+(y+h) (003 eq. 16); D, A, B, Gamma identified by piezo fit --model cbw from the open-loop record of every axis (003 sec. IV)", multi_ims),
     ]
 }
 
@@ -215,18 +216,6 @@ fn ims_bare<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
         ims_axis(s, ImsLoop::Solved, NOMINAL, false)
     })?;
     Ok(controller(ff))
-}
-
-/// The stage's CBW; on a stage of another family the least-squares CBW of its loop
-/// ([`super::models::fitted_cbw`], the CBW the feedback laws get there too).
-fn stage_cbw(s: &StageInfo) -> Result<Cbw<f64>> {
-    let hy = s.hysteresis();
-    if hy.model == HysteresisModel::Cbw {
-        return Cbw::new(hy.d, hy.alpha, hy.beta, hy.gamma, hy.n).map_err(e);
-    }
-    let (lo, hi) = s.volts_range();
-    let (d, a, b, g, n) = super::models::fitted_cbw(hy, lo, hi)?;
-    Cbw::new(d, a, b, g, n).map_err(e)
 }
 
 /// 002's compensator (eq. 8-12, `k_p = 1`) on the MBW that `piezo fit --model mbw002`
@@ -455,22 +444,50 @@ fn dpi_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
     Ok(controller(ff))
 }
 
+/// 003's multivariable IMS (eq. 16-19) on the model `piezo fit --model cbw` identifies
+/// from the scenario's open-loop record of every axis, with the fit's output offsets: on one
+/// axis the CBW (003's step 1 alone), on two the multivariable Bouc-Wen of 003 sec. IV
+/// ([`identified_multibw`]). Linear feedforward if the fit fails or does not invert.
 fn multi_ims<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
-    let m = stage_cbw(s)?;
-    let c = coupling::<N>(s, NOMINAL).unwrap_or_else(|| {
-        core::array::from_fn(|i| core::array::from_fn(|j| if i == j { 1.0 } else { 0.0 }))
-    });
-    let scaled = |x: f64| -> [[R; N]; N] {
-        core::array::from_fn(|i| core::array::from_fn(|j| c[i][j] * x as R))
+    or_linear(s, "multi-ims", multi_ims_identified(s))
+}
+
+fn multi_ims_identified<const N: usize>(s: &StageInfo) -> Result<Controller<N>> {
+    let to_r = |m: &[Vec<f64>]| -> [[R; N]; N] {
+        core::array::from_fn(|i| core::array::from_fn(|j| m[i][j] as R))
     };
-    let model = MultiBw::new(
-        scaled(m.d()),
-        scaled(m.alpha()),
-        scaled(m.beta()),
-        scaled(m.gamma()),
-    )
-    .map_err(e)?;
+    let (d, a, b, g, offset) = if N == 1 {
+        let f = identified(s, "cbw")?;
+        let p = f.values(); // d, alpha, beta, gamma/beta
+        anyhow::ensure!(
+            f.sign > 0.0 && p.len() == 4,
+            "the CBW fit of {} has the wrong orientation (sign {})",
+            s.scenario.name,
+            f.sign
+        );
+        let one = |x: f64| vec![vec![x]];
+        (
+            one(p[0]),
+            one(p[1]),
+            one(p[2]),
+            one(p[3] * p[2]),
+            vec![f.offset],
+        )
+    } else {
+        let f = identified_multibw(s)?;
+        anyhow::ensure!(
+            f.outputs == N && f.inputs == N,
+            "the multivariable fit of {} is {} x {}, the scenario has {N} axes",
+            s.scenario.name,
+            f.outputs,
+            f.inputs
+        );
+        (f.d, f.a, f.b, f.gamma, f.offset)
+    };
+    let model = MultiBw::new(to_r(&d), to_r(&a), to_r(&b), to_r(&g)).map_err(e)?;
     let (lo, hi) = volts(s);
-    let ims = MultiIms::new(model, ImsLoop::Solved, lo, hi, dt(s)).map_err(e)?;
+    let ims = MultiIms::new(model, ImsLoop::Solved, lo, hi, dt(s))
+        .and_then(|m| m.with_offset(core::array::from_fn(|i| offset[i] as R)))
+        .map_err(e)?;
     Ok(controller(MultiFeedforward::Ims(ims)))
 }
