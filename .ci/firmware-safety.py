@@ -23,6 +23,8 @@ Builds the firmware with nightly `-Z emit-stack-sizes` (same link flags as
     the check for a handler. Thread mode is reported per task (init, idle), with and
     without its panic paths (panic-probe logs through core::fmt, whose candidate set
     recurses, then halts).
+  * HardFault entry: MSP set to the vector table's initial SP before any instruction
+    touches the stack (also with --itcm-only).
 The worst case of the whole system: init runs alone (interrupts off until its last
 instruction); afterwards thread mode (idle, or init's own frame before it returns) plus,
 per preemption level, the largest handler of that level and the 104-byte exception frame.
@@ -62,7 +64,8 @@ CONTROL = re.compile(r"piezo_core::pipeline::Pipeline\W.*::step(::h[0-9a-f]{16})
 # (`Pipeline::restart`, #[cold]): it and what only it reaches may stay in flash (ITCM is 64 KB
 # and the two-axis build's per-sample code alone nearly fills it).
 COLD = re.compile(r"piezo_core::pipeline::Pipeline\W.*::restart(::h[0-9a-f]{16})?$")
-# The NMI (-2) and HardFault (-1) preempt every configurable level: their stacks add on top.
+# The NMI (-2) and HardFault (-1) preempt every configurable level: their stacks add on top,
+# except a HardFault that first moves MSP to the stack's top (checked: `hardfault_entry`).
 PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1, "NonMaskableInt": -2, "HardFault": -1}
 
 
@@ -173,7 +176,7 @@ def call_graph(elf):
             graph[f] = {thunk_target(f)} - {f}
             indirect.pop(f, None)
     local = {f: local_targets(code.get(f, [])) for f in indirect}
-    return graph, indirect, consts, local
+    return graph, indirect, consts, local, code
 
 
 # Instructions that write no core register other than through base writeback.
@@ -252,6 +255,52 @@ def local_targets(code):
             states += nxt
     return found
 
+def sections(elf):
+    """(name, type, flags, address, file offset, size) of every section."""
+    with open(elf, "rb") as f:
+        data = f.read()
+    shoff, = struct.unpack_from("<I", data, 0x20)
+    shentsize, shnum, shstrndx = struct.unpack_from("<HHH", data, 0x2E)
+    secs = [struct.unpack_from("<10I", data, shoff + i * shentsize) for i in range(shnum)]
+    strtab = secs[shstrndx][4]
+    out = []
+    for name_off, typ, flags, address, off, size, *_ in secs:
+        out.append((data[strtab + name_off:data.index(b"\0", strtab + name_off)].decode(), typ, flags, address, off, size))
+    return data, out
+
+
+def word_at(elf, address):
+    """The 32-bit word the image holds at `address` (None outside its loaded bytes)."""
+    data, secs = sections(elf)
+    for name, typ, flags, at, off, size in secs:
+        if typ != 8 and flags & 2 and at <= address and address + 4 <= at + size:  # not NOBITS
+            return int.from_bytes(data[off + address - at:off + address - at + 4], "little")
+    return None
+
+
+def hardfault_entry(elf, code):
+    """Issue 27 item 3: the HardFault moves MSP to a known-good stack (the vector table's
+    initial SP) before any instruction touches the stack, since a stack overflow enters it
+    with SP at the RAM's edge and a fault inside it locks the core up. Returns (ok, why)."""
+    ins = code.get("HardFault", [])
+    loaded = {}
+    for at, mn, ops in ins:
+        if mn == "msr" and ops.replace(" ", "").startswith("msp,"):
+            reg = ops.split(",")[1].strip()
+            initial = word_at(elf, next(a for n, t, f, a, o, sz in sections(elf)[1] if n == ".vector_table"))
+            if reg not in loaded:
+                return False, f"`msr msp, {reg}` with {reg} not loaded from a literal"
+            if loaded[reg] != initial:
+                return False, f"MSP set to {loaded[reg]:#x}, the vector table's initial SP is {initial:#x}"
+            return True, f"MSP = {initial:#x} (the initial SP) before any stack use"
+        m = re.fullmatch(r"(r\d+), \[pc, #(-?0x[0-9a-f]+|-?\d+)\].*", ops)
+        if mn in ("ldr", "ldr.w") and m:
+            loaded[m.group(1)] = word_at(elf, ((at + 4) & ~3) + int(m.group(2), 0))
+            continue
+        return False, f"`{mn} {ops}` before MSP is set to a known-good stack"
+    return False, "no `msr msp` in the HardFault entry" if ins else "no HardFault symbol"
+
+
 def address_taken(elf, addr, consts):
     """Functions whose start address (Thumb bit set) can reach a register other than by a
     direct branch: as a 32-bit word at any byte offset of an allocated section except the
@@ -289,17 +338,21 @@ def main():
     heap = sorted({l.split()[-1] for l in syms.splitlines() if HEAP.search(l)})
     print(f"firmware: {os.path.relpath(elf, ROOT)}{' (features ' + features + ')' if features else ''}")
     print(f"heap: {'none linked' if not heap else 'LINKED: ' + ', '.join(heap)}")
-    graph, indirect, consts, local = call_graph(elf)
+    graph, indirect, consts, local, code_of = call_graph(elf)
     cand = address_taken(elf, addr, consts)
     # A function whose every indirect call takes its register from movw/movt constants of
     # its own straight-line code calls only those; others may call any address-taken one.
     targets = lambda f: cand if local.get(f) is None or not local[f] <= {a | 1 for a in addr} else sorted(addr[a & ~1] for a in local[f])
     addr_of = {f: a for a, f in addr.items()}
     sizes = stack_sizes(elf)
+    fresh, why = hardfault_entry(elf, code_of)
+    print(f"HardFault entry: {'PASS' if fresh else 'FAIL'}: {why}")
+    if fresh:
+        sizes["HardFault"] = 0  # the assembly entry: no push before its branch
     # Thread mode (Reset -> main: init, then idle) first, then the exception/interrupt handlers.
     handlers = vector_table(elf, addr)
     handlers = ["main" if "main" in graph else handlers[0]] + handlers[1:]
-    ok = not heap
+    ok = not heap and fresh
 
     def reach(root):
         """Reachable functions with the caller that first reached each (BFS: shortest chains)."""
@@ -379,7 +432,7 @@ def main():
     # ITCM before anything runs, lies in flash.
     itcm_hi = 0x0001_0000
     if "--itcm-only" in args:  # a build without stack sizes (the release build's own ELF)
-        ok = not heap
+        ok = not heap and fresh
     for h in handlers[1:]:
         if not any(CONTROL.search(name(f)) for f in reach(h)):
             continue
@@ -450,7 +503,8 @@ def main():
     init_own = sizes.get(init) if init else None
     levels = {}
     for h, n, panics, ind, w, thread in rows:
-        if thread or h not in PRIORITY:
+        # A HardFault that moves to the stack's top first does not nest: it starts over.
+        if thread or h not in PRIORITY or h == "HardFault" and fresh:
             continue
         levels[PRIORITY[h]] = None if w is None or levels.get(PRIORITY[h], 0) is None else max(levels.get(PRIORITY[h], 0), w)
     print("stack per task (bytes):")
@@ -466,6 +520,8 @@ def main():
         if None not in levels.values() and tasks["idle", np] is not None and init_own is not None:
             nested = max(tasks["idle", np], own_main + init_own) + sum(v + EXC_FRAME for v in levels.values())
             total = None if tasks["init", np] is None else max(nested, tasks["init", np])
+            hf = next((w for h, n, p, i, w, t in rows if h == "HardFault"), 0) if fresh else 0
+            total = None if total is None or hf is None else max(total, hf)
         print(f"worst-case stack, whole system{' without thread-mode panic paths' if np else ''}: {fmt(total)}"
               f" (interrupts on: max(idle, main+init frame {own_main + (init_own or 0)}) + per level handler"
               f" + {EXC_FRAME} B frame = {fmt(nested)}; init runs with interrupts off)")

@@ -31,7 +31,7 @@ build() {
   cargo h743 "$@" # .cargo/config.toml: target-cpu=cortex-m7, target/m7
   cp "$elf" "$work/$name.elf"
   # The per-sample path lies in ITCM in the build that is flashed (stable's symbol scheme).
-  python3 .ci/firmware-safety.py --elf "$work/$name.elf" --itcm-only | grep -E '^(ADC1_2|TIM2|ITCM|__pre_init|firmware ITCM|  in flash)'
+  python3 .ci/firmware-safety.py --elf "$work/$name.elf" --itcm-only | grep -E '^(HardFault entry|ADC1_2|TIM2|ITCM|__pre_init|firmware ITCM|  in flash)'
   "$size" -A "$work/$name.elf" | grep -E '^(section|\.vector_table|\.text|\.rodata|\.data|\.bss|\.uninit)' || true
   "$size" -B "$work/$name.elf" | awk -v n="$name" 'NR==2 {printf "firmware (H743, %s): flash %d bytes (text+data), RAM %d bytes (data+bss, stack not included)\n", n, $1+$2, $2+$3}'
 }
