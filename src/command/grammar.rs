@@ -229,6 +229,32 @@ pub enum Command<'a> {
     Defaults,
 }
 
+impl Command<'_> {
+    /// A query that changes nothing (no setting, mode, reference, recorder or fault):
+    /// answered while a `save`/`load` is under way, which refuses every other command
+    /// (the record on its way to the flash and the live settings stay the same).
+    pub fn reads_only(&self) -> bool {
+        matches!(
+            self,
+            Command::Empty
+                | Command::Ping
+                | Command::Help
+                | Command::Get(_)
+                | Command::Axis(None)
+                | Command::TableLen
+                | Command::Stats
+                | Command::Fault
+                | Command::Rec(
+                    RecCmd::Status
+                        | RecCmd::Read { .. }
+                        | RecCmd::Bin { .. }
+                        | RecCmd::Divider(None)
+                        | RecCmd::Length(None)
+                )
+        )
+    }
+}
+
 /// Up to [`MAX_WORDS`] words of a line, without allocation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Words<'a> {

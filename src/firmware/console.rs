@@ -283,7 +283,8 @@ impl<C: Converters> CommandLine<C> {
         let mut reply = command::Reply::<REPLY_LEN>::new();
         match line.and_then(command::parse) {
             Ok(Command::Empty) => return false,
-            Ok(_) if self.flash_pending => reply.push_error(Error::Busy),
+            // A `save` (an erase takes seconds) refuses only what would change state.
+            Ok(c) if self.flash_pending && !c.reads_only() => reply.push_error(Error::Busy),
             Ok(Command::Bench) => match port.bench() {
                 Ok(rows) => {
                     reply.push_str("ok bench ");
