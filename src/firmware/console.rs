@@ -217,12 +217,9 @@ impl<C: Converters> CommandLine<C> {
         F: embedded_storage::nor_flash::NorFlash,
     {
         let mut buf = [0u8; MAX_RECORD];
-        let got = flash.load(&mut buf);
-        match self.install_loaded(got, &buf, ctl) {
-            Ok(_) => Boot::Loaded,
-            Err(Error::NoSettings) => Boot::Empty,
-            Err(e) => Boot::Refused(e),
-        }
+        let got = flash.boot_load(&mut buf);
+        let installed = self.install_loaded(got, &buf, ctl);
+        Boot::of(flash, installed)
     }
 
     /// The command task's side of a `save`/`load` (call it on every run of the task; the

@@ -46,6 +46,8 @@ pub struct RamNor<const SIZE: usize, const ERASE: usize, const WRITE: usize> {
     powered: bool,
     /// Bytes changed (programmed or erased) since start (the cut points of a test).
     pub changed: usize,
+    /// Erases asked since start (an H743 sector erase takes seconds).
+    pub erases: usize,
 }
 
 impl<const SIZE: usize, const ERASE: usize, const WRITE: usize> RamNor<SIZE, ERASE, WRITE> {
@@ -56,6 +58,7 @@ impl<const SIZE: usize, const ERASE: usize, const WRITE: usize> RamNor<SIZE, ERA
             budget: None,
             powered: true,
             changed: 0,
+            erases: 0,
         }
     }
 
@@ -150,6 +153,7 @@ impl<const SIZE: usize, const ERASE: usize, const WRITE: usize> NorFlash
     const ERASE_SIZE: usize = ERASE;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), NorError> {
+        self.erases += 1;
         let len = (to as usize)
             .checked_sub(from as usize)
             .ok_or(NorError::OutOfBounds)?;
@@ -176,22 +180,56 @@ impl<const SIZE: usize, const ERASE: usize, const WRITE: usize> NorFlash
 }
 
 /// A blocking flash seen through `embedded-storage-async`'s traits (each future is ready on
-/// its first poll; see [`super::storage::block_on`]).
-pub struct Blocking<F>(pub F);
+/// its first poll; see [`super::storage::block_on`]), whose erases can be refused: at boot,
+/// where an H743 sector erase (2-4 s) would outlast the 100 ms boot watchdog, a repair that
+/// needs one stops there, untouched, like a power loss just before it.
+pub struct Blocking<F> {
+    pub flash: F,
+    /// Erases answer [`FlashError::EraseRefused`] (and change nothing).
+    pub refuse_erase: bool,
+    /// An erase was refused since this was last cleared.
+    pub erase_refused: bool,
+}
+
+impl<F> Blocking<F> {
+    pub const fn new(flash: F) -> Self {
+        Self {
+            flash,
+            refuse_erase: false,
+            erase_refused: false,
+        }
+    }
+}
+
+/// The flash's own error, or an erase [`Blocking`] refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FlashError<E> {
+    Flash(E),
+    EraseRefused,
+}
+
+impl<E: NorFlashError> NorFlashError for FlashError<E> {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            FlashError::Flash(e) => e.kind(),
+            FlashError::EraseRefused => NorFlashErrorKind::Other,
+        }
+    }
+}
 
 impl<F: ErrorType> ErrorType for Blocking<F> {
-    type Error = F::Error;
+    type Error = FlashError<F::Error>;
 }
 
 impl<F: ReadNorFlash> embedded_storage_async::nor_flash::ReadNorFlash for Blocking<F> {
     const READ_SIZE: usize = F::READ_SIZE;
 
     async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        self.0.read(offset, bytes)
+        self.flash.read(offset, bytes).map_err(FlashError::Flash)
     }
 
     fn capacity(&self) -> usize {
-        self.0.capacity()
+        self.flash.capacity()
     }
 }
 
@@ -200,11 +238,15 @@ impl<F: NorFlash> embedded_storage_async::nor_flash::NorFlash for Blocking<F> {
     const ERASE_SIZE: usize = F::ERASE_SIZE;
 
     async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        self.0.erase(from, to)
+        if self.refuse_erase {
+            self.erase_refused = true;
+            return Err(FlashError::EraseRefused);
+        }
+        self.flash.erase(from, to).map_err(FlashError::Flash)
     }
 
     async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        self.0.write(offset, bytes)
+        self.flash.write(offset, bytes).map_err(FlashError::Flash)
     }
 }
 

@@ -183,7 +183,7 @@ impl<F: NorFlash> SettingsFlash<F> {
             return Err(Error::Flash);
         }
         Ok(Self {
-            map: MapStorage::new(Blocking(flash), config, Cache::new_uncached()),
+            map: MapStorage::new(Blocking::new(flash), config, Cache::new_uncached()),
             work: [0; WORK],
         })
     }
@@ -218,7 +218,35 @@ impl<F: NorFlash> SettingsFlash<F> {
 
     /// The flash back (tests: a reboot is a new [`SettingsFlash`] over the same flash).
     pub fn into_flash(self) -> F {
-        self.map.destroy().0 .0
+        self.map.destroy().0.flash
+    }
+
+    /// [`Self::load`] at boot: every erase refused, since an H743 sector erase (2-4 s)
+    /// outlasts the boot watchdog (100 ms) and a repair `sequential-storage` starts after
+    /// an interrupted save may erase a sector. `Err(Error::Flash)` with
+    /// [`Self::needs_repair`] true: the repair needs that erase; [`Self::repair`] does it
+    /// from idle, where the running loop feeds the watchdog.
+    pub fn boot_load(&mut self, out: &mut [u8; MAX_RECORD]) -> Result<Option<usize>, Error> {
+        let b = self.map.flash();
+        (b.refuse_erase, b.erase_refused) = (true, false);
+        let got = self.load(out);
+        self.map.flash().refuse_erase = false;
+        got
+    }
+
+    /// The last [`Self::boot_load`] stopped at an erase its repair needs.
+    pub fn needs_repair(&mut self) -> bool {
+        self.map.flash().erase_refused
+    }
+
+    /// The repair a [`Self::boot_load`] could not finish (erases allowed: idle only): a
+    /// load, whose record is not installed (`load` does that); `Ok(true)` when a record is
+    /// stored.
+    pub fn repair(&mut self) -> Result<bool, Error> {
+        let mut buf = [0u8; MAX_RECORD];
+        let got = self.load(&mut buf)?;
+        self.map.flash().erase_refused = false;
+        Ok(got.is_some())
     }
 }
 
@@ -232,6 +260,22 @@ pub enum Boot {
     /// A record was there but refused (damaged, stale, invalid values) or the flash failed:
     /// the defaults run (warn the user).
     Refused(Error),
+    /// An interrupted save left the flash in a state whose repair erases a sector, which
+    /// boot does not do (the watchdog): the defaults run, idle repairs
+    /// ([`SettingsFlash::repair`]), and `load` then installs the stored record.
+    Repair,
+}
+
+impl Boot {
+    /// What a boot-time install (of [`SettingsFlash::boot_load`]'s record) came to.
+    pub fn of<F: NorFlash, T>(flash: &mut SettingsFlash<F>, installed: Result<T, Error>) -> Self {
+        match installed {
+            Ok(_) => Boot::Loaded,
+            Err(_) if flash.needs_repair() => Boot::Repair,
+            Err(Error::NoSettings) => Boot::Empty,
+            Err(e) => Boot::Refused(e),
+        }
+    }
 }
 
 impl<C: Converters> Loop<C> {
@@ -352,12 +396,16 @@ impl<C: Converters> Loop<C> {
         Ok(n)
     }
 
-    /// At power-up: the stored settings if a valid record is there, else the defaults.
+    /// At power-up: the stored settings if a valid record is there, else the defaults. No
+    /// erase ([`SettingsFlash::boot_load`]).
     pub fn boot_settings<F: NorFlash>(&mut self, flash: &mut SettingsFlash<F>) -> Boot {
-        match self.load_settings(flash) {
-            Ok(()) => Boot::Loaded,
-            Err(Error::NoSettings) => Boot::Empty,
-            Err(e) => Boot::Refused(e),
-        }
+        let mut buf = [0u8; MAX_RECORD];
+        let got = flash.boot_load(&mut buf);
+        Boot::of(
+            flash,
+            got.and_then(|n| n.ok_or(Error::NoSettings))
+                .and_then(|n| decode(buf.get(..n).ok_or(Error::BadSettings)?))
+                .and_then(|rec| self.apply_settings(&rec)),
+        )
     }
 }

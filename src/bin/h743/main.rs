@@ -250,6 +250,8 @@ mod app {
         work: FlashWork,
         /// The last boot faulted reading the settings: idle erases them first.
         erase_settings: bool,
+        /// The boot's read stopped at an erase its repair needs: idle repairs first.
+        repair_settings: bool,
     }
 
     #[init]
@@ -502,6 +504,7 @@ mod app {
             Budget::m4f(SYSCLK_HZ / SAMPLE_HZ, OVERHEAD_CYCLES),
         );
         let faulted_before = super::settings::mark_read(true);
+        let mut repair_settings = false;
         match settings.as_mut() {
             None => defmt::warn!("settings: no settings flash (bank 2), defaults"),
             // Erased from idle (about 4 s: longer than the boot watchdog; the loop feeds
@@ -516,6 +519,11 @@ mod app {
                     "settings: stored record refused (err {=u8}), defaults",
                     e.code()
                 ),
+                // The erase (seconds) runs in idle, where the loop feeds the watchdog.
+                Boot::Repair => {
+                    repair_settings = true;
+                    defmt::warn!("settings: an interrupted save needs a repair: defaults; idle repairs, then `load`")
+                }
             },
         }
         super::settings::mark_read(false);
@@ -558,6 +566,7 @@ mod app {
                 settings,
                 work: FlashWork::new(),
                 erase_settings: faulted_before,
+                repair_settings,
             },
         )
     }
@@ -630,11 +639,20 @@ mod app {
     /// `save`/`load` on the settings flash, and timing and overruns over defmt once per
     /// second (DWT cycle counter), from thread mode: the only context besides `init` that
     /// logs or touches the flash.
-    #[idle(shared = [ctl, job], local = [settings, work, erase_settings])]
+    #[idle(shared = [ctl, job], local = [settings, work, erase_settings, repair_settings])]
     fn idle(mut cx: idle::Context) -> ! {
         if let (true, Some(f)) = (*cx.local.erase_settings, cx.local.settings.as_mut()) {
             let erased = f.erase_all().is_ok();
             defmt::warn!("settings: sectors erased ({=bool})", erased);
+        }
+        if let (true, Some(f)) = (*cx.local.repair_settings, cx.local.settings.as_mut()) {
+            match f.repair() {
+                Ok(stored) => defmt::warn!(
+                    "settings: repaired, a record stored: {=bool} (`load` installs it)",
+                    stored
+                ),
+                Err(e) => defmt::warn!("settings: repair failed (err {=u8})", e.code()),
+            }
         }
         let mut last = DWT::cycle_count();
         loop {

@@ -563,6 +563,13 @@ mod app {
                 );
                 uart::line("warn settings: stored record refused, defaults in use");
             }
+            // QEMU's RAM flash starts empty: no save was ever interrupted. Repaired at once
+            // here (no watchdog), not from idle as on the H743.
+            Boot::Repair => {
+                let stored = settings.repair();
+                defmt::warn!("settings: repaired ({=bool}), defaults", stored.is_ok());
+                uart::line("warn settings: the flash was repaired, defaults in use; `load` installs the stored record");
+            }
         }
         (
             Shared {
