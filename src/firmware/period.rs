@@ -38,6 +38,12 @@ pub trait Clock {
     fn since_trigger(&self, _now: u32) -> Option<u32> {
         None
     }
+    /// Whole control periods from one trigger to a later one (both read by
+    /// [`Clock::since_trigger`]), on a counter that spans periods (the H743's DWT);
+    /// `None` on one that wraps every period (QEMU's SysTick).
+    fn periods_between(&self, _from: u32, _to: u32) -> Option<u32> {
+        None
+    }
 }
 
 /// One control period, from the interrupt that says a sample is ready: read the ADCs, step
@@ -66,19 +72,107 @@ where
         }
         io.amplifier(ctl.lp.p.state().fault.is_none());
         ctl.record(code, dac_code);
-        let late = lost || clock.next_due();
+        let t = &mut ctl.timing;
+        // Samples lost entirely: the trigger counter wraps every period, so a period that
+        // starts a whole period late reads its trigger a period late, and the gap between
+        // two periods' triggers counts the periods that got no run of their own.
+        let trigger = delay.map(|d| t0.wrapping_sub(d));
+        let missed = match (t.last_trigger, trigger) {
+            (Some(from), Some(to)) => clock
+                .periods_between(from, to)
+                .map_or(0, |n| n.saturating_sub(1)),
+            _ => 0,
+        };
+        t.last_trigger = trigger;
+        let late = lost || missed > 0 || clock.next_due();
         let isr = clock.elapsed(t0, clock.now());
         let late = late || isr > clock.period();
-        let t = &mut ctl.timing;
         t.step.record(clock.elapsed(t1, t2));
         t.isr.record(isr);
         if let Some(d) = delay {
             t.delay.record(d);
         }
-        if late {
-            t.overruns = t.overruns.wrapping_add(1);
-        }
+        t.lost = t.lost.wrapping_add(missed);
+        // A converter's own lost flag (the ADC's overrun) may name the same lost sample.
+        t.overruns = t.overruns.wrapping_add(missed.max(u32::from(late)));
         ctl.periods = ctl.periods.wrapping_add(1);
         !late
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::firmware::{c, OnChip, SAMPLE_HZ};
+    use core::cell::Cell;
+    use rtic_core::Exclusive;
+
+    const PERIOD: u32 = 4000;
+
+    /// A board whose counter spans periods (as the H743's DWT) and whose trigger counter
+    /// wraps every period (as its TIM2): `now` is set per period by the test.
+    struct Board {
+        now: Cell<u32>,
+        spans: bool,
+    }
+
+    impl Clock for Board {
+        fn now(&self) -> u32 {
+            self.now.get()
+        }
+        fn elapsed(&self, start: u32, end: u32) -> u32 {
+            end.wrapping_sub(start)
+        }
+        fn period(&self) -> u32 {
+            PERIOD
+        }
+        fn since_trigger(&self, now: u32) -> Option<u32> {
+            Some(now % PERIOD)
+        }
+        fn periods_between(&self, from: u32, to: u32) -> Option<u32> {
+            self.spans
+                .then(|| (to.wrapping_sub(from) + PERIOD / 2) / PERIOD)
+        }
+    }
+
+    struct Converters;
+
+    impl Io for Converters {
+        fn sample(&mut self) -> ([i32; AXES], bool) {
+            ([0; AXES], false)
+        }
+        fn write(&mut self, _: [i32; AXES]) -> [Option<i32>; AXES] {
+            [None; AXES]
+        }
+    }
+
+    /// Periods starting at these counter readings: (lost, overruns).
+    fn run(starts: &[u32], spans: bool) -> (u32, u32) {
+        let mut ctl = crate::firmware::Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
+        let clock = Board {
+            now: Cell::new(0),
+            spans,
+        };
+        for &s in starts {
+            clock.now.set(s);
+            control_period(&mut Converters, &clock, &mut Exclusive(&mut ctl));
+        }
+        (ctl.timing.lost, ctl.timing.overruns)
+    }
+
+    #[test]
+    fn a_sample_lost_entirely_is_counted() {
+        // On time, and late within their own period: nothing lost.
+        assert_eq!(
+            run(&[10, PERIOD + 10, 2 * PERIOD + 3900, 3 * PERIOD + 20], true),
+            (0, 0)
+        );
+        // The third trigger passed without a run: its period started after the fourth
+        // trigger, where the wrapping trigger counter reads a small delay.
+        assert_eq!(run(&[10, PERIOD + 10, 3 * PERIOD + 30], true), (1, 1));
+        // Three triggers without a run.
+        assert_eq!(run(&[10, 4 * PERIOD + 30], true), (3, 3));
+        // A counter that wraps every period cannot tell (QEMU's SysTick).
+        assert_eq!(run(&[10, 4 * PERIOD + 30], false), (0, 0));
+    }
 }

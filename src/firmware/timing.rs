@@ -45,8 +45,15 @@ pub struct Timing {
     /// From the period's trigger to the control interrupt's first reading of the counter
     /// (boards whose counter tells, [`super::Clock::since_trigger`]; else no samples).
     pub delay: CycleStats,
-    /// Samples whose processing missed the deadline (the next sample was due or lost).
+    /// Samples whose processing missed the deadline (the next sample was due or lost; a
+    /// period after `n` samples lost entirely counts `n`).
     pub overruns: u32,
+    /// Samples lost entirely, seen from the gap between two periods' triggers (boards whose
+    /// counter spans periods, [`super::Clock::periods_between`]).
+    pub lost: u32,
+    /// The last period's trigger on the board's counter (`None`: none yet, or no board
+    /// clock that tells).
+    pub last_trigger: Option<u32>,
 }
 
 impl Timing {
@@ -56,6 +63,8 @@ impl Timing {
             isr: CycleStats::new(),
             delay: CycleStats::new(),
             overruns: 0,
+            lost: 0,
+            last_trigger: None,
         }
     }
 }

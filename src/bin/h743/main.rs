@@ -164,11 +164,25 @@ mod board {
         pub clock: Dwt,
     }
 
-    /// The DWT cycle counter (core clock).
+    /// The DWT cycle counter (core clock), and TIM2's counter for the time since the
+    /// control interrupt's trigger.
     pub struct Dwt {
         /// The deadline: core cycles per sample period.
         pub period_cycles: u32,
+        /// Core cycles per TIM2 tick (SYSCLK / TIM2's kernel clock).
+        pub cycles_per_tick: u32,
+        /// TIM2 ticks per period (ARR + 1).
+        pub ticks: u32,
+        /// TIM2's count at the trigger: 0 on-chip (the update event starts the ADC), CCR1
+        /// with SPI converters (CNV falls, the compare interrupt runs the control task).
+        pub trigger_count: u32,
     }
+
+    /// The control task's interrupt: pending again means the next sample is due.
+    #[cfg(not(feature = "spi-converters"))]
+    pub const CONTROL_IRQ: pac::Interrupt = pac::Interrupt::ADC1_2;
+    #[cfg(feature = "spi-converters")]
+    pub const CONTROL_IRQ: pac::Interrupt = pac::Interrupt::TIM2;
 
     impl Clock for Dwt {
         #[inline(always)]
@@ -182,6 +196,33 @@ mod board {
         #[inline(always)]
         fn period(&self) -> u32 {
             self.period_cycles
+        }
+        /// The control interrupt pending again (its flag is cleared by the period's
+        /// sample read, so this is the next trigger).
+        #[inline(always)]
+        fn next_due(&self) -> bool {
+            cortex_m::peripheral::NVIC::is_pending(CONTROL_IRQ)
+        }
+        /// TIM2's count since the trigger, in core cycles (modulo one period: a start a
+        /// whole period late reads small, which `periods_between` then shows).
+        #[inline(always)]
+        fn since_trigger(&self, _now: u32) -> Option<u32> {
+            // SAFETY: a read of TIM2_CNT, which no read changes (the control task owns
+            // TIM2; reading its counter has no side effect).
+            #[allow(unsafe_code)]
+            let cnt = unsafe { (*pac::TIM2::ptr()).cnt.read().bits() };
+            let ticks = cnt
+                .wrapping_add(self.ticks)
+                .wrapping_sub(self.trigger_count)
+                .checked_rem(self.ticks)?;
+            Some(ticks.wrapping_mul(self.cycles_per_tick))
+        }
+        /// Whole periods between two triggers on the DWT counter (wraps after 10 s).
+        #[inline(always)]
+        fn periods_between(&self, from: u32, to: u32) -> Option<u32> {
+            to.wrapping_sub(from)
+                .wrapping_add(self.period_cycles / 2)
+                .checked_div(self.period_cycles)
         }
     }
 
@@ -537,8 +578,18 @@ mod app {
         // The on-chip DAC loads its output on TIM2's trigger from now on.
         #[cfg(not(feature = "spi-converters"))]
         safe::dac1::trigger_from_tim2();
-        // TIM2 last: from here on samples arrive.
+        // No stale flag before the first sample: a conversion or compare event left from the
+        // set-up would run the first period on an old sample or at the wrong time.
         let mut io = io;
+        clear_control_flags(&mut io);
+        let tim = io.timer.inner();
+        let ticks = tim.arr.read().arr().bits().wrapping_add(1);
+        #[cfg(not(feature = "spi-converters"))]
+        let trigger_count = 0;
+        #[cfg(feature = "spi-converters")]
+        let trigger_count = tim.ccr1().read().ccr().bits();
+        let cycles_per_tick = SYSCLK_HZ / ccdr.clocks.timx_ker_ck().raw().max(1);
+        // TIM2 last: from here on samples arrive.
         io.timer.resume();
         safe::amp::set(false); // on from the first period without a fault
         let hw = Hw {
@@ -546,6 +597,9 @@ mod app {
             watchdog,
             clock: Dwt {
                 period_cycles: SYSCLK_HZ / SAMPLE_HZ,
+                cycles_per_tick,
+                ticks,
+                trigger_count,
             },
         };
 
@@ -569,6 +623,29 @@ mod app {
                 repair_settings,
             },
         )
+    }
+
+    /// Clears the converters' and TIM2's event flags and the control interrupt's pending
+    /// bit (interrupts are still off: RTIC enables them after `init`).
+    fn clear_control_flags(io: &mut Io) {
+        #[cfg(not(feature = "spi-converters"))]
+        {
+            // ADC_ISR: write 1 to clear (EOC, EOS, OVR).
+            io.adc
+                .inner()
+                .isr
+                .write(|w| w.eoc().set_bit().eos().set_bit().ovr().set_bit());
+            #[cfg(feature = "xy")]
+            io.adc2
+                .inner()
+                .isr
+                .write(|w| w.eoc().set_bit().eos().set_bit().ovr().set_bit());
+        }
+        // TIM2_SR: write 0 to clear (update, compare and capture flags).
+        // SAFETY: 0 clears every flag; no reserved bit is set.
+        #[allow(unsafe_code)]
+        io.timer.inner().sr.write(|w| unsafe { w.bits(0) });
+        cortex_m::peripheral::NVIC::unpend(super::CONTROL_IRQ);
     }
 
     /// TIM2's period to exactly 1 / SAMPLE_HZ: the HAL loads ARR with the tick count, but
@@ -669,9 +746,9 @@ mod app {
             last = last.wrapping_add(SYSCLK_HZ);
             let t = cx.shared.ctl.lock(|c| c.timing);
             defmt::info!(
-                "step cycles min {} max {} last {} | isr min {} max {} last {} | samples {} overruns {}",
+                "step cycles min {} max {} last {} | isr min {} max {} last {} | start after trigger max {} | samples {} overruns {} lost {}",
                 t.step.min, t.step.max, t.step.last, t.isr.min, t.isr.max, t.isr.last,
-                t.isr.count, t.overruns
+                t.delay.max, t.isr.count, t.overruns, t.lost
             );
         }
     }

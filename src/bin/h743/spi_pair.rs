@@ -34,14 +34,13 @@ impl firmware::Io for Io {
     /// the pipeline's range check takes the safe state), and whether a period was lost.
     #[inline(always)]
     fn sample(&mut self) -> ([i32; AXES], bool) {
-        let tim = self.timer.inner();
-        // CC1OF: a CNV edge came while the previous one was still pending.
-        let overrun = tim.sr.read().cc1of().bit_is_set();
-        tim.sr
-            .modify(|_, w| w.cc1if().clear_bit().cc1of().clear_bit());
+        // CC1IF cleared first, so the interrupt pending again means the next CNV. No lost
+        // flag here: CC1OF is set only in input-capture mode (CH1 is PWM); lost samples are
+        // counted from the gap between the periods' triggers (`Dwt::periods_between`).
+        self.timer.inner().sr.modify(|_, w| w.cc1if().clear_bit());
         let code = self.adc.read().unwrap_or(i32::MIN);
         selftest::ADC.store(code, Relaxed);
-        ([code; AXES], overrun)
+        ([code; AXES], false)
     }
 
     /// Writes the DAC register (TIM2 CH2's LDAC edge loads it at the next period's start);
