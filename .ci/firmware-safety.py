@@ -307,15 +307,9 @@ def address_taken(elf, addr, consts):
     vector table (literal pools, vtables, fmt::Arguments, statics), or as a movw/movt pair
     of one function (every low half combined with every high half, a superset of the
     pairs). Only such a function can be the target of `blx rN`."""
-    with open(elf, "rb") as f:
-        data = f.read()
-    shoff, = struct.unpack_from("<I", data, 0x20)
-    shentsize, shnum, shstrndx = struct.unpack_from("<HHH", data, 0x2E)
-    secs = [struct.unpack_from("<10I", data, shoff + i * shentsize) for i in range(shnum)]
-    strtab = secs[shstrndx][4]
+    data, secs = sections(elf)
     words = set().union(*consts.values())
-    for name_off, typ, flags, _, off, size, *_ in secs:
-        nm = data[strtab + name_off:data.index(b"\0", strtab + name_off)].decode()
+    for nm, typ, flags, _, off, size in secs:
         # SHT_PROGBITS with SHF_ALLOC: the bytes in flash (.data holds its initial values).
         if typ != 1 or not flags & 2 or nm == ".vector_table":
             continue
