@@ -26,7 +26,7 @@ def round_():
     out = ["ping", "help"]
     out += [f"get {p}" for p in PARAMS]
     out += [f"set {p} {v}" for p, v in SETS]
-    out += ["cbw 0.16 0.07 0.02 0.01"]
+    out += ["cbw 0.16 0.07 0.02 0.01", "defaults"]
     for law in LAWS:
         out += [f"mode {law}", "rec read 0 8"]
     out += ["mode ff+hgo-robust"]

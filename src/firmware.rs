@@ -90,3 +90,33 @@ macro_rules! recorder_storage {
         }
     };
 }
+
+/// Defines the `HardFault` symbol (the vector table's entry) as an assembly entry that sets
+/// MSP to the stack's top (`_stack_start`, the vector table's initial SP) before anything
+/// touches the stack, then branches to `$halt` (an `extern "C" fn() -> !`: the board's safe
+/// state). flip-link puts the stack at the bottom of RAM, so an overflow faults with SP at
+/// the RAM's edge: the core still enters HardFault, but a push there faults again at
+/// priority -1, a lockup that leaves the DAC where it was until the watchdog resets.
+/// Nothing below the stack's top is needed again: `$halt` never returns. Assembly, since a
+/// Rust function may push in its prologue. Invoke inside a module that allows
+/// `unsafe_code`; `.ci/firmware-safety.py` checks the entry in the H743's ELF and
+/// `30-qemu.sh` overflows the QEMU board's stack.
+#[macro_export]
+macro_rules! hard_fault_entry {
+    ($halt:path) => {
+        core::arch::global_asm!(
+            ".section .HardFault.user, \"ax\"",
+            ".global HardFault",
+            ".type HardFault, %function",
+            ".thumb_func",
+            "HardFault:",
+            "ldr r0, =_stack_start",
+            "msr msp, r0",
+            "isb",
+            "b {halt}",
+            ".ltorg",
+            ".size HardFault, . - HardFault",
+            halt = sym $halt,
+        );
+    };
+}

@@ -125,6 +125,29 @@ panic_run() {
   echo "=== $name: panic handler put the DAC from $before back to the safe code $safe, amplifier off"
 }
 
+# overflow_run <name> <qemu machine> <qemu cpu>: the harness line `overflow` (after 10 000
+# periods, the output driven away from the safe code) recurses until the stack (at the
+# bottom of RAM, flip-link) runs into unmapped memory. The HardFault entry must move MSP to
+# the stack's top before anything is pushed and put the safe code in the DAC model (status
+# 102). A handler that pushes first faults again inside the HardFault: QEMU reports a lockup
+# and aborts (status 134), with the DAC where it was.
+overflow_run() {
+  local name=$1 machine=$2 cpu=$3 status line before after safe
+  local dir="$work/$name-overflow" elf="$work/$name/firmware.elf"
+  mkdir -p "$dir"
+  status=0
+  pipe_run "$dir" "$elf" "$machine" "$cpu" /dev/null 'ping\nwave sine 5 100 30\noverflow\n' || status=$?
+  echo "=== $name: stack overflow"
+  grep -E '^(hardfault|ok)' "$dir/uart.txt" || true
+  [ "$status" -eq 102 ] || { echo "$name: stack overflow ended with status $status, not 102 (134: a lockup in the HardFault)"; exit 1; }
+  line=$(grep -E '^hardfault: dac 0 out ' "$dir/uart.txt") || { echo "$name: no DAC report from the HardFault"; exit 1; }
+  read -r before after safe <<<"$(sed -E 's/^hardfault: dac 0 out (-?[0-9]+) -> (-?[0-9]+) safe (-?[0-9]+) amp off$/\1 \2 \3/' <<<"$line")"
+  [ "$before" != "$safe" ] || { echo "$name: the DAC was at the safe code before the overflow: the check would prove nothing"; exit 1; }
+  [ "$after" = "$safe" ] || { echo "$name: after the overflow the DAC model holds $after, not the safe code $safe"; exit 1; }
+  echo "=== $name: stack overflow: the HardFault put the DAC from $before back to the safe code $safe, amplifier off"
+}
+
 run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4 250
 panic_run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4
+overflow_run m4f-f32 mps2-an386 cortex-m4
 run m3-q16 thumbv7m-none-eabi mps2-an385 cortex-m3 1525

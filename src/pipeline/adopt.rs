@@ -46,6 +46,10 @@ impl Parts {
     const fn any(self, other: Self) -> bool {
         self.0 & other.0 != 0
     }
+    /// These parts less `other`'s.
+    pub const fn without(self, other: Self) -> Self {
+        Self(self.0 & !other.0)
+    }
 }
 
 impl<T: Real, const N: usize> Pipeline<T, N> {

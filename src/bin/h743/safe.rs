@@ -167,29 +167,10 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 }
 
 // A HardFault (a bus fault, a stack overflow caught by flip-link, ...): the safe state,
-// from a known-good stack. flip-link puts the stack at the bottom of DTCM, so an overflow
-// faults with SP at the RAM's start; the core still enters HardFault, but any push there
-// faults again at priority -1, a lockup that leaves the DAC where it was until the
-// watchdog resets. So the entry sets MSP to the stack's top (`_stack_start`, the vector
-// table's initial SP) before anything touches the stack: nothing below is needed again,
-// `halt` never returns. Written in assembly because a Rust function may push in its
-// prologue; `.ci/firmware-safety.py` checks the entry in the ELF.
+// from a known-good stack (the entry moves MSP to the stack's top first).
 #[allow(unsafe_code)]
 mod hard_fault {
-    core::arch::global_asm!(
-        ".section .HardFault.user, \"ax\"",
-        ".global HardFault",
-        ".type HardFault, %function",
-        ".thumb_func",
-        "HardFault:",
-        "ldr r0, =_stack_start",
-        "msr msp, r0",
-        "isb",
-        "b {halt}",
-        ".ltorg",
-        ".size HardFault, . - HardFault",
-        halt = sym super::hard_fault_halt,
-    );
+    piezo_core::hard_fault_entry!(super::hard_fault_halt);
 }
 
 /// The HardFault's safe state, entered from the assembly entry on the fresh stack.

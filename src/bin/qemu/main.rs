@@ -112,6 +112,9 @@ mod board {
     /// The harness line that forces a panic (after [`PERIODS_MIN`] periods, so the DAC has
     /// left its safe code): the panic handler must put the safe code back (CI checks it).
     const PANIC_LINE: &[u8] = b"panic";
+    /// The harness line that overflows the stack (after [`PERIODS_MIN`] periods): the
+    /// HardFault entry must reach the safe state on a fresh stack (CI checks it).
+    const OVERFLOW_LINE: &[u8] = b"overflow";
     /// The DAC's safe code (the pipeline's safe voltage at the DAC's own scale), set in
     /// `init` before anything else, read by the panic handler.
     pub static SAFE_CODE: AtomicI32 = AtomicI32::new(0);
@@ -122,6 +125,7 @@ mod board {
     /// The harness asked (serial task) to end the run or to panic (idle acts on it).
     pub static EXIT: AtomicBool = AtomicBool::new(false);
     pub static PANIC: AtomicBool = AtomicBool::new(false);
+    pub static OVERFLOW: AtomicBool = AtomicBool::new(false);
     /// Replies sent (serial task), read by idle.
     pub static ANSWERED: AtomicU32 = AtomicU32::new(0);
     /// The harness line that starts a command flood (resets the timing) and the one that
@@ -372,6 +376,7 @@ mod board {
             match line {
                 EXIT_LINE => EXIT.store(true, Relaxed),
                 PANIC_LINE => PANIC.store(true, Relaxed),
+                OVERFLOW_LINE => OVERFLOW.store(true, Relaxed),
                 FLOOD_START => self.flood = Some(true),
                 FLOOD_STOP => self.flood = Some(false),
                 _ => match wait_periods(line) {
@@ -430,6 +435,38 @@ mod board {
     /// (CI checks it is the safe code) and the run ends with status 101.
     #[panic_handler]
     fn panic(info: &core::panic::PanicInfo) -> ! {
+        safe_state("panic");
+        defmt::error!("panic: {}", defmt::Display2Format(info));
+        uart::line("panic");
+        semihosting::process::exit(101)
+    }
+
+    // A HardFault (the harness' stack overflow among them): the safe state from a fresh
+    // stack, reported as the panic is, then status 102.
+    #[allow(unsafe_code)]
+    mod hard_fault {
+        piezo_core::hard_fault_entry!(super::hard_fault);
+    }
+
+    extern "C" fn hard_fault() -> ! {
+        safe_state("hardfault");
+        uart::line("hardfault");
+        semihosting::process::exit(102)
+    }
+
+    /// The harness' stack overflow: a recursion that keeps a frame of 256 bytes live per
+    /// level until the stack runs out of RAM (flip-link: into unmapped memory, a bus fault).
+    #[inline(never)]
+    #[allow(unconditional_recursion)]
+    pub fn overflow_stack(depth: u32) -> u32 {
+        let mut frame = [depth as u8; 256];
+        let frame = core::hint::black_box(&mut frame);
+        u32::from(frame[0]).wrapping_add(overflow_stack(depth.wrapping_add(1)))
+    }
+
+    /// Interrupts off, amplifier off, the safe code into every axis' DAC through the driver;
+    /// prints `<tag>: dac <axis> out <before> -> <after> safe <code> amp off`.
+    fn safe_state(tag: &str) {
         cortex_m::interrupt::disable();
         chips::AMP_ON.store(false, Relaxed);
         let safe = SAFE_CODE.load(Relaxed);
@@ -439,7 +476,8 @@ mod board {
         safe_dac::<1>(safe);
         for (axis, before) in before.iter().enumerate().take(firmware::AXES) {
             let mut r = Reply::<120>::new();
-            r.push_str("panic: dac ");
+            r.push_str(tag);
+            r.push_str(": dac ");
             r.push_usize(axis);
             r.push_str(" out ");
             r.push_i32(*before);
@@ -455,9 +493,6 @@ mod board {
             });
             uart::line(r.as_str());
         }
-        defmt::error!("panic: {}", defmt::Display2Format(info));
-        uart::line("panic");
-        semihosting::process::exit(101)
     }
 
     /// Axis `A`'s DAC to `code` through the firmware's driver.
@@ -479,8 +514,8 @@ mod app {
     use super::io::SimIo;
     use super::{
         bench, chips, recorder_storage, settings_flash, uart, Ctl, SettingsNor, SysTickClock, Uart,
-        ANSWERED, EXIT, INSTR_PER_TICK, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE, SYSTICK_HZ,
-        WAIT_UNTIL,
+        ANSWERED, EXIT, INSTR_PER_TICK, OVERFLOW, PANIC, PERIODS_MAX, PERIODS_MIN, SAFE_CODE,
+        SYSTICK_HZ, WAIT_UNTIL,
     };
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
@@ -688,6 +723,9 @@ mod app {
             let answered = ANSWERED.load(Relaxed);
             if PANIC.load(Relaxed) && periods >= PERIODS_MIN {
                 panic!("forced by the harness");
+            }
+            if OVERFLOW.load(Relaxed) && periods >= PERIODS_MIN {
+                super::overflow_stack(0);
             }
             if EXIT.load(Relaxed) && periods >= PERIODS_MIN {
                 finish(&mut cx.shared.ctl, periods, answered, 0);
