@@ -105,49 +105,33 @@ run() {
     piezo_core::drivers::ad5791::Ad5791::set_code
 }
 
-# panic_run <name> <target> <qemu machine> <qemu cpu>: the harness line `panic` (after
-# 10 000 periods, with the output driven away from the safe code by a 30 um sine) forces a
-# panic; the handler must leave the safe code in the DAC model, which prints its output code
-# before and after. Fails if the handler did not write it (the output would keep its code).
-panic_run() {
-  local name=$1 target=$2 machine=$3 cpu=$4 status line before after safe
-  local dir="$work/$name-panic" elf="$work/$name/firmware.elf"
+# fault_run <name> <qemu machine> <qemu cpu> <harness line> <tag> <status>: after 10 000
+# periods, with the output driven away from the safe code by a 30 um sine, the harness line
+# makes the firmware fail; its handler must leave the safe code in the DAC model, which
+# prints its output code before and after (`<tag>: dac 0 out <before> -> <after> safe
+# <code> amp off`), and end the run with <status>. Fails if the handler did not write it.
+#   panic     forces a panic (status 101).
+#   overflow  recurses until the stack (at the bottom of RAM, flip-link) runs into unmapped
+#             memory: the HardFault entry must move MSP to the stack's top before anything
+#             is pushed (status 102). A handler that pushes first faults again inside the
+#             HardFault: QEMU reports a lockup and aborts (status 134), the DAC where it was.
+fault_run() {
+  local name=$1 machine=$2 cpu=$3 harness=$4 tag=$5 want=$6 status line before after safe
+  local dir="$work/$name-$harness" elf="$work/$name/firmware.elf"
   mkdir -p "$dir"
   status=0
-  pipe_run "$dir" "$elf" "$machine" "$cpu" /dev/null 'ping\nwave sine 5 100 30\npanic\n' || status=$?
-  echo "=== $name: forced panic"
-  grep -E '^(panic|ok|chips)' "$dir/uart.txt" || true
-  [ "$status" -eq 101 ] || { echo "$name: forced panic ended with status $status, not 101"; exit 1; }
-  line=$(grep -E '^panic: dac 0 out ' "$dir/uart.txt") || { echo "$name: no DAC report from the panic handler"; exit 1; }
-  read -r before after safe <<<"$(sed -E 's/^panic: dac 0 out (-?[0-9]+) -> (-?[0-9]+) safe (-?[0-9]+) amp off$/\1 \2 \3/' <<<"$line")"
-  [ "$before" != "$safe" ] || { echo "$name: the DAC was at the safe code before the panic: the check would prove nothing"; exit 1; }
-  [ "$after" = "$safe" ] || { echo "$name: after the panic the DAC model holds $after, not the safe code $safe"; exit 1; }
-  echo "=== $name: panic handler put the DAC from $before back to the safe code $safe, amplifier off"
-}
-
-# overflow_run <name> <qemu machine> <qemu cpu>: the harness line `overflow` (after 10 000
-# periods, the output driven away from the safe code) recurses until the stack (at the
-# bottom of RAM, flip-link) runs into unmapped memory. The HardFault entry must move MSP to
-# the stack's top before anything is pushed and put the safe code in the DAC model (status
-# 102). A handler that pushes first faults again inside the HardFault: QEMU reports a lockup
-# and aborts (status 134), with the DAC where it was.
-overflow_run() {
-  local name=$1 machine=$2 cpu=$3 status line before after safe
-  local dir="$work/$name-overflow" elf="$work/$name/firmware.elf"
-  mkdir -p "$dir"
-  status=0
-  pipe_run "$dir" "$elf" "$machine" "$cpu" /dev/null 'ping\nwave sine 5 100 30\noverflow\n' || status=$?
-  echo "=== $name: stack overflow"
-  grep -E '^(hardfault|ok)' "$dir/uart.txt" || true
-  [ "$status" -eq 102 ] || { echo "$name: stack overflow ended with status $status, not 102 (134: a lockup in the HardFault)"; exit 1; }
-  line=$(grep -E '^hardfault: dac 0 out ' "$dir/uart.txt") || { echo "$name: no DAC report from the HardFault"; exit 1; }
-  read -r before after safe <<<"$(sed -E 's/^hardfault: dac 0 out (-?[0-9]+) -> (-?[0-9]+) safe (-?[0-9]+) amp off$/\1 \2 \3/' <<<"$line")"
-  [ "$before" != "$safe" ] || { echo "$name: the DAC was at the safe code before the overflow: the check would prove nothing"; exit 1; }
-  [ "$after" = "$safe" ] || { echo "$name: after the overflow the DAC model holds $after, not the safe code $safe"; exit 1; }
-  echo "=== $name: stack overflow: the HardFault put the DAC from $before back to the safe code $safe, amplifier off"
+  pipe_run "$dir" "$elf" "$machine" "$cpu" /dev/null "ping\nwave sine 5 100 30\n$harness\n" || status=$?
+  echo "=== $name: $harness"
+  grep -E "^($tag|ok|chips)" "$dir/uart.txt" || true
+  [ "$status" -eq "$want" ] || { echo "$name: $harness ended with status $status, not $want"; exit 1; }
+  line=$(grep -E "^$tag: dac 0 out " "$dir/uart.txt") || { echo "$name: no DAC report after $harness"; exit 1; }
+  read -r before after safe <<<"$(sed -E "s/^$tag: dac 0 out (-?[0-9]+) -> (-?[0-9]+) safe (-?[0-9]+) amp off\$/\1 \2 \3/" <<<"$line")"
+  [ "$before" != "$safe" ] || { echo "$name: the DAC was at the safe code before $harness: the check would prove nothing"; exit 1; }
+  [ "$after" = "$safe" ] || { echo "$name: after $harness the DAC model holds $after, not the safe code $safe"; exit 1; }
+  echo "=== $name: $harness: the $tag handler put the DAC from $before back to the safe code $safe, amplifier off"
 }
 
 run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4 250
-panic_run m4f-f32 thumbv7em-none-eabihf mps2-an386 cortex-m4
-overflow_run m4f-f32 mps2-an386 cortex-m4
+fault_run m4f-f32 mps2-an386 cortex-m4 panic panic 101
+fault_run m4f-f32 mps2-an386 cortex-m4 overflow hardfault 102
 run m3-q16 thumbv7m-none-eabi mps2-an385 cortex-m3 1525
