@@ -42,52 +42,49 @@ fn open_loop_axes(s: &StageInfo, axis: Option<usize>) -> Result<crate::record::R
 /// multi-axis scenario: 003's multivariable Bouc-Wen, its two steps and the joint refinement
 /// ([`multibw::identify`]).
 pub fn identified_multibw(s: &StageInfo) -> Result<MultiBwFit> {
-    let key = format!("{:?}", s.scenario);
-    let cached =
-        |v: &Vec<(String, MultiBwFit)>| v.iter().find(|(k, _)| *k == key).map(|(_, f)| f.clone());
-    if let Some(f) = cached(&lock_multi()) {
-        return Ok(f);
-    }
-    let rec = open_loop_axes(s, None)?;
-    let f = multibw::identify(&rec, &FitOptions::default()).with_context(|| {
-        format!(
-            "identifying the multivariable Bouc-Wen on the open-loop record of {}",
-            s.scenario.name
-        )
-    })?;
-    lock_multi().push((key, f.clone()));
-    Ok(f)
-}
-
-fn lock_multi() -> std::sync::MutexGuard<'static, Vec<(String, MultiBwFit)>> {
-    MULTI_FITS.lock().unwrap_or_else(|e| e.into_inner())
+    cached(&MULTI_FITS, format!("{:?}", s.scenario), || {
+        let rec = open_loop_axes(s, None)?;
+        multibw::identify(&rec, &FitOptions::default()).with_context(|| {
+            format!(
+                "identifying the multivariable Bouc-Wen on the open-loop record of {}",
+                s.scenario.name
+            )
+        })
+    })
 }
 
 /// `piezo fit --model name` (default options) on [`open_loop_record`].
 pub fn identified(s: &StageInfo, name: &str) -> Result<Fitted> {
-    let key = format!("{:?} {name}", s.scenario);
+    cached(&FITS, format!("{:?} {name}", s.scenario), || {
+        let rec = open_loop_record(s)?;
+        fit_siso(
+            fit_models::find(name)?,
+            &rec.u[0],
+            &rec.y[0],
+            rec.dt(),
+            &FitOptions::default(),
+        )
+        .with_context(|| {
+            format!(
+                "identifying {name} on the open-loop record of {}",
+                s.scenario.name
+            )
+        })
+    })
+}
+
+/// The fit kept under `key`, or `fit()` kept there.
+fn cached<T: Clone>(
+    cache: &Mutex<Vec<(String, T)>>,
+    key: String,
+    fit: impl FnOnce() -> Result<T>,
+) -> Result<T> {
+    // One push per fit: a panic elsewhere cannot leave the list half written.
+    let lock = || cache.lock().unwrap_or_else(|e| e.into_inner());
     if let Some((_, f)) = lock().iter().find(|(k, _)| *k == key) {
         return Ok(f.clone());
     }
-    let rec = open_loop_record(s)?;
-    let f = fit_siso(
-        fit_models::find(name)?,
-        &rec.u[0],
-        &rec.y[0],
-        rec.dt(),
-        &FitOptions::default(),
-    )
-    .with_context(|| {
-        format!(
-            "identifying {name} on the open-loop record of {}",
-            s.scenario.name
-        )
-    })?;
+    let f = fit()?;
     lock().push((key, f.clone()));
     Ok(f)
-}
-
-fn lock() -> std::sync::MutexGuard<'static, Vec<(String, Fitted)>> {
-    // One push per fit: a panic elsewhere cannot leave the list half written.
-    FITS.lock().unwrap_or_else(|e| e.into_inner())
 }
