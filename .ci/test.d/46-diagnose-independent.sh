@@ -11,5 +11,5 @@ out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cases=()
 for i in $(seq 150 161); do cases+=(--case "$i"); done
-target/host/piezo diagnose-bench --cases 300 --seed 1 "${cases[@]}" --jobs 2 --out "$out" \
+"$piezo" diagnose-bench --cases 300 --seed 1 "${cases[@]}" --jobs 2 --out "$out" \
   --min-exact 0.4 --min-recall 0.6

@@ -24,7 +24,7 @@ check_runs() {
     echo "$sc/$c $(field "$run" rmse_pct)"
   done <<< "$runs"
 }
-out=$(target/host/piezo sim --json --amplitude-um 30 \
+out=$("$piezo" sim --json --amplitude-um 30 \
   --scenario sine-1hz --scenario sine-10hz --scenario sine-50hz --scenario force-37pct \
   --scenario sine-10hz-model+20pct --scenario sine-10hz-model-20pct --scenario sine-10hz-noise10x)
 checked=$(check_runs "$out" 7)
@@ -39,7 +39,7 @@ echo "feedback sim: $(echo "$checked" | wc -l) runs, all voltages inside 0..150 
 # family) ran on the seven scenarios above, and their fits cost 8 s a scenario.
 laws=()
 for c in nmpc-gbw fts-gbw adrc ff+adrc hgo-robust fts nmpc; do laws+=(--controller "$c"); done
-out=$(target/host/piezo sim --json --scenario gbw-asymmetric-10hz --scenario dahl-10hz "${laws[@]}")
+out=$("$piezo" sim --json --scenario gbw-asymmetric-10hz --scenario dahl-10hz "${laws[@]}")
 checked=$(check_runs "$out" 2)
 for sc in gbw-asymmetric-10hz dahl-10hz; do
   for c in nmpc-gbw fts-gbw adrc ff+adrc hgo-robust fts nmpc; do

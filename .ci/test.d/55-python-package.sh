@@ -25,7 +25,7 @@ start=$(date +%s)
 echo "55-python-package: pip install ./hal-sim/python took $(( $(date +%s) - start )) s"
 # Exit code 5 (no test collected) fails the step like any other.
 rc=0
-(cd "$work" && PIEZO_BIN="$repo/target/host/piezo" PIEZO_REQUIRE=1 \
+(cd "$work" && PIEZO_BIN="$piezo" PIEZO_REQUIRE=1 \
   "$py" -m pytest -q -p no:cacheprovider "$repo/hal-sim/python/tests") || rc=$?
 [ "$rc" -eq 0 ] || { echo "55-python-package: pytest exited with $rc"; exit 1; }
 (cd "$work" && "$py" "$repo/hal-sim/python/examples/diagnose_record.py" \

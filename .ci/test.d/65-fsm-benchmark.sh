@@ -3,7 +3,8 @@
 # iterations) for all three levels from realizations r1-r2, scored with the benchmark's rule
 # (simulate from rest, RMSE over the second period, mean over outputs) on the held-back r5
 # of every level. Asserts each level below a bound measured with margin (README,
-# "Fine-steering-mirror benchmark"). Release build; a few minutes on a 2-core machine.
+# "Fine-steering-mirror benchmark"). The dev-profile CLI (.ci/host-piezo.sh); a few minutes
+# on a 2-core machine.
 set -euo pipefail
 D=../shared/data/fsm-benchmark
 if [ ! -d "$D" ]; then
@@ -14,7 +15,7 @@ fi
 if [ -z "${PIEZO:-}" ]; then
     . .ci/host-piezo.sh
 fi
-P=${PIEZO:-target/host/piezo}
+P=${PIEZO:-$piezo}
 OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
 T=()

@@ -1,7 +1,8 @@
 //! `piezo fit --model lfr` on records of a known LFR (a lightly damped mode whose stiffness
 //! hardens with the amplitude) at three levels: it beats the linear model of all levels on a
-//! held-out level by the official rule (`piezo score`), `predict` runs its `fit.json`, and a
-//! broken LFR section is refused with a clear error.
+//! held-out level by the official rule (`piezo score`), `predict` runs its `fit.json`, a
+//! record it diverges on is reported beside the scored ones, and a broken LFR section is
+//! refused with a clear error.
 use hal_sim::ident::ss::lfr::{Basis, Lfr};
 use hal_sim::ident::ss::model::{Block, Modal};
 use hal_sim::ident::ss::score::with_warmup;
@@ -148,6 +149,45 @@ fn lfr_beats_the_linear_model_on_a_held_out_level_and_predict_runs_it() {
         .parse::<f64>()
         .unwrap()
         .is_finite()));
+    // Far outside the training amplitudes the cubic feedback diverges: that record is
+    // reported as not scored, the others keep their score, and the command fails.
+    // (The truth diverges there too: the valid record's input and output, scaled.)
+    let far = dir.join("far.csv");
+    let v = Record::read(&valid).unwrap();
+    let scaled = |x: &[Vec<f64>]| -> Vec<Vec<f64>> {
+        x.iter()
+            .map(|c| c.iter().map(|a| 200.0 * a).collect())
+            .collect()
+    };
+    Record::new(v.t.clone(), scaled(&v.u), scaled(&v.y))
+        .unwrap()
+        .write(&far)
+        .unwrap();
+    let o = piezo(&[
+        "score",
+        "--model",
+        &fitjson,
+        "--record",
+        &d(&valid),
+        "--record",
+        &d(&far),
+    ]);
+    let (out, e) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(!o.status.success(), "{out}");
+    assert!(
+        e.contains("could not be scored on 1 of 2 records") && e.contains("far.csv"),
+        "{e}"
+    );
+    let valid_line = out.lines().find(|l| l.contains("valid.csv")).unwrap();
+    assert!(valid_line.contains("official RMSE"), "{out}");
+    let far_line = out.lines().find(|l| l.contains("far.csv")).unwrap();
+    assert!(
+        far_line.contains("not scored (") && far_line.contains("diverged"),
+        "{out}"
+    );
     // A broken LFR section: refused, naming the matrix.
     let mut j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&fitjson).unwrap()).unwrap();

@@ -37,11 +37,14 @@ pub fn run(args: Args) -> Result<()> {
     let unit = Quantity::Length.internal();
     let mut per_record = Vec::new();
     let mut levels = Vec::new();
+    let mut failed = Vec::new();
     for (path, rec) in args.record.iter().zip(&recs) {
         let n = period_of(rec)?;
         levels.push(record_level(rec, n));
-        let s = match &model {
-            Some(m) => Some(score::official(rec, |u| {
+        // A model that fails on one record (an LFR that diverges) leaves the others scored:
+        // the record says why, its level has no mean, and the command fails at the end.
+        let scored = model.as_ref().map(|m| {
+            score::official(rec, |u| {
                 let r = crate::record::Record {
                     t: (0..u[0].len()).map(|k| k as f64 * rec.dt()).collect(),
                     u: u.to_vec(),
@@ -51,15 +54,25 @@ pub fn run(args: Args) -> Result<()> {
                     unit_note: None,
                 };
                 m.simulate(&r)
-            })?),
-            None => None,
+            })
+        });
+        let (s, error) = match scored {
+            Some(Ok(s)) => (Some(s), None),
+            Some(Err(e)) => {
+                failed.push(format!("{}: {e:#}", path.display()));
+                (None, Some(format!("{e:#}")))
+            }
+            None => (None, None),
         };
         let floor = score::noise_floor(rec);
         if !args.json {
             println!(
-                "{}: level {:.4} V RMS, period {n}: {}noise floor {}",
+                "{}: level {:.4} V RMS, period {n}: {}{}noise floor {}",
                 path.display(),
                 levels.last().unwrap_or(&0.0),
+                error
+                    .as_ref()
+                    .map_or(String::new(), |e| format!("not scored ({e}), ")),
                 s.as_ref().map_or(String::new(), |s| format!(
                     "official RMSE {:.5} {unit} (per period and output {:?}), ",
                     s.mean,
@@ -75,6 +88,7 @@ pub fn run(args: Args) -> Result<()> {
             "record": path.display().to_string(),
             "level_v_rms": levels.last(),
             "official": s,
+            "error": error,
             "noise_floor": floor,
         }));
     }
@@ -84,6 +98,7 @@ pub fn run(args: Args) -> Result<()> {
             let v: Option<Vec<f64>> = g.iter().map(|&i| f(i)).collect();
             v.map(|v| v.iter().sum::<f64>() / v.len().max(1) as f64)
         };
+        // No mean over a level with a record the model failed on.
         let official = mean(&|i| per_record[i]["official"]["mean"].as_f64());
         let floor = mean(&|i| per_record[i]["noise_floor"].as_f64());
         let group: Vec<_> = g.iter().map(|&i| recs[i].clone()).collect();
@@ -93,7 +108,11 @@ pub fn run(args: Args) -> Result<()> {
             println!(
                 "level {level:.4} V RMS ({} records): {}noise floor {}; BLA noise {}, nonlinear distortion {} {unit} RMS per period",
                 g.len(),
-                official.map_or(String::new(), |o| format!("official RMSE {o:.5} {unit}, ")),
+                match (official, &model) {
+                    (Some(o), _) => format!("official RMSE {o:.5} {unit}, "),
+                    (None, Some(_)) => "official RMSE n/a (a record not scored), ".into(),
+                    (None, None) => String::new(),
+                },
                 floor.map_or("n/a".into(), |f| format!("{f:.5} {unit}")),
                 bla.as_ref().map_or("n/a".into(), |b| format!("{:.5}", b.noise_rms)),
                 bla.as_ref()
@@ -119,5 +138,12 @@ pub fn run(args: Args) -> Result<()> {
             }))?
         );
     }
+    anyhow::ensure!(
+        failed.is_empty(),
+        "the model could not be scored on {} of {} records (the others are above):\n  {}",
+        failed.len(),
+        recs.len(),
+        failed.join("\n  ")
+    );
     Ok(())
 }
