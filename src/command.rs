@@ -42,7 +42,7 @@
 //! | `fault` | latched fault (`none`, `sensor-range`, `sensor-stuck`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |
-//! | `selftest` | converters and safe-state hardware: DAC read-back, ADC code and sensor window, amplifier enable, reset cause, mock-chip rule violations (QEMU) | `ok selftest reset <cause> dac <read>/<wrote> ok adc <code> in ...` |
+//! | `selftest` | converters and safe-state hardware: DAC read-back, ADC code and sensor window, amplifier enable, reset cause, the DAC scale at its pin (H743 on-chip, one axis), mock-chip rule violations (QEMU) | `ok selftest reset <cause> dac <read>/<wrote> ok adc <code> in ...` |
 //! | `save` | store every settable parameter in the settings flash as one versioned, checksummed record (power-fail safe: the old record or the new one); only in the safe state (open loop holding, or a fault latched), else `err 12`; no settings flash on the board: `err 13` | `ok save <n> settings <bytes> B` |
 //! | `load` | the stored record, checked (magic, version, CRC-32, exactly the stored settings, values as `set` checks them) and installed bumplessly, all or none; nothing stored `err 15`, refused `err 16`, flash failed `err 17` | `ok load <n> settings` |
 //! | `defaults` | the built-in settings (the stored record stays) | `ok defaults` |

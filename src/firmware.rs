@@ -29,6 +29,7 @@ mod nor;
 mod params;
 mod period;
 pub mod reset;
+mod selftest;
 mod settings;
 mod storage;
 mod target;
@@ -42,14 +43,13 @@ pub use converters::{
     DAC_CONFIG, SPI_CENTER_UM, SPI_SPAN_UM,
 };
 pub use ctl::{Ctl, PointTable};
-pub use execute::{
-    push_dac_readback, push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY,
-};
+pub use execute::{push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY};
 pub use flash_job::{run_flash_job, FlashDone, FlashOp, FlashWork, SettingsJob};
 pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;
 pub use period::{control_period, Clock, Io};
+pub use selftest::{dac_scale, push_dac_readback, push_dac_scale, DacScale};
 pub use settings::{setting, Access, Setting, SETTINGS};
 pub use storage::{decode, encode, stored, Boot, Record, SettingsFlash, MAX_RECORD, VERSION};
 pub use target::{

@@ -634,23 +634,6 @@ fn push_fault<const N: usize>(out: &mut command::Reply<N>, p: &LoopPipeline) {
     }
 }
 
-/// `selftest`'s DAC read-back: ` <read>/<wrote> ok` (or ` BAD` when they differ), or
-/// `no-period BAD` when no control period ran to do the write and read-back.
-pub fn push_dac_readback<const N: usize>(
-    r: &mut command::Reply<N>,
-    read_wrote: Option<(i32, i32)>,
-) {
-    match read_wrote {
-        Some((read, wrote)) => {
-            r.push_i32(read);
-            r.push_str("/");
-            r.push_i32(wrote);
-            r.push_str(if read == wrote { " ok" } else { " BAD" });
-        }
-        None => r.push_str("no-period BAD"),
-    }
-}
-
 /// A value of the control path as text (Q16.16 through f32: 24 significant bits).
 pub fn push_real<const N: usize>(out: &mut command::Reply<N>, v: R) {
     out.push_f32(v.to_f64() as f32);

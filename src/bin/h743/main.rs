@@ -364,16 +364,8 @@ mod app {
             use stm32h7xx_hal::adc;
             // DAC1 channel 1 on PA4 (xy: channel 2 on PA5) runs since `safe::early`.
             // ADC1 (xy: and ADC2), 16 bit, triggered by TIM2 TRGO.
-            #[cfg(not(feature = "xy"))]
-            let mut adc = adc::Adc::adc1(
-                dp.ADC1,
-                36.MHz(),
-                &mut delay,
-                ccdr.peripheral.ADC12,
-                &ccdr.clocks,
-            )
-            .enable();
-            #[cfg(feature = "xy")]
+            // ADC2: the y sensor (xy), else `selftest`'s conversion of the DAC pin PA4.
+            #[allow(unused_mut)] // only xy configures it through the HAL
             let (mut adc, mut adc2) = {
                 let (a1, a2) = adc::adc12(
                     dp.ADC1,
@@ -390,6 +382,13 @@ mod app {
             configure_adc_trigger(adc.inner(), true);
             let mut ain = gpioa.pa3.into_analog();
             adc.start_conversion(&mut ain);
+            #[cfg(not(feature = "xy"))]
+            {
+                let _dac_pin = gpioa.pa4.into_analog();
+                // Enabled and calibrated by the HAL; its registers are `dac_pin`'s now.
+                let _ = adc2;
+                crate::onchip::dac_pin::setup();
+            }
             #[cfg(feature = "xy")]
             {
                 let gpioc = dp.GPIOC.split(ccdr.peripheral.GPIOC);

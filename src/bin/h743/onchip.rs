@@ -90,3 +90,55 @@ impl firmware::Io for Io {
         amp::set(on);
     }
 }
+
+/// ADC2 on the DAC's own pin for `selftest`'s scale (one axis; in the xy build ADC2 samples
+/// the y sensor): PA4 is ADC12_INP18, so the conversion sees what the wiring leaves of the
+/// DAC's output. Software-started single conversions, 16 bit, the longest sampling time
+/// (810.5 ADC clocks, 22.5 us at 36 MHz) for the unbuffered pin's ~15 kOhm source.
+#[cfg(not(feature = "xy"))]
+pub mod dac_pin {
+    use stm32h7xx_hal::pac;
+
+    const CHANNEL: u8 = 18;
+    /// Polls of the end of conversion (each at least a few core cycles: over 100 us at
+    /// 400 MHz, against a conversion of about 23 us).
+    const POLLS: u32 = 40_000;
+
+    #[allow(unsafe_code)]
+    fn regs() -> &'static pac::adc1::RegisterBlock {
+        // SAFETY: in the one-axis on-chip build ADC2 is this module's alone (init enables
+        // and calibrates it through the HAL, then only `setup` and `convert` touch it, both
+        // from the command task).
+        unsafe { &*pac::ADC2::ptr() }
+    }
+
+    /// The channel, resolution and sampling time, software trigger, single conversions
+    /// (ADC2 enabled by the HAL, idle).
+    #[allow(unsafe_code)]
+    pub fn setup() {
+        let r = regs();
+        r.cfgr
+            .modify(|_, w| w.res().sixteen_bit().exten().disabled().cont().clear_bit());
+        // SAFETY: PCSEL holds one bit per channel (20); SQ1 takes a channel number < 20.
+        r.pcsel
+            .modify(|r, w| unsafe { w.pcsel().bits(r.pcsel().bits() | 1 << CHANNEL) });
+        r.smpr2.modify(|_, w| w.smp18().cycles810_5());
+        r.sqr1
+            .modify(|_, w| unsafe { w.sq1().bits(CHANNEL) }.l().bits(0));
+    }
+
+    /// One conversion of the pin (16-bit code), or `None` when ADC2 is off, busy, or gives
+    /// no result within [`POLLS`].
+    pub fn convert() -> Option<u32> {
+        let r = regs();
+        let cr = r.cr.read();
+        if cr.aden().bit_is_clear() || cr.adstart().bit_is_set() {
+            return None;
+        }
+        r.isr.write(|w| w.eoc().clear());
+        r.cr.modify(|_, w| w.adstart().set_bit());
+        (0..POLLS)
+            .any(|_| r.isr.read().eoc().bit_is_set())
+            .then(|| r.dr.read().bits() & 0xFFFF)
+    }
+}

@@ -1,11 +1,14 @@
 //! `selftest`: the command line asks, the next control period reads axis 0's DAC back after
 //! its write (the on-chip DAC's output register one period later, after the trigger that
 //! loads it; or the AD5791's DAC register at the read-back SCLK) and answers; the reply adds the last ADC code against the sensor window,
-//! the amplifier enable line and the reset cause.
+//! the amplifier enable line and the reset cause, and (on-chip, one axis) the DAC's scale as
+//! its pin sees it.
 
 use crate::safe::{amp, reset_cause, RESET_FLAGS};
 use core::sync::atomic::{AtomicI32, AtomicU8, Ordering::Relaxed};
 use piezo_core::command::Reply;
+#[cfg(not(any(feature = "spi-converters", feature = "xy")))]
+use piezo_core::firmware::{dac_scale, push_dac_scale};
 use piezo_core::firmware::{push_dac_readback, Converters, REPLY_LEN};
 
 pub const IDLE: u8 = 0;
@@ -46,4 +49,14 @@ pub fn run<C: Converters>(r: &mut Reply<REPLY_LEN>) {
     });
     r.push_str(" amp ");
     r.push_str(if amp::is_on() { "on" } else { "off" });
+    // The DAC's scale as its pin sees it (on-chip, one axis): the pin converted by ADC2
+    // between two reads of the DAC's output code.
+    #[cfg(not(any(feature = "spi-converters", feature = "xy")))]
+    {
+        use crate::safe::dac1;
+        let before = dac1::output(0) as u32;
+        let pin = crate::onchip::dac_pin::convert();
+        let after = dac1::output(0) as u32;
+        push_dac_scale(r, dac_scale(before, after, pin, 12, 16));
+    }
 }
