@@ -188,9 +188,12 @@ fn lfr_beats_the_linear_model_on_a_held_out_level_and_predict_runs_it() {
         far_line.contains("not scored (") && far_line.contains("diverged"),
         "{out}"
     );
-    // A broken LFR section: refused, naming the matrix.
+    // The fit says how far its feedback stays bounded on the training inputs scaled up.
     let mut j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&fitjson).unwrap()).unwrap();
+    let scale = &j["report"]["lfr_input_scale"];
+    assert!(scale["bounded"].as_f64().unwrap() >= 1.0, "{scale}");
+    // A broken LFR section: refused, naming the matrix.
     j["lfr"]["f"][0].as_array_mut().unwrap().pop();
     let bad = dir.join("bad.json");
     std::fs::write(&bad, j.to_string()).unwrap();

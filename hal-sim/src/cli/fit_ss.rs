@@ -84,6 +84,11 @@ pub fn run(args: &Args) -> Result<()> {
     } else {
         None
     };
+    // Where the fitted feedback stays bounded: the training inputs scaled up, from rest.
+    let lfr_scale = lfr_fit.as_ref().map(|f| {
+        let inputs: Vec<&[Vec<f64>]> = recs.iter().map(|r| r.u.as_slice()).collect();
+        f.model.bounded_input_scale(&inputs, &lfr::INPUT_SCALES)
+    });
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = serde_json::json!({
         "train": args.records.train.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
@@ -96,6 +101,7 @@ pub fn run(args: &Args) -> Result<()> {
         "train_rms_lfr_start": lfr_fit.as_ref().map(|f| f.start_rms),
         "train_rms_lfr": lfr_fit.as_ref().map(|f| f.rms),
         "lfr_iterations": lfr_fit.as_ref().map(|f| f.iterations),
+        "lfr_input_scale": lfr_scale,
         "seconds": seconds,
     });
     let saved = SsJson::new(
@@ -146,6 +152,29 @@ pub fn run(args: &Args) -> Result<()> {
             Quantity::Length.internal(),
             f.start_rms
         );
+    }
+    if let Some(s) = &lfr_scale {
+        let x = |v: f64| format!("{v}x");
+        match (s.bounded, s.diverges) {
+            (Some(b), None) => println!(
+                "  lfr: bounded from rest on the training inputs scaled up to {} (the largest tried)",
+                x(b)
+            ),
+            (b, Some(d)) => {
+                println!(
+                    "  lfr: bounded from rest on the training inputs scaled by {}, diverges at {}",
+                    b.map_or("none of the scales".into(), x),
+                    x(d)
+                );
+                if d <= 1.25 {
+                    eprintln!(
+                        "warning: the LFR diverges on the training inputs scaled by {}: it is at the edge of stability and may diverge on other records of the same level (inputs the model has not seen); fewer --lfr-iterations or another --lfr-basis",
+                        x(d)
+                    );
+                }
+            }
+            (None, None) => {}
+        }
     }
     for (f, p) in &fit.model.fronts.iter().enumerate().collect::<Vec<_>>() {
         println!("  u{} hysteresis {}: {:?}", f + 1, p.def.name, p.params);

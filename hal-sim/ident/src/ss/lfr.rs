@@ -230,6 +230,48 @@ impl Lfr {
     }
 }
 
+/// The input scales [`Lfr::bounded_input_scale`] tries, ascending.
+pub const INPUT_SCALES: [f64; 5] = [1.0, 1.1, 1.25, 1.5, 2.0];
+
+/// How far the inputs can grow before the model diverges: the largest scale that stays
+/// bounded and the first that diverges (`None`: every scale tried stayed bounded).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct InputScale {
+    pub bounded: Option<f64>,
+    pub diverges: Option<f64>,
+}
+
+impl Lfr {
+    /// Every record's inputs (`inputs[r][j][k]`) scaled by each of `scales` in turn
+    /// (ascending) and simulated from rest, until one diverges. A polynomial feedback has no
+    /// bound of its own: a model fitted at the edge of stability diverges on another
+    /// realization of the same level (the mirror's 300 mV records: see docs/src/lfr.md), and
+    /// this says so at fit time.
+    pub fn bounded_input_scale(&self, inputs: &[&[Vec<f64>]], scales: &[f64]) -> InputScale {
+        let mut bounded = None;
+        for &s in scales {
+            let ok = inputs.par_iter().all(|u| {
+                let scaled: Vec<Vec<f64>> = u
+                    .iter()
+                    .map(|c| c.iter().map(|v| v * s).collect())
+                    .collect();
+                self.simulate(&scaled).is_ok()
+            });
+            if !ok {
+                return InputScale {
+                    bounded,
+                    diverges: Some(s),
+                };
+            }
+            bounded = Some(s);
+        }
+        InputScale {
+            bounded,
+            diverges: None,
+        }
+    }
+}
+
 impl Lfr {
     /// Memory of the hysteresis operators at rest (`channels * basis`).
     pub fn rest_memory(&self) -> Vec<f64> {
@@ -979,6 +1021,38 @@ mod tests {
         let s = score::official(&v, |u| fit.model.simulate(u)).unwrap();
         let lin = score::official(&v, |u| t.linear.simulate(u)).unwrap();
         assert!(s.mean < 0.1 * lin.mean, "{} vs {}", s.mean, lin.mean);
+    }
+
+    #[test]
+    fn the_bounded_input_scale_finds_where_the_cubic_feedback_diverges() {
+        let t = truth();
+        let u = |amp: f64| vec![multisine(512, 2, amp, 4)];
+        let all = |amp: f64| t.bounded_input_scale(&[&u(amp)], &INPUT_SCALES);
+        // Small inputs: bounded at every scale tried.
+        assert_eq!(
+            all(1.0),
+            InputScale {
+                bounded: Some(2.0),
+                diverges: None
+            }
+        );
+        // Find an amplitude where 1x is bounded and 2x is not; the answer brackets it.
+        let amp = (1..400)
+            .map(|i| i as f64 * 0.5)
+            .find(|&a| all(a).diverges.is_some() && all(a).bounded.is_some())
+            .expect("an amplitude bounded at 1x and divergent by 2x");
+        let s = all(amp);
+        let (b, d) = (s.bounded.unwrap(), s.diverges.unwrap());
+        assert!(b < d, "{s:?}");
+        let sim = |k: f64| {
+            t.simulate(&[u(amp)[0].iter().map(|v| v * k).collect()])
+                .is_ok()
+        };
+        assert!(sim(b) && !sim(d), "{s:?} at amplitude {amp}");
+        // Diverging at once: nothing bounded.
+        let far = t.bounded_input_scale(&[&u(1e4)], &INPUT_SCALES);
+        assert_eq!(far.bounded, None);
+        assert_eq!(far.diverges, Some(1.0));
     }
 
     #[test]
