@@ -6,6 +6,8 @@
 #   s <args>                           one `piezo serial` call against it
 #   refused <line> <message>           the raw line must fail (exit status 1) naming it and
 #                                      <message> (the firmware's numbered error)
+#   settle <periods>                   returns once the firmware has run <periods> more control
+#                                      periods (its own `stats` count: virtual time)
 #   qemu_stop                          fails if the firmware exited early, then stops it
 #   qemu_session <step>                the f32 build (mps2-an386) built and booted: sets
 #                                      $work (removed with QEMU at exit) and fail()
@@ -48,10 +50,10 @@ refused() {
 qemu_boot() {
   local elf=$1 machine=$2 cpu=$3
   port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-  # nodelay=on: QEMU writes the UART's bytes one at a time; with Nagle on, the second waits
-  # for the host's delayed ACK and every reply line costs about 40 ms (ping: 43 -> 0.5 ms).
+  # QEMU writes the UART's bytes one at a time with Nagle on: the clients ask for quick ACKs
+  # (serial/link.rs), else every reply waits for the host's 40 ms delayed ACK.
   qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none -icount shift=0 \
-    -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off,nodelay=on -serial chardev:ser \
+    -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$elf.defmt" &
   qemu=$!
   # QEMU listens at once; the firmware answers after its boot-time bench table, which takes
@@ -65,6 +67,22 @@ qemu_boot() {
   done
   cat "$work/ping.txt"
   grep -q '^ok pong' "$work/ping.txt" || fail "no answer to ping"
+}
+
+# settle <periods>: waits for the firmware's own time, not the host's: a reply takes 0.5 ms
+# over the socket, so a script that needs a loop to settle (a wave just started, a law just
+# rebuilt) must say so. The wall-clock cap only catches a firmware that stopped counting.
+settle() {
+  local want=$1 from now start=$SECONDS
+  from=$(s stats | sed -n 's/^samples \([0-9]*\) .*/\1/p')
+  [ -n "$from" ] || fail "settle: no sample count in stats"
+  while :; do
+    now=$(s stats | sed -n 's/^samples \([0-9]*\) .*/\1/p')
+    [ -n "$now" ] || fail "settle: no sample count in stats"
+    [ "$now" -ge $((from + want)) ] && return 0
+    [ $((SECONDS - start)) -lt 600 ] || fail "settle: the firmware ran $((now - from)) of $want periods in 600 s"
+    sleep 0.05
+  done
 }
 
 qemu_stop() {

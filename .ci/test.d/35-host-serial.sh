@@ -21,6 +21,9 @@ run limits --u-max 140V --slew 20V/ms
 grep -qx 'output 0 V .. 140 V, slew limit 20000 V/s (20 V/ms)' "$work/last.txt" || fail "limits not set"
 run wave sine 5um 100Hz --offset 10um
 grep -qx 'ok wave sine 5 100 10' "$work/last.txt" || fail "wave not started"
+# 20 000 periods (0.2 s, 20 sine periods) of the firmware's time: the free-running capture
+# below checks the tracking, not the start.
+settle 20000
 run record --signals ref_um,y_um,u_volts,error_um --out "$work/rec.csv" --svg "$work/rec.svg"
 run record --signals ref_um,y_um,u_volts,dac_code --trigger rise:ref_um:10 --pre 100 \
   --out "$work/trig.csv"

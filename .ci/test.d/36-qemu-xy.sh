@@ -106,6 +106,9 @@ session() {
   # divided capture spans about 500 ms, both turning points of y whenever it starts.
   run wave raster 10um 10um 4 20Hz --center 10um,10um
   grep -qx 'ok wave raster 10 10 4 20 10 10' "$work/last.txt" || fail "raster not started"
+  # The captures check the tracking, not the scan's start: 20 000 periods of the firmware's
+  # time first (a reply takes under 1 ms, so nothing else lets the loop settle).
+  settle 20000
   run record --xy --every "$every_r" --out "$work/$name-raster.csv" --svg "$work/$name-raster.svg"
   grep -q 'x-y path' "$work/$name-raster.svg" || fail "no x-y panel in the SVG"
   check "$work/$name-raster.csv" "$dt_r" 5 15 5 15 "$bound" || fail "raster capture"
@@ -114,6 +117,7 @@ session() {
   # repeats every 100 ms, the divided capture spans at least that.
   run wave lissajous 6um 5um 40Hz 30Hz --center 10um,10um
   grep -qx 'ok wave lissajous 6 5 40 30 90 10 10' "$work/last.txt" || fail "Lissajous not started"
+  settle 20000
   run record --xy --every "$every_l" --out "$work/$name-lissajous.csv" --svg "$work/$name-lissajous.svg"
   check "$work/$name-lissajous.csv" "$dt_l" 4 16 5 15 "$bound" || fail "Lissajous capture"
 

@@ -2,7 +2,7 @@
 //! client [`crate::serial`]; one file per subcommand group below.
 //!
 //! Transport: a serial port (`--port /dev/ttyACM0 [--baud 115200]`) or TCP (`--tcp
-//! 127.0.0.1:PORT`, e.g. QEMU `-serial tcp::PORT,server=on,wait=off,nodelay=on`).
+//! 127.0.0.1:PORT`, e.g. QEMU `-serial tcp::PORT,server=on,wait=off`).
 //!
 //! Every command the host builds is a [`Command`] of the core's protocol module, written by
 //! [`format_command`](crate::serial::lines::format_command) and parsed back with the
@@ -65,7 +65,7 @@ pub struct Conn {
     /// Baud rate of --port.
     #[arg(long, global = true, default_value_t = 115_200)]
     pub baud: u32,
-    /// TCP address of the serial port (QEMU: -serial tcp::PORT,server=on,wait=off,nodelay=on).
+    /// TCP address of the serial port (QEMU: -serial tcp::PORT,server=on,wait=off).
     #[arg(long, global = true, value_name = "HOST:PORT")]
     pub tcp: Option<String>,
     /// Longest wait for a reply line, in seconds.

@@ -20,6 +20,12 @@ impl Link for TcpStream {
     }
     fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
         self.set_read_timeout(Some(timeout.max(Duration::from_millis(1))))?;
+        // Linux delays an ACK up to 40 ms. A peer that writes byte by byte with Nagle on
+        // (QEMU's UART socket) holds the rest of every reply until that ACK: 43 ms a `ping`.
+        // Quick ACKs are not sticky (the kernel leaves the mode by itself): set before every
+        // read. Nagle's batching of a bulk transfer stays (unlike `nodelay=on` at QEMU).
+        #[cfg(target_os = "linux")]
+        socket2::SockRef::from(&*self).set_tcp_quickack(true).ok();
         self.read(buf)
     }
 }

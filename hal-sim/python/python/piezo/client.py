@@ -179,6 +179,10 @@ class Piezo:
         return self._take(b"\0", "packet")
 
     def _recv(self):
+        if self._sock and hasattr(socket, "TCP_QUICKACK"):
+            # As the Rust client (serial/link.rs): no 40 ms delayed ACK against a peer that
+            # writes byte by byte with Nagle on (QEMU's UART socket); not sticky, so per read.
+            self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK, 1)
         chunk = self._sock.recv(4096) if self._sock else self._serial.read(256)
         if self._sock and not chunk:
             raise LinkError("the connection closed")
