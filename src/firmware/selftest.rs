@@ -29,8 +29,8 @@ pub fn push_dac_readback<const N: usize>(r: &mut Reply<N>, read_wrote: Option<(i
 /// The DAC's code at the conversion must be at least this share of its full scale
 /// (thousandths): below it the ADC's offset and noise would dominate the ratio.
 pub const SCALE_MIN_CODE_MILLI: u32 = 100;
-/// The scale passes within this many thousandths of 1 (the DAC's and the ADC's gain and
-/// offset errors together are a few tenths of a percent; a divider is tens of percent).
+/// The scale passes within this many thousandths of 1: well above the converters' own gain
+/// and offset errors (not measured here), well below the tens of percent of a divider.
 pub const SCALE_TOLERANCE_MILLI: u32 = 30;
 
 /// What the pin's conversion says about the DAC's scale.
