@@ -52,7 +52,7 @@ qemu_boot() {
   port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
   # QEMU writes the UART's bytes one at a time with Nagle on: the clients ask for quick ACKs
   # (serial/link.rs), else every reply waits for the host's 40 ms delayed ACK.
-  qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none -icount shift=0 \
+  qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none -icount shift=0,sleep=off \
     -chardev socket,id=ser,host=127.0.0.1,port="$port",server=on,wait=off -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$elf.defmt" &
   qemu=$!

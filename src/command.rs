@@ -38,7 +38,7 @@
 //! | `rec status` | `idle`, `armed`, `triggered` or `done` and the frames of the capture in place (all N when done) | `ok rec <state> <n>` |
 //! | `rec read <start> <count>` | frames as `<i> <v0> <v1> ...` lines | `ok rec read <n>` |
 //! | `rec len [<n>]` | frames per capture, 1 up to the recorder's storage (`err 8` beyond; `err 12` while capturing); drops a finished capture; without `n`: report it | `ok rec len <n> of <capacity>` |
-//! | `rec bin <start> <count>` | frames as binary packets ([`crate::bulk`]: COBS, a zero byte after each, 32 frames of f32 LE per packet, CRC-32 each) after the reply line; `err 12` when no finished capture holds them | `ok rec bin <n> <packets>`, then the packets |
+//! | `rec bin <start> <count>` | frames as binary packets ([`crate::bulk`]: COBS, a zero byte after each, 32 frames of f32 LE per packet, CRC-32 each) after the reply line; `err 12` when the capture holds none of them yet (readable from the trigger on, while it fills) | `ok rec bin <n> <packets>`, then the packets |
 //! | `fault` | latched fault (`none`, `sensor-range`, `sensor-stuck`, `non-finite`, `dac-write`) and counters | `ok fault <state> sensor <n> nonfinite <n> dac <n>` |
 //! | `fault clear` | leave the safe state (bumpless, in the current mode) | `ok fault none` |
 //! | `bench` | instructions/cycles per step for every mode (QEMU board) | `ok bench ...` |

@@ -443,6 +443,33 @@ where
         self.buf.as_ref().get(if k >= n { k - n } else { k })
     }
 
+    /// Frames [`Recorder::read`] gives now: the first [`Recorder::progress`] of a triggered
+    /// capture, all of a finished one, none before the trigger.
+    pub fn readable(&self) -> usize {
+        match self.state {
+            State::Triggered | State::Done => self.progress(),
+            State::Idle | State::Armed => 0,
+        }
+    }
+
+    /// Frame `i` of the capture, oldest first, as soon as it is in place: a capture can be
+    /// read while it fills (a scope that streams), and a frame read early equals the one
+    /// [`Recorder::frame`] gives when it is done. After the trigger the capture's first
+    /// frame sits `post_left` slots past the head, and nothing overwrites it until the next
+    /// arm.
+    pub fn read(&self, i: usize) -> Option<&[T; CH]> {
+        match self.state {
+            State::Done => self.frame(i),
+            State::Triggered if i < self.progress() => {
+                let k = (self.head + self.post_left).checked_rem(self.n)? + i;
+                self.buf
+                    .as_ref()
+                    .get(if k >= self.n { k - self.n } else { k })
+            }
+            _ => None,
+        }
+    }
+
     /// Index of the trigger frame in a finished capture.
     pub fn trigger_index(&self) -> usize {
         self.pre
@@ -665,5 +692,57 @@ mod tests {
                 }
             }
         }
+
+        /// A capture read while it fills (after every frame, what is readable so far)
+        /// gives the frames of the finished capture, and nothing before the trigger.
+        #[test]
+        fn frames_read_while_filling_are_the_final_ones(
+            n in 1usize..16, pre in 0usize..16, start in 1usize..40, div in 1u32..4,
+        ) {
+            let pre = pre % n;
+            let mut r = ArrayRecorder::<f32, 2, 16>::new();
+            r.set_capture_len(n).unwrap();
+            r.set_divider(div).unwrap();
+            // The ramp's crossing comes after `pre` frames of history, so it fires.
+            let level = (start + pre * div as usize) as f32;
+            r.set_trigger(Trigger::Rising { channel: 0, level }, pre).unwrap();
+            r.arm();
+            let mut early = vec![None; n];
+            let mut k = 0;
+            while r.state() != State::Done && k < 200 {
+                r.push(&signals(k as f32));
+                k += 1;
+                prop_assert_eq!(r.readable() > 0, r.state() != State::Armed);
+                prop_assert!(r.read(r.readable()).is_none() || r.state() == State::Done);
+                for (i, e) in early.iter_mut().enumerate().take(r.readable()) {
+                    let f = *r.read(i).unwrap();
+                    prop_assert!(e.is_none_or(|e| e == f), "frame {} changed", i);
+                    *e = Some(f);
+                }
+            }
+            prop_assert_eq!(r.state(), State::Done);
+            prop_assert_eq!(r.readable(), n);
+            for (i, e) in early.iter().enumerate() {
+                prop_assert_eq!(*e, r.frame(i).copied());
+            }
+        }
+    }
+
+    #[test]
+    fn nothing_readable_while_armed_or_idle() {
+        let mut r = rising_at_10_pre_3();
+        assert_eq!((r.readable(), r.read(0)), (0, None));
+        r.arm();
+        for k in 0..10 {
+            r.push(&signals(k as f32));
+        }
+        assert_eq!(r.state(), State::Armed);
+        assert_eq!((r.readable(), r.read(0)), (0, None));
+        r.push(&signals(10.0));
+        assert_eq!(r.state(), State::Triggered);
+        // The three frames before the trigger and the trigger frame.
+        assert_eq!(r.readable(), 4);
+        assert_eq!(r.read(3).map(|f| f[0]), Some(10.0));
+        assert_eq!(r.read(4), None);
     }
 }

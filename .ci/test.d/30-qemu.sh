@@ -27,7 +27,7 @@ pipe_run() {
   cat "$dir/uart.out" >"$dir/uart.txt" &
   reader=$!
   timeout 1800 qemu-system-arm -M "$machine" -cpu "$cpu" -nographic -monitor none \
-    -icount shift=0 -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
+    -icount shift=0,sleep=off -chardev pipe,id=ser,path="$dir/uart" -serial chardev:ser \
     -semihosting-config enable=on,target=native -kernel "$elf" >"$defmt" &
   qemu=$!
   # shellcheck disable=SC2059 # the lines are a printf format (\n escapes)

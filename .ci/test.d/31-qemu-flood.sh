@@ -30,7 +30,7 @@ reader=$!
 python3 .ci/qemu-flood.py "$ROUNDS" >"$work/flood.txt"
 set +e
 timeout 1800 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
-  -icount shift=0 -chardev pipe,id=ser,path="$work/uart" -serial chardev:ser \
+  -icount shift=0,sleep=off -chardev pipe,id=ser,path="$work/uart" -serial chardev:ser \
   -semihosting-config enable=on,target=native -kernel "$work/firmware.elf" >/dev/null &
 qemu=$!
 cat "$work/flood.txt" >"$work/uart.in"

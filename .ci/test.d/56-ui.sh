@@ -66,4 +66,65 @@ grep -q '^ui: [0-9]* browser checks passed$' "$work/browser.txt" || fail "no sum
 # The example ended QEMU on purpose (the lost-link check).
 wait "$qemu" 2>/dev/null || true
 qemu=
+kill "$ui_pid" 2>/dev/null || true
+wait "$ui_pid" 2>/dev/null || true
+ui_pid=
+
+# A board's port: `piezo ui --port` on a serial device, here the tty QEMU makes of the UART
+# (`-serial pty`), through the serial-port path a Nucleo's /dev/ttyACM0 takes (termios, no
+# TCP). The console answers a raw line and streams the scope to a finished capture.
+# QEMU names the tty on its stdout, beside the defmt bytes: line-buffered, so it comes at once.
+stdbuf -oL qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
+  -icount shift=0,sleep=off -chardev pty,id=ser -serial chardev:ser \
+  -semihosting-config enable=on,target=native -kernel "$work/firmware.elf" \
+  >"$work/pty.out" 2>"$work/pty.err" &
+qemu=$!
+start=$SECONDS
+until grep -aq 'char device redirected to /dev/' "$work/pty.out"; do
+  kill -0 "$qemu" 2>/dev/null || { cat "$work/pty.err"; fail "QEMU with -serial pty exited"; }
+  [ $((SECONDS - start)) -lt 60 ] || fail "QEMU named no pty"
+  sleep 0.1
+done
+tty=$(grep -ao 'char device redirected to /dev/[^ ]*' "$work/pty.out" | sed 's/.* //')
+start=$SECONDS
+until timeout 900 "$piezo" serial --port "$tty" --timeout-s 60 ping >"$work/ping.txt" 2>&1; do
+  kill -0 "$qemu" 2>/dev/null || fail "QEMU exited before answering on $tty"
+  [ $((SECONDS - start)) -lt 1800 ] || fail "no answer on $tty"
+  sleep 0.2
+done
+"$piezo" ui --port "$tty" --timeout-s 60 --listen 0 --work "$work/ui-port" >"$work/ui-port.txt" 2>&1 &
+ui_pid=$!
+start=$SECONDS
+until grep -q '^piezo ui: http://' "$work/ui-port.txt"; do
+  kill -0 "$ui_pid" 2>/dev/null || { cat "$work/ui-port.txt"; fail "piezo ui --port exited"; }
+  [ $((SECONDS - start)) -lt 120 ] || fail "piezo ui --port did not start listening"
+  sleep 0.1
+done
+url=$(sed -n 's/^piezo ui: \(http:[^ ]*\)$/\1/p' "$work/ui-port.txt")
+python3 - "$url" "$tty" <<'PY' || fail "piezo ui --port"
+import json, sys, time, urllib.error, urllib.request
+url, tty = sys.argv[1], sys.argv[2]
+req = urllib.request.Request(url + "api/raw", data=json.dumps({"line": "get sample_hz"}).encode(),
+                             headers={"content-type": "application/json"})
+try:
+    reply = json.load(urllib.request.urlopen(req, timeout=120))["reply"]
+except urllib.error.HTTPError as e:
+    sys.exit(f"api/raw: HTTP {e.code}: {e.read().decode()}")
+assert reply == "ok sample_hz 100000", reply
+# Wall-clock cap only for a dead emulator: the scope streams as fast as the firmware runs.
+end = time.time() + 600
+while True:
+    try:
+        csv = urllib.request.urlopen(url + "api/scope/csv", timeout=120).read().decode()
+    except urllib.error.HTTPError as e:  # no capture yet
+        csv = f"HTTP {e.code}: {e.read().decode()}"
+    if csv.startswith("# piezo serial record: 256 frames"):
+        break
+    assert time.time() < end, "no finished 256-frame capture: " + csv[:200]
+    time.sleep(0.05)
+rows = [l for l in csv.splitlines()[3:] if l]
+assert len(rows) == 256, len(rows)
+print(f"ui: board port {tty}: `get sample_hz` -> `{reply}`; the scope streamed a "
+      f"{len(rows)}-frame capture")
+PY
 echo "56-ui: ok"

@@ -250,11 +250,31 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
         "return window.consoleState.frames >= 10;",
     )
     .await?;
-    let rate =
-        r.c.execute("return window.consoleState.rate;", vec![])
-            .await?;
+    // The rate the page shows: updates in the last second of the server's clock. A
+    // condition, not a timed wait: it holds once a second of streaming has gone by.
+    let rate = r
+        .until(
+            "20 scope updates a second",
+            "const r = window.consoleState.rate; return r >= 20 ? r : null;",
+        )
+        .await?;
+    // And the rate 40 updates later, for the record.
+    let later = r
+        .until(
+            "40 more scope updates",
+            &format!(
+                "const s = window.consoleState; return s.frames >= {} ? s.rate : null;",
+                r.c.execute("return window.consoleState.frames;", vec![])
+                    .await?
+                    .as_u64()
+                    .unwrap_or(0)
+                    + 40
+            ),
+        )
+        .await?;
     r.pass(&format!(
-        "the scope receives frames ({rate} updates/s at its default 256 frames)"
+        "the scope receives frames: {rate} updates/s (at least 20), {later} updates/s 40 \
+         updates later, at its default 256 frames, every 4th period"
     ));
     r.shot("scope.png").await?;
 

@@ -6,6 +6,7 @@
 //! packet fails the transfer, and nothing damaged is ever taken as data.
 use std::collections::VecDeque;
 use std::io;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use hal_sim::serial::bulk::{read_bin, shortest};
@@ -24,12 +25,26 @@ struct Fake {
     in_bin: bool,
     /// Bytes damaged so far.
     hits: usize,
+    /// The stage's position (um) and the last DAC code.
+    y: f64,
+    dac: i32,
 }
 
 impl Fake {
     /// A finished capture of `frames` frames of four channels of a closed loop tracking a
     /// sine (every value distinct enough to catch a misplaced frame).
     fn new(frames: usize, one_in: u64) -> Self {
+        let mut f = Self::armed(frames, one_in);
+        f.run(frames + 10);
+        assert_eq!(
+            f.ctl.answer("rec status").as_str(),
+            format!("ok rec done {frames}")
+        );
+        f
+    }
+
+    /// The same loop with the capture armed and no period run yet.
+    fn armed(frames: usize, one_in: u64) -> Self {
         let mut ctl = Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
         for line in [
             "wave sine 5 300 10",
@@ -44,18 +59,6 @@ impl Fake {
             format!("ok rec len {frames} of 4096")
         );
         assert_eq!(ctl.answer("rec arm").as_str(), "ok");
-        let (mut y, mut dac) = (0.0f64, 0);
-        for _ in 0..frames + 10 {
-            let volts = dac as f64 * 150.0 / 4095.0;
-            y += 0.3 * (0.16 * volts - y);
-            let code = (y * 546.125 + 5461.25).clamp(0.0, 65535.0) as i32;
-            [dac] = ctl.lp.step([code]);
-            ctl.record([code], [dac]);
-        }
-        assert_eq!(
-            ctl.answer("rec status").as_str(),
-            format!("ok rec done {frames}")
-        );
         Self {
             ctl,
             lb: LineBuffer::new(),
@@ -64,6 +67,19 @@ impl Fake {
             rng: 0x9E37_79B9_7F4A_7C15,
             in_bin: false,
             hits: 0,
+            y: 0.0,
+            dac: 0,
+        }
+    }
+
+    /// `periods` control periods of the loop against a first-order stage.
+    fn run(&mut self, periods: usize) {
+        for _ in 0..periods {
+            let volts = self.dac as f64 * 150.0 / 4095.0;
+            self.y += 0.3 * (0.16 * volts - self.y);
+            let code = (self.y * 546.125 + 5461.25).clamp(0.0, 65535.0) as i32;
+            [self.dac] = self.ctl.lp.step([code]);
+            self.ctl.record([code], [self.dac]);
         }
     }
 
@@ -123,6 +139,19 @@ impl Link for Fake {
     }
 }
 
+/// A fake the test keeps a hold of while the client talks to it (to run periods between
+/// reads).
+struct Held(Arc<Mutex<Fake>>);
+
+impl Link for Held {
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.0.lock().unwrap().send(bytes)
+    }
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+        self.0.lock().unwrap().recv(buf, timeout)
+    }
+}
+
 /// A client over `fake`, with a short reply timeout (a packet whose delimiter was damaged
 /// is waited for that long).
 fn client(fake: Fake) -> Client {
@@ -174,4 +203,28 @@ fn a_link_that_damages_every_packet_fails_and_accepts_nothing_damaged() {
     let mut c = client(fake);
     let e = read_bin(&mut c, 0, 1024, 4).unwrap_err();
     assert!(e.to_string().contains("still damaged"), "{e}");
+}
+
+/// The console's scope streams a capture: from the trigger on, the frames in place are read
+/// while it fills, and they are the frames of the finished capture.
+#[test]
+fn a_capture_is_read_while_it_fills() {
+    let fake = Arc::new(Mutex::new(Fake::armed(4000, 0)));
+    let mut c = Client::new(Box::new(Held(fake.clone())), Duration::from_millis(300));
+    // Nothing before the trigger (`now`: the first frame).
+    let e = read_bin(&mut c, 0, 1, 4).unwrap_err();
+    assert!(e.to_string().contains("error 12"), "{e}");
+    fake.lock().unwrap().run(1500);
+    assert_eq!(c.rec_status().unwrap(), ("triggered".to_string(), 1500));
+    let (first, _) = read_bin(&mut c, 0, 1500, 4).unwrap();
+    // Not beyond what is in place.
+    let e = read_bin(&mut c, 1500, 1, 4).unwrap_err();
+    assert!(e.to_string().contains("error 12"), "{e}");
+    fake.lock().unwrap().run(1000);
+    let (second, _) = read_bin(&mut c, 1500, 1000, 4).unwrap();
+    fake.lock().unwrap().run(1510);
+    assert_eq!(c.rec_status().unwrap(), ("done".to_string(), 4000));
+    let (rest, _) = read_bin(&mut c, 2500, 1500, 4).unwrap();
+    let streamed: Vec<Vec<f64>> = [first, second, rest].concat();
+    assert_eq!(streamed, fake.lock().unwrap().expected());
 }

@@ -83,11 +83,11 @@ impl<C: Converters> Ctl<C> {
             Ok(Command::Empty) => return,
             Ok(Command::Rec(RecCmd::Bin { start, count })) => {
                 let rec = &self.rec;
-                return stream_bin(start, count, rec.len(), |i| rec.frame(i).copied(), port);
+                return stream_bin(start, count, rec.readable(), |i| rec.read(i).copied(), port);
             }
             Ok(Command::Rec(RecCmd::Read { start, count })) => {
                 let rec = &self.rec;
-                return stream_frames(start, count, |i| rec.frame(i).copied(), |l| port.send(l));
+                return stream_frames(start, count, |i| rec.read(i).copied(), |l| port.send(l));
             }
             Ok(cmd) => self.execute(cmd, &mut r),
             Err(e) => r.push_error(e),
@@ -315,18 +315,18 @@ impl<C: Converters> CommandLine<C> {
                 stream_frames(
                     start,
                     count,
-                    |i| ctl.lock(|c| c.rec.frame(i).copied()),
+                    |i| ctl.lock(|c| c.rec.read(i).copied()),
                     |l| port.send(l),
                 );
                 return true;
             }
             Ok(Command::Rec(RecCmd::Bin { start, count })) => {
-                let available = ctl.lock(|c| c.rec.len());
+                let available = ctl.lock(|c| c.rec.readable());
                 stream_bin(
                     start,
                     count,
                     available,
-                    |i| ctl.lock(|c| c.rec.frame(i).copied()),
+                    |i| ctl.lock(|c| c.rec.read(i).copied()),
                     port,
                 );
                 return true;

@@ -546,7 +546,8 @@ pub fn stream_frames(
 }
 
 /// Streams `rec bin <start> <count>` ([`crate::bulk`]): `available` is the capture's
-/// frames (0 unless finished); the reply line `ok rec bin <frames> <packets>` (err 12 when
+/// frames in place ([`crate::recorder::Recorder::readable`]: from the trigger on, while it
+/// fills); the reply line `ok rec bin <frames> <packets>` (err 12 when
 /// nothing is available), then the packets, each of up to
 /// [`crate::bulk::FRAMES_PER_PACKET`] frames fetched by `frame(i)` (one short lock each),
 /// all sent to `port`. Bounded by `count`; a frame gone meanwhile (the recorder re-armed)

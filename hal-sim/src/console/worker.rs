@@ -135,7 +135,11 @@ impl Link for Logged {
     }
 }
 
-/// One finished scope capture, kept for the CSV export.
+/// Shortest time between two scope updates of one capture while it fills (at most 33 per
+/// second); a finished capture goes out at once.
+const UPDATE_EVERY: Duration = Duration::from_millis(30);
+
+/// One scope capture (finished, or as far as it was streamed), kept for the CSV export.
 pub struct Capture {
     pub seq: u64,
     pub rec: Recording,
@@ -378,8 +382,19 @@ fn scope_step(c: &mut Client, shared: &Shared, run: &mut ScopeRun) -> Result<()>
         return Ok(());
     };
     c.send(&Command::Rec(RecCmd::Arm))?;
+    run.seq += 1;
+    let units: Vec<&str> = run
+        .channels
+        .iter()
+        .map(|n| Signal::from_name(n).map_or("?", signal_unit))
+        .collect();
     let mut told_armed = false;
-    let n = loop {
+    // Streamed: from the trigger on, the frames in place are read while the capture fills
+    // (`rec bin` takes them; they do not change until the next arm), at most one update per
+    // UPDATE_EVERY; the last part goes out as soon as the capture is done.
+    let mut frames: Vec<Vec<f64>> = Vec::with_capacity(cfg.frames);
+    let mut last_update: Option<Instant> = None;
+    loop {
         if shared.pending.load(Ordering::SeqCst) > 0
             || shared.scope_version.load(Ordering::SeqCst) != version
         {
@@ -388,67 +403,79 @@ fn scope_step(c: &mut Client, shared: &Shared, run: &mut ScopeRun) -> Result<()>
             return Ok(());
         }
         let (state, n) = c.rec_status()?;
-        match state.as_str() {
-            "done" => break n,
+        let readable = match state.as_str() {
+            "done" | "triggered" => n,
             "idle" => bail!("the recorder went idle without a capture (stopped by someone else?)"),
             "armed" if !told_armed => {
                 told_armed = true;
                 shared.event(json!({"type": "scope", "state": "armed", "detail": format!("waiting for the trigger {}", cfg.trigger)}));
+                0
             }
-            _ => {}
+            _ => 0,
+        };
+        let done = state == "done";
+        let due = last_update.is_none_or(|t| t.elapsed() >= UPDATE_EVERY);
+        if readable > frames.len() && (done || due) {
+            let from = frames.len();
+            let (more, _) = read_bin(c, from, readable - from, run.channels.len())?;
+            frames.extend(more);
+            let complete = done && frames.len() >= readable;
+            let now = Instant::now();
+            last_update = Some(now);
+            run.times.push_back(now);
+            while run
+                .times
+                .front()
+                .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(1))
+            {
+                run.times.pop_front();
+            }
+            let columns: Vec<Vec<f64>> = (0..run.channels.len())
+                .map(|k| {
+                    frames[from..]
+                        .iter()
+                        .map(|f| f.get(k).copied().unwrap_or(f64::NAN))
+                        .collect()
+                })
+                .collect();
+            shared.event(json!({
+                "type": "frame",
+                "seq": run.seq,
+                "channels": run.channels,
+                "units": units,
+                "sample_hz": run.frame_hz,
+                "pre": cfg.pre,
+                "trigger": cfg.trigger,
+                "from": from,
+                "total": cfg.frames,
+                "complete": complete,
+                "columns": columns,
+                "updates_per_s": run.times.len(),
+            }));
+            if run.failed {
+                run.failed = false;
+                shared.event(json!({"type": "scope", "state": "running", "detail": ""}));
+            }
+            // The export takes what the page shows: the capture so far, replaced as it grows.
+            let rec = Recording {
+                channels: run.channels.clone(),
+                sample_hz: run.frame_hz,
+                pre: cfg.pre,
+                trigger: cfg.trigger.clone(),
+                frames: frames.clone(),
+            };
+            let mut caps = shared.captures.lock().unwrap_or_else(|e| e.into_inner());
+            if caps.back().is_some_and(|c| c.seq == run.seq) {
+                caps.pop_back();
+            }
+            if caps.len() >= 16 {
+                caps.pop_front();
+            }
+            caps.push_back(Arc::new(Capture { seq: run.seq, rec }));
+        }
+        if done && frames.len() >= readable {
+            return Ok(());
         }
         std::thread::sleep(Duration::from_millis(1));
-    };
-    let (frames, _) = read_bin(c, 0, n, run.channels.len())?;
-    run.seq += 1;
-    let now = Instant::now();
-    run.times.push_back(now);
-    while run
-        .times
-        .front()
-        .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(1))
-    {
-        run.times.pop_front();
     }
-    let rec = Recording {
-        channels: run.channels.clone(),
-        sample_hz: run.frame_hz,
-        pre: cfg.pre,
-        trigger: cfg.trigger.clone(),
-        frames,
-    };
-    let units: Vec<&str> = rec
-        .channels
-        .iter()
-        .map(|n| Signal::from_name(n).map_or("?", signal_unit))
-        .collect();
-    let columns: Vec<Vec<f64>> = (0..rec.channels.len())
-        .map(|k| {
-            rec.frames
-                .iter()
-                .map(|f| f.get(k).copied().unwrap_or(f64::NAN))
-                .collect()
-        })
-        .collect();
-    shared.event(json!({
-        "type": "frame",
-        "seq": run.seq,
-        "channels": rec.channels,
-        "units": units,
-        "sample_hz": rec.sample_hz,
-        "pre": rec.pre,
-        "trigger": rec.trigger,
-        "columns": columns,
-        "updates_per_s": run.times.len(),
-    }));
-    if run.failed {
-        run.failed = false;
-        shared.event(json!({"type": "scope", "state": "running", "detail": ""}));
-    }
-    let mut caps = shared.captures.lock().unwrap_or_else(|e| e.into_inner());
-    if caps.len() >= 16 {
-        caps.pop_front();
-    }
-    caps.push_back(Arc::new(Capture { seq: run.seq, rec }));
-    Ok(())
 }

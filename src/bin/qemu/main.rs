@@ -27,9 +27,12 @@
 //!   <k> instructions, overruns <m>` (the delay from SysTick's reload to the control
 //!   interrupt's first instruction of its own).
 //! * defmt logs go out over semihosting (decode with `defmt-print -e <elf>`).
+//! * Run QEMU with `-icount shift=0,sleep=off`: one instruction per virtual ns, and idle
+//!   (`wfi`) jumps to the next interrupt. Without `sleep=off` the virtual clock runs in wall
+//!   time while idle sleeps, and a host slower than 100 kHz makes periods overrun.
 //! * Before the loop starts, `init` measures the instructions per control step of every
-//!   feedback law x feedforward combination ([`bench`]; run QEMU with `-icount shift=0`: one
-//!   instruction per virtual ns, so SysTick ticks over N steps count instructions; a loop of
+//!   feedback law x feedforward combination ([`bench`]; under `-icount shift=0` one
+//!   instruction is one virtual ns, so SysTick ticks over N steps count instructions; a loop of
 //!   known length calibrates ticks to instructions). The `bench` command prints that table.
 //!   The table counts the pipeline step (ADC code in, DAC code out) without the driver
 //!   calls; one extra line counts the driver path per sample (both drivers and the mock
@@ -734,6 +737,11 @@ mod app {
                 uart::line("error: no command received");
                 finish(&mut cx.shared.ctl, periods, answered, 1);
             }
+            // Sleep to the next interrupt (the next period at the latest): with QEMU's
+            // `-icount sleep=off` the virtual clock jumps there, where a spinning idle made the
+            // emulator execute every idle nanosecond (6 000 periods per wall second against
+            // 9 300; without sleep=off, idle time passes in wall time and periods overrun).
+            cortex_m::asm::wfi();
         }
     }
 

@@ -100,22 +100,34 @@ function makePlot(ev) {
   plotKey = ev.channels.join(",") + "|" + ev.units.join(",");
 }
 
+// A capture streams in parts (`from`, `columns` of the new frames) while it fills; the
+// plot keeps the whole capture's time span, so the trace sweeps across it.
+let building = null;
+
 function onFrame(ev) {
   const s = window.consoleState;
   s.frames += 1;
-  s.lastSeq = ev.seq;
   s.rate = ev.updates_per_s;
-  s.lastFrame = ev;
+  if (!building || building.seq !== ev.seq || ev.from === 0) {
+    building = { ...ev, columns: ev.channels.map(() => []) };
+  }
+  if (ev.from !== building.columns[0].length) { building = null; return; } // a part missed
+  ev.columns.forEach((c, k) => { for (const v of c) building.columns[k].push(v); });
+  building.complete = ev.complete;
+  building.updates_per_s = ev.updates_per_s;
+  if (ev.complete) { s.lastSeq = ev.seq; s.lastFrame = building; }
   if (paused) return;
-  shown = ev;
+  shown = building;
   const key = ev.channels.join(",") + "|" + ev.units.join(",");
   if (!plot || key !== plotKey) makePlot(ev);
-  const n = ev.columns[0].length;
+  const b = building, n = b.columns[0].length;
   const t = new Array(n);
-  for (let i = 0; i < n; i++) t[i] = ((i - ev.pre) / ev.sample_hz) * 1e3;
-  plot.setData([t].concat(ev.columns), !zoomed);
-  $("scope-status").textContent =
-    `capture ${ev.seq}: ${n} frames at ${ev.sample_hz} Hz (${(n / ev.sample_hz * 1e3).toFixed(2)} ms), trigger ${ev.trigger}; ${ev.updates_per_s} updates/s`;
+  for (let i = 0; i < n; i++) t[i] = ((i - b.pre) / b.sample_hz) * 1e3;
+  plot.setData([t].concat(b.columns), !zoomed);
+  if (!zoomed) plot.setScale("x", { min: (-b.pre / b.sample_hz) * 1e3, max: ((b.total - 1 - b.pre) / b.sample_hz) * 1e3 });
+  const span = (b.total / b.sample_hz * 1e3).toFixed(2);
+  $("scope-status").textContent = (b.complete ? `capture ${b.seq}: ${n} frames` : `capture ${b.seq}: ${n} of ${b.total} frames`) +
+    ` at ${b.sample_hz} Hz (${span} ms), trigger ${b.trigger}; ${ev.updates_per_s} updates/s`;
   $("scope-error").textContent = "";
 }
 
