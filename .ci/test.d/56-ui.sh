@@ -2,13 +2,16 @@
 # The lab console in a real browser: the QEMU firmware (stage with the 2.5 kHz resonance of
 # 39-bode), `piezo ui` connected to it over the same TCP link `piezo serial` uses, and headless
 # Chromium driven through chromedriver (WebDriver) by hal-sim/examples/ui_browser.rs: the
-# scope receives frames and triggers on the wave's start; a valid setting reaches the firmware
-# (read back with `get`); an out-of-range value shows the range and sends nothing; the
-# firmware's `err N` shows by its field; a mode change is reflected; bode finds the resonance
-# within 50 Hz and applies the notch; Stop leaves the DAC at the safe code; a lost link is
-# shown; a report (`piezo demo --out`'s index.html) opens from the console. Screenshots in
-# out/ui/. Every wait is on a condition (page state, a reply); the
-# wall-clock caps only end a run whose emulator, server or browser stopped.
+# scope streams at >= 20 updates/s and triggers on the wave's start; a valid setting reaches
+# the firmware (read back with `get`); an out-of-range value shows the range and sends
+# nothing; the firmware's `err N` shows by its field; a mode change is reflected; bode finds
+# the resonance within 50 Hz and applies the notch; identify cuts the tracking error of a
+# mismatched stage 3x and loads the model; save is refused in closed loop with its reason,
+# taken after Stop, and load restores it; Stop leaves the DAC at the safe code; a lost link
+# is shown; a report (`piezo demo --out`'s index.html) opens from the console. Then `piezo ui
+# --port` on QEMU's -serial pty (a board's serial-port path). Screenshots in out/ui/. Every
+# wait is on a condition (page state, a reply); the wall-clock caps only end a run whose
+# emulator, server or browser stopped.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
@@ -30,6 +33,8 @@ listening() { python3 -c 'import socket,sys; socket.create_connection(("127.0.0.
 # The stage's mechanical resonance (QEMU harness line; no reply, the next ping answers after it).
 exec 3<>"/dev/tcp/127.0.0.1/$port"
 printf 'resonance 2500 0.05\n' >&3
+# A stage that differs from the firmware's model (as 40-identify's): identify has work to do.
+printf 'stage 1.25 1.6 1\n' >&3
 exec 3>&-
 s ping >/dev/null
 
@@ -61,7 +66,7 @@ done
 mkdir -p out/ui
 timeout 1200 target/debug/examples/ui_browser --ui "$url" --webdriver "http://127.0.0.1:$wd_port" \
   --out out/ui --chromium "$(command -v chromium)" --resonance-hz 2500 --safe-code 0 \
-  --kill-pid "$qemu" --report "piezo demo: hysteresis loops" | tee "$work/browser.txt" || { tail -20 "$work/ui.txt"; fail "browser checks"; }
+  --kill-pid "$qemu" --report "piezo demo: hysteresis loops" --identify | tee "$work/browser.txt" || { tail -20 "$work/ui.txt"; fail "browser checks"; }
 grep -q '^ui: [0-9]* browser checks passed$' "$work/browser.txt" || fail "no summary line"
 # The example ended QEMU on purpose (the lost-link check).
 wait "$qemu" 2>/dev/null || true

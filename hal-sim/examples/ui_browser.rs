@@ -29,6 +29,9 @@ struct Opts {
     kill_pid: Option<u32>,
     /// The title of the report `piezo ui --report` was given (opened from the Tools tab).
     report: Option<String>,
+    /// The stage differs from the firmware's model (`stage` harness line): identify from the
+    /// Tools tab must cut the tracking error three times.
+    identify: bool,
 }
 
 fn opts() -> Result<Opts> {
@@ -42,6 +45,7 @@ fn opts() -> Result<Opts> {
         timeout: Duration::from_secs(600),
         kill_pid: None,
         report: None,
+        identify: false,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -56,6 +60,7 @@ fn opts() -> Result<Opts> {
             "--timeout-s" => o.timeout = Duration::from_secs_f64(v()?.parse()?),
             "--kill-pid" => o.kill_pid = Some(v()?.parse()?),
             "--report" => o.report = Some(v()?),
+            "--identify" => o.identify = true,
             other => bail!("unknown argument {other}"),
         }
     }
@@ -141,6 +146,17 @@ impl Run {
     fn pass(&mut self, what: &str) {
         self.passed += 1;
         println!("ui: ok {}: {what}", self.passed);
+    }
+
+    /// Empties a result line, so a wait on it sees the next result, not the last one.
+    async fn clear(&self, id: &str) -> Result<()> {
+        self.c
+            .execute(
+                &format!("document.getElementById('{id}').textContent = '';"),
+                vec![],
+            )
+            .await?;
+        Ok(())
     }
 
     /// One raw line through the console's Wire panel (the firmware's own reply).
@@ -409,6 +425,122 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
         ));
     }
 
+    // Identify from the Tools tab, on a stage that differs from the firmware's model.
+    if o.identify {
+        r.tab("tools").await?;
+        let d_before = r.raw("get cbw_d").await?;
+        r.tab("tools").await?;
+        r.click("#ident-run").await?;
+        let text = r
+            .until(
+                "identify's result",
+                "const t = document.getElementById('ident-result').textContent;
+                 return /tracking error|error/.test(t) && !t.startsWith('running') ? t : null;",
+            )
+            .await?;
+        let text = text.as_str().unwrap_or_default().to_string();
+        let steps =
+            r.c.execute(
+                "return document.getElementById('ident-progress').children.length;",
+                vec![],
+            )
+            .await?;
+        r.shot("identify.png").await?;
+        let nums: Vec<f64> = text
+            .strip_prefix("tracking error ")
+            .and_then(|t| t.split(" um after").next())
+            .map(|t| {
+                t.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+                    .filter_map(|w| w.parse().ok())
+                    .collect()
+            })
+            .unwrap_or_default();
+        let [before, after] = nums[..] else {
+            bail!("identify: no `tracking error <a> um RMS before, <b> um after` in: {text}");
+        };
+        if !(after > 0.0 && before >= 3.0 * after) {
+            bail!("identify: tracking error {before} -> {after} um, not 3x smaller");
+        }
+        let d_after = r.raw("get cbw_d").await?;
+        if d_after == d_before {
+            bail!("identify: the firmware's model did not change (`{d_after}`)");
+        }
+        r.pass(&format!(
+            "identify from the Tools tab ({steps} progress lines): tracking error {before} -> \
+             {after} um RMS, model loaded (`{d_before}` -> `{d_after}`)"
+        ));
+    }
+
+    // Save to flash from the Settings panel: refused while the stage is driven (with the
+    // reason), taken after Stop; a later change is undone by `load`.
+    let kp = r.raw("get pid_kp").await?;
+    r.tab("mode").await?;
+    r.select("#mode-law", "ff+pid").await?;
+    r.click("#mode-apply").await?;
+    r.until(
+        "mode ff+pid before save",
+        "return document.getElementById('mode-result').textContent.includes('ok mode ff+pid');",
+    )
+    .await?;
+    r.tab("settings").await?;
+    r.clear("settings-result").await?;
+    r.click("#flash-save").await?;
+    let refused = r
+        .until(
+            "save refused in closed loop",
+            "const t = document.getElementById('settings-result').textContent;
+             return t.startsWith('save:') ? t : null;",
+        )
+        .await?;
+    let refused = refused.as_str().unwrap_or_default().to_string();
+    if !(refused.contains("err 12") && refused.contains("press STOP first")) {
+        bail!("save in closed loop: `{refused}`, not err 12 with the reason");
+    }
+    r.clear("stop-result").await?;
+    r.click("#stop").await?;
+    r.until(
+        "Stop before save",
+        "return document.getElementById('stop-result').textContent.startsWith('stopped');",
+    )
+    .await?;
+    r.tab("settings").await?;
+    r.clear("settings-result").await?;
+    r.click("#flash-save").await?;
+    r.until(
+        "the reply to save",
+        "const t = document.getElementById('settings-result').textContent;
+         return t.startsWith('ok save') || t.startsWith('save:') ? t : null;",
+    )
+    .await?;
+    let saved =
+        r.c.execute(
+            "return document.getElementById('settings-result').textContent;",
+            vec![],
+        )
+        .await?;
+    let saved = saved.as_str().unwrap_or_default().to_string();
+    if !saved.starts_with("ok save") {
+        bail!("flash save from the Settings panel: {saved}");
+    }
+    let changed = r.raw("set pid_kp 0.5").await?;
+    r.tab("settings").await?;
+    r.clear("settings-result").await?;
+    r.click("#flash-load").await?;
+    r.until(
+        "the reply to load",
+        "const t = document.getElementById('settings-result').textContent;
+         return t.startsWith('ok load') || t.startsWith('load:') ? t : null;",
+    )
+    .await?;
+    let back = r.raw("get pid_kp").await?;
+    if back != kp {
+        bail!("saved with `{kp}`, then `{changed}`, load gave `{back}`");
+    }
+    r.pass(&format!(
+        "Settings: flash save in closed loop refused with its reason (`{refused}`); after \
+         Stop, save (`{saved}`), `set pid_kp 0.5`, load: `{back}` again"
+    ));
+
     // 7. Stop: from a sine in closed loop, the DAC ends at the safe code and stays there.
     r.tab("mode").await?;
     r.select("#mode-law", "ff+pid").await?;
@@ -435,6 +567,7 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
         &format!("f.channels.includes('dac_code') && col('dac_code').every(v => v !== {safe})"),
     )
     .await?;
+    r.clear("stop-result").await?;
     r.click("#stop").await?;
     r.until(
         "Stop done",

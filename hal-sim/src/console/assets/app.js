@@ -241,8 +241,16 @@ async function readSettings() {
 
 async function flashOp(op) {
   const r = await api("/api/flash", { op });
-  if (r.ok) { show("settings-result", true, r.body.reply); readSettings(); }
-  else show("settings-result", false, `${op}: ` + why(r.body));
+  if (r.ok) {
+    // The values read back, then the operation's own reply stays on screen.
+    await readSettings();
+    show("settings-result", true, r.body.reply + "; values read back");
+  } else {
+    // The firmware writes its flash only in the safe state (the command table's `save`).
+    const hint = op === "save" && r.body.code === 12
+      ? " (the firmware saves only in the safe state, open loop holding or a fault latched: press STOP first)" : "";
+    show("settings-result", false, `${op}: ` + why(r.body) + hint);
+  }
 }
 
 async function downloadSettings() {
