@@ -35,7 +35,10 @@ mod storage;
 mod target;
 mod timing;
 
-pub use budget::{Budget, WORST_M4F, WORST_M4F_BUILD, WORST_M4F_XY};
+pub use budget::{
+    Budget, SOLVER_LOCK_M4F_BUILD, SOLVE_M4F, SOLVE_M4F_BUILD, SOLVE_M4F_XY, WORST_M4F,
+    WORST_M4F_BUILD, WORST_M4F_XY,
+};
 pub use console::{CommandLine, Port, Replica, WithFlash};
 pub use control_loop::Loop;
 pub use converters::{
@@ -45,10 +48,12 @@ pub use converters::{
 pub use ctl::{Ctl, PointTable};
 pub use execute::{push_real, push_stats, stream_bin, stream_frames, PARAMS, READ_ONLY};
 pub use flash_job::{run_flash_job, FlashDone, FlashOp, FlashWork, SettingsJob};
-pub use laws::{ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, STAGE_POLE_PER_S};
+pub use laws::{
+    ff_by_name, ff_with, law_by_name, law_with, FFS, LAWS, NMPC_DECIMATION, STAGE_POLE_PER_S,
+};
 pub use nor::{Blocking, NorError, RamNor};
 pub use params::Params;
-pub use period::{control_period, Clock, Io};
+pub use period::{control_period, solve_nmpc, Clock, Io};
 pub use selftest::{dac_scale, push_dac_readback, push_dac_scale, DacScale};
 pub use settings::{setting, Access, Setting, SETTINGS};
 pub use storage::{decode, encode, stored, Boot, Record, SettingsFlash, MAX_RECORD, VERSION};

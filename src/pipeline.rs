@@ -264,6 +264,11 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     pub fn feedback(&self) -> &[Feedback<T>; N] {
         &self.feedback
     }
+    /// The feedback law of `axis`, to hand a deferred NMPC its plan
+    /// ([`crate::feedback::Nmpc::deliver`]; replacing a law is [`Pipeline::set_feedback`]).
+    pub fn feedback_mut(&mut self, axis: usize) -> Option<&mut Feedback<T>> {
+        self.feedback.get_mut(axis)
+    }
     /// The reference generator of `axis`.
     pub fn reference(&self, axis: usize) -> Option<&WaveGen<T>> {
         self.reference.get(axis)

@@ -111,6 +111,17 @@ fn adrc(feedforward: bool) -> Feedback<f64> {
 /// `y_d = 12 + 7 sin(2 pi f t)` for two periods; returns the RMSE over the last period
 /// and the largest command seen (after limits).
 fn run(law: &mut Feedback<f64>, plant: Cbw<f64>, f_hz: f64, disturbance_um: f64) -> (f64, f64) {
+    run_with(law, plant, f_hz, disturbance_um, |_| {})
+}
+
+/// [`run`], with `after` called on the law after every sample (a deferred NMPC's solver).
+fn run_with(
+    law: &mut Feedback<f64>,
+    plant: Cbw<f64>,
+    f_hz: f64,
+    disturbance_um: f64,
+    mut after: impl FnMut(&mut Feedback<f64>),
+) -> (f64, f64) {
     let mut s = plant.init(0.0);
     let mut x = 0.0;
     let mut u_applied = 0.0;
@@ -138,6 +149,7 @@ fn run(law: &mut Feedback<f64>, plant: Cbw<f64>, f_hz: f64, disturbance_um: f64)
             u_applied,
         };
         let u = law.update(&io);
+        after(law);
         u_applied = u.clamp(0.0, U_MAX);
         u_peak = u_peak.max(u_applied.abs());
         let v = plant.step(&mut s, u_applied, DT);
@@ -189,6 +201,64 @@ fn baselines_close_the_loop() {
             "{name}: rmse {rmse} / {rmse_d} um"
         );
     }
+}
+
+fn deferred(mut law: Feedback<f64>) -> Feedback<f64> {
+    if let Feedback::Nmpc(n) = &mut law {
+        n.set_deferred(true);
+    }
+    law
+}
+
+/// The firmware's deferred NMPC (its solve in a lower-priority task, one MPC period behind
+/// the boundary it starts from, the first move fixed) tracks like the NMPC that solves in
+/// the step, with a solver that delivers within every MPC period.
+#[test]
+fn deferred_nmpc_tracks_like_the_inline_one() {
+    for ff in [false, true] {
+        let (inline, _) = run(&mut nmpc(ff), cbw(1.2), 10.0, -1.0);
+        let mut solves = 0;
+        let (late, _) = run_with(&mut deferred(nmpc(ff)), cbw(1.2), 10.0, -1.0, |law| {
+            if let Feedback::Nmpc(n) = law {
+                if let Some(job) = n.job() {
+                    let plan = n.solve_job(&job);
+                    assert_eq!(plan[0], job.first(), "the first move stays");
+                    assert!(n.deliver(&job, plan));
+                    solves += 1;
+                }
+            }
+        });
+        eprintln!(
+            "nmpc ff={ff}: rmse inline {inline:.2e} um, deferred {late:.2e} um ({solves} solves)"
+        );
+        // 2 periods of 10 Hz at 100 kHz, a solve every 10 samples.
+        assert!(solves >= 1999, "{solves} solves");
+        assert!(
+            late < 0.5 && late < 2.0 * inline + 0.02,
+            "ff={ff}: {late} vs {inline} um"
+        );
+    }
+}
+
+/// Without a solver (late or gone) the deferred NMPC holds its last plan, shifted: finite,
+/// inside the input range, and a plan for a job that is no longer asked is refused.
+#[test]
+fn deferred_nmpc_without_a_solver_holds_its_plan() {
+    let mut law = deferred(nmpc(false));
+    let (rmse, u_peak) = run(&mut law, cbw(1.0), 10.0, 0.0);
+    assert!(rmse.is_finite() && u_peak <= U_MAX, "{rmse} {u_peak}");
+    let Feedback::Nmpc(n) = &mut law else {
+        unreachable!()
+    };
+    let job = n.job().expect("a job is posted at every boundary");
+    let plan = n.solve_job(&job);
+    // A job of an older boundary: not the one asked.
+    let mut old = job;
+    old.seq = old.seq.wrapping_sub(1);
+    assert!(!n.deliver(&old, plan));
+    assert!(!n.deliver(&job, [f64::NAN; 8]));
+    assert!(n.deliver(&job, plan));
+    assert!(n.job().is_none());
 }
 
 #[test]

@@ -20,6 +20,15 @@
 //! fixed-size arrays: no allocation, bounded work (`iterations * (H model steps +
 //! H^3/6 Cholesky)`). [`Nmpc::cost`] evaluates that cost for any plan (the tests check the
 //! solver against an exhaustive search of it on short horizons).
+//!
+//! Deferred ([`Nmpc::set_deferred`], the boards at 100 kHz): the solve leaves the control
+//! step. At an MPC boundary the step shifts its plan (the one a solver delivered for the
+//! last boundary, else its own), applies the plan's first move and posts an [`NmpcJob`]: the
+//! estimates and signals of this boundary with that first move fixed. A lower-priority task
+//! copies the law and the job ([`Nmpc::job`]), solves ([`Nmpc::solve_job`]: the same
+//! Gauss-Newton, the first move held) and hands the plan back ([`Nmpc::deliver`]) before the
+//! next boundary, where the step applies its second move. A solver that is late or gone
+//! leaves the step on its last plan, shifted (the last move held).
 
 // Dense matrix code reads best with indices; every index is below the const H of
 // fixed-size arrays, so none can go out of bounds.
@@ -61,6 +70,8 @@ pub struct Nmpc<T, const H: usize = HORIZON> {
     gd: T,
     dt_mpc: T,
     state: NmpcState<T, H>,
+    /// The solve runs outside [`Nmpc::update`] ([`Nmpc::set_deferred`]).
+    deferred: bool,
     pub(crate) guard: InputGuard<T>,
 }
 
@@ -71,6 +82,27 @@ pub struct NmpcState<T, const H: usize = HORIZON> {
     pub count: u32,
     pub u_hold: T,
     pub fresh: bool,
+    /// Deferred: the job of the last boundary, while no plan has come back for it.
+    pub asked: Option<NmpcJob<T, H>>,
+    /// Deferred: the plan a solver delivered for the last job (from that boundary on).
+    pub delivered: Option<[T; H]>,
+}
+
+/// One deferred solve: the estimates and signals at an MPC boundary, the plan to start from
+/// (its first move, applied from that boundary on, stays fixed) and the job's number.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NmpcJob<T, const H: usize = HORIZON> {
+    pub seq: u32,
+    obs: HgoState<T>,
+    io: LoopSignals<T>,
+    warm: [T; H],
+}
+
+impl<T: Copy, const H: usize> NmpcJob<T, H> {
+    /// The move applied from the job's boundary on (the solve keeps it).
+    pub fn first(&self) -> T {
+        self.warm[0]
+    }
 }
 
 impl<T: Real, const H: usize> Default for NmpcState<T, H> {
@@ -81,6 +113,8 @@ impl<T: Real, const H: usize> Default for NmpcState<T, H> {
             count: 0,
             u_hold: T::ZERO,
             fresh: false,
+            asked: None,
+            delivered: None,
         }
     }
 }
@@ -109,8 +143,41 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
                 fresh: true,
                 ..Default::default()
             },
+            deferred: false,
             guard: InputGuard::default(),
         })
+    }
+
+    /// Solves outside [`Nmpc::update`]: a lower-priority task takes [`Nmpc::job`] and gives
+    /// [`Nmpc::deliver`] the plan (module docs). Off by default (the solve runs in the step).
+    pub fn set_deferred(&mut self, on: bool) {
+        self.deferred = on;
+    }
+
+    pub fn deferred(&self) -> bool {
+        self.deferred
+    }
+
+    /// The job posted at the last MPC boundary, while no plan came back for it (deferred).
+    pub fn job(&self) -> Option<NmpcJob<T, H>> {
+        self.state.asked
+    }
+
+    /// The plan for `job` (from its boundary on, the first move as it was applied): the
+    /// solve of the step, on a copy of the law. Bounded like it; no allocation.
+    pub fn solve_job(&self, job: &NmpcJob<T, H>) -> [T; H] {
+        self.plan_from(&job.obs, &job.io, job.warm, true)
+    }
+
+    /// Takes the plan solved for `job` if it is still the one asked for (a plan for an older
+    /// job, or for a law that was replaced since, is dropped); true if taken.
+    pub fn deliver(&mut self, job: &NmpcJob<T, H>, plan: [T; H]) -> bool {
+        if self.state.asked.as_ref() != Some(job) || !plan.iter().all(|p| p.is_finite()) {
+            return false;
+        }
+        self.state.asked = None;
+        self.state.delivered = Some(plan);
+        true
     }
 
     pub fn config(&self) -> &NmpcConfig<T> {
@@ -134,7 +201,11 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
         self.state.count += 1;
         if self.state.count >= self.cfg.decimation {
             self.state.count = 0;
-            self.solve(&io);
+            if self.deferred {
+                self.boundary(&io);
+            } else {
+                self.solve(&io);
+            }
         }
         let u = self.state.u_hold;
         if u.is_finite() {
@@ -145,15 +216,33 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
         }
     }
 
-    /// Predicted outputs for `plan` from the current estimates; returns also the local
+    /// Deferred, at an MPC boundary: the delivered plan (else the last one), both starting
+    /// at the last boundary, shifted to this one; its first move applied; the next job
+    /// posted. A few copies: the solve is the job's.
+    fn boundary(&mut self, io: &LoopSignals<T>) {
+        let mut plan = self.state.delivered.take().unwrap_or(self.state.plan);
+        plan.rotate_left(1);
+        plan[H - 1] = plan[H - 2];
+        self.state.plan = plan;
+        self.state.u_hold = plan[0];
+        let seq = self.state.asked.map_or(0, |j| j.seq).wrapping_add(1);
+        self.state.asked = Some(NmpcJob {
+            seq,
+            obs: self.state.obs,
+            io: *io,
+            warm: plan,
+        });
+    }
+
+    /// Predicted outputs for `plan` from the estimates `obs`; returns also the local
     /// `dv/du` of every move.
     #[inline]
-    fn rollout(&self, plan: &[T; H], u_prev: T) -> ([T; H], [T; H]) {
+    fn rollout(&self, obs: &HgoState<T>, plan: &[T; H], u_prev: T) -> ([T; H], [T; H]) {
         let m = self.hgo.model();
         let lo = m.d() / T::from_f64(20.0);
-        let mut x = self.state.obs.x;
-        let mut h = self.state.obs.h;
-        let dist = self.state.obs.d;
+        let mut x = obs.x;
+        let mut h = obs.h;
+        let dist = obs.d;
         let mut u0 = u_prev;
         let mut y = [T::ZERO; H];
         let mut dvdu = [T::ZERO; H];
@@ -184,7 +273,7 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
     /// setpoint, feedforward and applied voltage of `io`:
     /// `sum_k (y[k+1] - y_d[k+1])^2 + r * sum_k (u[k] - u_ref[k])^2`.
     pub fn cost(&self, plan: &[T; H], io: &LoopSignals<T>) -> T {
-        let (y, _) = self.rollout(plan, io.u_applied);
+        let (y, _) = self.rollout(&self.state.obs, plan, io.u_applied);
         let reference = self.reference(io);
         let mut j = T::ZERO;
         for (k, (yk, rk)) in y.iter().zip(reference.iter()).enumerate() {
@@ -200,16 +289,32 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
     }
 
     fn solve(&mut self, io: &LoopSignals<T>) {
+        // Warm start: shift the previous plan.
+        let mut warm = self.state.plan;
+        warm.rotate_left(1);
+        warm[H - 1] = warm[H - 2];
+        let plan = self.plan_from(&self.state.obs, io, warm, false);
+        self.state.plan = plan;
+        self.state.u_hold = plan[0];
+    }
+
+    /// Gauss-Newton from `warm` on the estimates `obs` and the signals `io` of one boundary;
+    /// with `first_fixed` the first move stays `warm[0]` (a deferred job's, already
+    /// applied). A plan that is not finite falls back to holding `io.u_applied`.
+    fn plan_from(
+        &self,
+        obs: &HgoState<T>,
+        io: &LoopSignals<T>,
+        warm: [T; H],
+        first_fixed: bool,
+    ) -> [T; H] {
         let n = H;
         let u_prev = io.u_applied;
-        // Warm start: shift the previous plan.
-        let mut plan = self.state.plan;
-        plan.rotate_left(1);
-        plan[n - 1] = plan[n - 2];
+        let mut plan = warm;
         let reference = self.reference(io);
         let r_w = self.cfg.r;
         for _ in 0..self.cfg.iterations {
-            let (y, g) = self.rollout(&plan, u_prev);
+            let (y, g) = self.rollout(obs, &plan, u_prev);
             // J[i][j] = gd * ad^(i-j) * g[j] for i >= j.
             let mut jac = [[T::ZERO; H]; H];
             for j in 0..n {
@@ -251,19 +356,30 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
                     }
                 }
             }
+            if first_fixed {
+                // The first move is applied already: its row and column decoupled, no step.
+                for k in 0..n {
+                    hm[0][k] = T::ZERO;
+                    hm[k][0] = T::ZERO;
+                }
+                hm[0][0] = T::ONE;
+                grad[0] = T::ZERO;
+            }
             let Some(step) = cholesky_solve(hm, grad) else {
                 break;
             };
-            for (p, d) in plan.iter_mut().zip(step.iter()) {
+            for (p, d) in plan
+                .iter_mut()
+                .zip(step.iter())
+                .skip(usize::from(first_fixed))
+            {
                 *p = (*p - *d).clamp_to(self.cfg.u_min, self.cfg.u_max);
             }
         }
         if plan.iter().all(|p| p.is_finite()) {
-            self.state.plan = plan;
-            self.state.u_hold = plan[0];
+            plan
         } else {
-            self.state.plan = [u_prev; H];
-            self.state.u_hold = u_prev;
+            [u_prev; H]
         }
     }
 
@@ -275,6 +391,8 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
             count: 0,
             u_hold: u,
             fresh: false,
+            asked: None,
+            delivered: None,
         };
     }
 

@@ -10,7 +10,7 @@
 //! table with one instruction per core cycle (its code in ITCM, its state in DTCM; not
 //! measured on a board).
 
-use super::laws::{FFS, LAWS};
+use super::laws::{FFS, LAWS, NMPC_DECIMATION};
 use super::target::AXES;
 use crate::command::Error;
 
@@ -20,19 +20,19 @@ use crate::command::Error;
 /// 200 (the bench counts in 40-instruction SysTick ticks). `open-loop` stands
 /// for the open-loop modes (`open-loop`, `feedforward`).
 pub const WORST_M4F: [[u32; FFS.len()]; LAWS.len()] = [
-    [600, 1200, 800],      // open-loop
-    [800, 1200, 800],      // pid
-    [800, 1200, 800],      // ff+pid
-    [1000, 1200, 1200],    // hgo-robust
-    [1000, 1200, 1200],    // ff+hgo-robust
-    [2000, 2200, 2200],    // fts
-    [2000, 2200, 2200],    // ff+fts
-    [2000, 2200, 2200],    // fts-gbw
-    [800, 1200, 1000],     // adrc
-    [800, 1200, 1000],     // ff+adrc
-    [14600, 14600, 14600], // nmpc
-    [14800, 14800, 14800], // ff+nmpc
-    [15200, 15400, 15400], // nmpc-gbw
+    [600, 1200, 800],   // open-loop
+    [800, 1200, 800],   // pid
+    [800, 1200, 800],   // ff+pid
+    [1000, 1200, 1200], // hgo-robust
+    [1000, 1200, 1200], // ff+hgo-robust
+    [2000, 2200, 2200], // fts
+    [2000, 2200, 2200], // ff+fts
+    [2000, 2200, 2200], // fts-gbw
+    [800, 1200, 1000],  // adrc
+    [800, 1200, 1000],  // ff+adrc
+    [1000, 1200, 1200], // nmpc (the step; its solve: SOLVE_M4F)
+    [1000, 1200, 1200], // ff+nmpc
+    [1000, 1200, 1200], // nmpc-gbw
 ];
 
 /// [`WORST_M4F`] for the two-axis (`xy`) build: its step runs the feedforward and the law
@@ -40,24 +40,47 @@ pub const WORST_M4F: [[u32; FFS.len()]; LAWS.len()] = [
 /// [`WORST_M4F`], `fts` 3280-3600 against 2000-2200). Measured and rounded the same way by
 /// the xy QEMU board's bench (`36-qemu-xy.sh` fails if a measurement exceeds it).
 pub const WORST_M4F_XY: [[u32; FFS.len()]; LAWS.len()] = [
-    [800, 1400, 1000],     // open-loop
-    [1200, 1800, 1400],    // pid
-    [1200, 1800, 1400],    // ff+pid
-    [1600, 1800, 1800],    // hgo-robust
-    [1600, 1800, 1800],    // ff+hgo-robust
-    [3600, 3800, 3800],    // fts
-    [3600, 3800, 3800],    // ff+fts
-    [3600, 3800, 3800],    // fts-gbw
-    [1200, 1600, 1400],    // adrc
-    [1200, 1600, 1400],    // ff+adrc
-    [26800, 27000, 27000], // nmpc
-    [26800, 27000, 27000], // ff+nmpc
-    [28000, 28400, 28400], // nmpc-gbw
+    [800, 1400, 1000],  // open-loop
+    [1200, 1800, 1400], // pid
+    [1200, 1800, 1400], // ff+pid
+    [1600, 1800, 1800], // hgo-robust
+    [1600, 1800, 1800], // ff+hgo-robust
+    [3600, 3800, 3800], // fts
+    [3600, 3800, 3800], // ff+fts
+    [3600, 3800, 3800], // fts-gbw
+    [1200, 1600, 1400], // adrc
+    [1200, 1600, 1400], // ff+adrc
+    [1600, 1800, 2000], // nmpc (the step; its solve: SOLVE_M4F_XY)
+    [1600, 2000, 2000], // ff+nmpc
+    [1800, 2000, 2000], // nmpc-gbw
 ];
 
 /// The worst-case table of this build's axis count: [`WORST_M4F`] or [`WORST_M4F_XY`].
 pub const WORST_M4F_BUILD: [[u32; FFS.len()]; LAWS.len()] =
     if AXES == 2 { WORST_M4F_XY } else { WORST_M4F };
+
+/// The deferred NMPC's solver task ([`super::solve_nmpc`], priority 2) per MPC boundary:
+/// every axis' solve with its two locks, worst over the same bench runs as [`WORST_M4F`],
+/// rounded the same way (each row's largest); 0 for the laws that solve nothing apart.
+/// It must fit the periods of one MPC move beside the control task.
+const fn solve_rows(nmpc: u32, ff_nmpc: u32, nmpc_gbw: u32) -> [[u32; FFS.len()]; LAWS.len()] {
+    let mut t = [[0; FFS.len()]; LAWS.len()];
+    t[LAWS.len() - 3] = [nmpc; FFS.len()];
+    t[LAWS.len() - 2] = [ff_nmpc; FFS.len()];
+    t[LAWS.len() - 1] = [nmpc_gbw; FFS.len()];
+    t
+}
+/// One axis (bench worst 15 560 to 16 360).
+pub const SOLVE_M4F: [[u32; FFS.len()]; LAWS.len()] = solve_rows(16_000, 16_000, 16_600);
+/// Two axes: both solves in one run of the task (bench worst 29 360 to 30 800).
+pub const SOLVE_M4F_XY: [[u32; FFS.len()]; LAWS.len()] = solve_rows(30_000, 29_800, 31_000);
+/// [`SOLVE_M4F`] or [`SOLVE_M4F_XY`] for this build.
+pub const SOLVE_M4F_BUILD: [[u32; FFS.len()]; LAWS.len()] =
+    if AXES == 2 { SOLVE_M4F_XY } else { SOLVE_M4F };
+/// The solver's copy of a law and its job under the lock (the control interrupt waits that
+/// long at most): bench worst 1 320 one axis, 1 720 two, rounded as above. A solver mode's
+/// blocking is the larger of this and [`BLOCKING_M4F`] (one lock at a time).
+pub const SOLVER_LOCK_M4F_BUILD: u32 = if AXES == 2 { 2_000 } else { 1_600 };
 
 /// The longest the command task's lock delays the control interrupt (instructions on the
 /// QEMU M4F, taken as core cycles on the H743 like the table): the hand-over of a new
@@ -81,6 +104,12 @@ pub struct Budget {
     blocking: u32,
     /// Worst-case step per law x feedforward; 0: unknown (not refused).
     worst: [[u32; FFS.len()]; LAWS.len()],
+    /// Worst solver-task run per MPC boundary (deferred NMPC); 0: no solver.
+    solve: [[u32; FFS.len()]; LAWS.len()],
+    /// The solver's lock ([`SOLVER_LOCK_M4F_BUILD`]).
+    solver_lock: u32,
+    /// Control periods per MPC boundary ([`super::NMPC_DECIMATION`]).
+    decimation: u32,
 }
 
 impl Budget {
@@ -90,6 +119,9 @@ impl Budget {
         overhead: 0,
         blocking: 0,
         worst: [[0; FFS.len()]; LAWS.len()],
+        solve: [[0; FFS.len()]; LAWS.len()],
+        solver_lock: 0,
+        decimation: NMPC_DECIMATION,
     };
 
     /// This build's table ([`WORST_M4F_BUILD`]: one or two axes) against `period`
@@ -100,6 +132,9 @@ impl Budget {
             overhead,
             blocking: BLOCKING_M4F,
             worst: WORST_M4F_BUILD,
+            solve: SOLVE_M4F_BUILD,
+            solver_lock: SOLVER_LOCK_M4F_BUILD,
+            decimation: NMPC_DECIMATION,
         }
     }
 
@@ -114,11 +149,32 @@ impl Budget {
             overhead,
             blocking: BLOCKING_M4F,
             worst,
+            solve: [[0; FFS.len()]; LAWS.len()],
+            solver_lock: 0,
+            decimation: NMPC_DECIMATION,
         }
+    }
+
+    /// With a board's own measurement of the solver task (`solve[law][ff]` per MPC
+    /// boundary, 0 where none) and of its lock.
+    pub const fn with_solver(mut self, solve: [[u32; FFS.len()]; LAWS.len()], lock: u32) -> Self {
+        self.solve = solve;
+        self.solver_lock = lock;
+        self
     }
 
     /// The worst case of `law` with `ff`, when known (`feedforward` is the open-loop row).
     pub fn worst(&self, law: &str, ff: &str) -> Option<u32> {
+        Self::cell(&self.worst, law, ff)
+    }
+
+    /// The worst solver-task run of `law` with `ff` per MPC boundary, for a law that solves
+    /// apart (deferred NMPC).
+    pub fn solve(&self, law: &str, ff: &str) -> Option<u32> {
+        Self::cell(&self.solve, law, ff)
+    }
+
+    fn cell(t: &[[u32; FFS.len()]; LAWS.len()], law: &str, ff: &str) -> Option<u32> {
         let law = if law == "feedforward" {
             "open-loop"
         } else {
@@ -126,8 +182,7 @@ impl Budget {
         };
         let row = LAWS.iter().position(|l| *l == law)?;
         let col = FFS.iter().position(|f| *f == ff)?;
-        self.worst
-            .get(row)
+        t.get(row)
             .and_then(|r| r.get(col))
             .copied()
             .filter(|w| *w > 0)
@@ -142,11 +197,29 @@ impl Budget {
     }
 
     /// `Ok` when `law` with `ff` fits the period (or its cost is unknown), else
-    /// [`Error::OverBudget`].
+    /// [`Error::OverBudget`]. A law with a solver task fits when its step fits beside the
+    /// larger of the two locks, and its solve fits what the control task leaves of the
+    /// periods of one MPC move (less one lock of the command task, which can hold it off).
     pub fn check(&self, law: &str, ff: &str) -> Result<(), Error> {
-        match self.worst(law, ff) {
-            Some(w) if w > self.allowance() => Err(Error::OverBudget),
-            _ => Ok(()),
+        let step = self.worst(law, ff).unwrap_or(0);
+        match self.solve(law, ff) {
+            None if step > self.allowance() => Err(Error::OverBudget),
+            None => Ok(()),
+            Some(solve) => {
+                let blocking = self.blocking.max(self.solver_lock);
+                let busy = self.overhead.saturating_add(step);
+                let allowance = self
+                    .period
+                    .saturating_sub(self.overhead)
+                    .saturating_sub(blocking);
+                let free = (self.period.saturating_sub(busy) as u64 * self.decimation as u64)
+                    .saturating_sub(self.blocking as u64);
+                if step > allowance || solve as u64 > free {
+                    Err(Error::OverBudget)
+                } else {
+                    Ok(())
+                }
+            }
         }
     }
 }
@@ -156,7 +229,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn nmpc_is_refused_at_100_khz_on_the_m4f_and_the_main_mode_fits() {
+    fn nmpc_fits_at_100_khz_on_the_m4f_with_its_solver_apart_and_the_main_mode_fits() {
         // QEMU M4F: 10 000 instructions per 10 us period, the SPI driver path ~800.
         let b = Budget::m4f(10_000, 1_200);
         assert_eq!(b.check("ff+hgo-robust", "ims-cbw"), Ok(()));
@@ -164,14 +237,34 @@ mod tests {
         assert_eq!(b.check("fts-gbw", "ims-cbw-delayed"), Ok(()));
         for law in ["nmpc", "ff+nmpc", "nmpc-gbw"] {
             for ff in FFS {
-                assert_eq!(b.check(law, ff), Err(Error::OverBudget), "{law} {ff}");
+                assert_eq!(b.check(law, ff), Ok(()), "{law} {ff}");
+                assert!(b.solve(law, ff).is_some(), "{law} {ff}");
             }
         }
-        // At 20 kHz NMPC fits.
-        assert_eq!(Budget::m4f(50_000, 1_200).check("nmpc", "linear"), Ok(()));
+        // The solve counted inside the step (the former firmware) did not fit.
+        let inline = Budget::measured(10_000, 1_200, SOLVE_M4F);
+        assert_eq!(inline.check("nmpc", "linear"), Err(Error::OverBudget));
         // Unknown names are not this check's business (the mode parser refuses them).
         assert_eq!(b.check("nonsense", "ims-cbw"), Ok(()));
         assert_eq!(Budget::UNLIMITED.check("nmpc", "linear"), Ok(()));
+    }
+
+    #[test]
+    fn a_solve_that_does_not_fit_its_move_is_refused() {
+        // H743, 4000 cycles a period. On-chip converters (400 besides the step): ten
+        // periods leave 22 600 cycles for the solver. The SPI pair (1200): 14 600, less
+        // than one solve.
+        let on_chip = Budget::measured(4_000, 400, WORST_M4F).with_solver(SOLVE_M4F, 1_600);
+        let spi = Budget::measured(4_000, 1_200, WORST_M4F).with_solver(SOLVE_M4F, 1_600);
+        assert_eq!(on_chip.check("nmpc", "ims-cbw"), Ok(()));
+        assert_eq!(spi.check("nmpc", "ims-cbw"), Err(Error::OverBudget));
+        assert_eq!(spi.check("ff+hgo-robust", "ims-cbw"), Ok(()));
+        // The solver's lock counts as blocking: a lock longer than the step's room refuses.
+        let long_lock = Budget::measured(4_000, 400, WORST_M4F).with_solver(SOLVE_M4F, 2_500);
+        assert_eq!(long_lock.check("nmpc", "ims-cbw"), Err(Error::OverBudget));
+        // Two axes solve twice per boundary.
+        let xy = Budget::measured(4_000, 400, WORST_M4F_XY).with_solver(SOLVE_M4F_XY, 2_000);
+        assert_eq!(xy.check("nmpc", "ims-cbw"), Err(Error::OverBudget));
     }
 
     #[test]

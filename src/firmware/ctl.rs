@@ -5,6 +5,8 @@ use super::converters::Converters;
 use super::target::{c, RecStorage, AXES, R, REC_CH};
 use super::timing::Timing;
 use crate::command::Error;
+use crate::feedback::nmpc::{NmpcJob, HORIZON};
+use crate::feedback::{Feedback, Nmpc};
 use crate::pipeline::TABLE_LEN;
 use crate::recorder::{self, Recorder};
 use crate::Real;
@@ -47,6 +49,34 @@ impl<C: Converters> Ctl<C> {
         extern crate std;
         let frames = std::vec![[R::ZERO; REC_CH]; 4 * super::REC_N];
         Self::with_recorder(sample_hz, frames.into_boxed_slice())
+    }
+
+    /// A deferred NMPC's job on `axis` with a copy of the law to solve it on (the boards'
+    /// solver task, under a short lock; `None` when no law waits for a plan).
+    pub fn nmpc_job(&self, axis: usize) -> Option<(Nmpc<R>, NmpcJob<R>)> {
+        match self.lp.p.feedback().get(axis)? {
+            Feedback::Nmpc(n) => n.job().map(|j| (*n, j)),
+            _ => None,
+        }
+    }
+
+    /// Hands the plan solved for `job` to the law of `axis`; false if the law no longer
+    /// asks for it (a newer boundary, or another law).
+    pub fn nmpc_deliver(&mut self, axis: usize, job: &NmpcJob<R>, plan: [R; HORIZON]) -> bool {
+        match self.lp.p.feedback_mut(axis) {
+            Some(Feedback::Nmpc(n)) => n.deliver(job, plan),
+            _ => false,
+        }
+    }
+
+    /// True when some axis' NMPC waits for a plan (the control task pends the solver).
+    #[inline]
+    pub fn nmpc_waiting(&self) -> bool {
+        self.lp
+            .p
+            .feedback()
+            .iter()
+            .any(|f| matches!(f, Feedback::Nmpc(n) if n.job().is_some()))
     }
 
     /// Feeds the recorder (only while it captures: the signals cost a few instructions).

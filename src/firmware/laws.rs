@@ -2,7 +2,7 @@
 //! [`Params`].
 
 use super::params::Params;
-use super::target::{c, R};
+use super::target::{c, NMPC_DEFERRED, R};
 use crate::command::Error;
 use crate::feedback::{Feedback, ObserverModel};
 use crate::feedforward::{Feedforward, Ims, ImsLoop};
@@ -115,7 +115,7 @@ pub fn tuning(p: &Params) -> Tuning<R> {
             omega_c: c(2_000.0),
         },
         nmpc: NmpcGains {
-            decimation: 10,
+            decimation: NMPC_DECIMATION,
             r: c(1e-3),
             iterations: 2,
             u_min: c(0.0),
@@ -125,6 +125,10 @@ pub fn tuning(p: &Params) -> Tuning<R> {
     }
 }
 
+/// Control periods per NMPC move: the solve runs once per this many periods (deferred on
+/// the boards: [`super::solve_nmpc`]).
+pub const NMPC_DECIMATION: u32 = 10;
+
 /// The feedback laws of [`LAWS`], by name, with the model and gains of `p`, and the notch
 /// of `p` ([`Params::notch`]) on the law's measurement.
 pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
@@ -132,6 +136,9 @@ pub fn law_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedback<R>> {
     let mut fb = law_unfiltered(name, p, sample_hz)?;
     if notch.is_some() {
         fb.set_measurement_filter(notch);
+    }
+    if let Feedback::Nmpc(n) = &mut fb {
+        n.set_deferred(NMPC_DEFERRED);
     }
     Some(fb)
 }

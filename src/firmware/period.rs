@@ -100,6 +100,29 @@ where
     })
 }
 
+/// The boards' NMPC solver task, written once: for every axis whose NMPC waits for a plan
+/// ([`Ctl::nmpc_waiting`]; the control task pends this task then), the law and its job are
+/// copied under one short lock, solved without it, and the plan handed back under another
+/// ([`crate::feedback::Nmpc::set_deferred`]). Runs below the control task and above the
+/// command task. Bounded: one solve per axis. Returns the plans taken.
+pub fn solve_nmpc<C, M>(ctl: &mut M) -> u32
+where
+    C: Converters,
+    M: Mutex<T = Ctl<C>>,
+{
+    let mut taken = 0;
+    for axis in 0..AXES {
+        let Some((law, job)) = ctl.lock(|c| c.nmpc_job(axis)) else {
+            continue;
+        };
+        let plan = law.solve_job(&job);
+        if ctl.lock(|c| c.nmpc_deliver(axis, &job, plan)) {
+            taken += 1;
+        }
+    }
+    taken
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -18,6 +18,11 @@ pub const FIXED: bool = cfg!(not(any(target_abi = "eabihf", not(target_os = "non
 /// scans), else 1.
 pub const AXES: usize = if cfg!(feature = "xy") { 2 } else { 1 };
 
+/// The boards solve NMPC in a task below the control task ([`crate::feedback::Nmpc::set_deferred`]:
+/// the control step only applies the plan); the host's in-process firmware solves it in the
+/// step, as `piezo sim` does.
+pub const NMPC_DEFERRED: bool = cfg!(target_os = "none");
+
 /// The pipeline of the control task: [`crate::pipeline::FirmwarePipeline`] (the type
 /// hal-sim runs), [`crate::pipeline::FirmwarePipeline2`] with feature `xy`, with an FPU;
 /// their Q16.16 twins without one.

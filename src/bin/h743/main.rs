@@ -261,7 +261,9 @@ mod app {
     use super::{safe, Conv, Ctl, Dwt, Hw, Io, Usart3, OVERHEAD_CYCLES, SYSCLK_HZ, WATCHDOG_MS};
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::DWT;
-    use piezo_core::firmware::{c, control_period, Boot, Budget, CommandLine, SAMPLE_HZ};
+    use piezo_core::firmware::{
+        c, control_period, solve_nmpc, Boot, Budget, CommandLine, SAMPLE_HZ,
+    };
     use piezo_core::firmware::{run_flash_job, FlashWork, SettingsFlash, SettingsJob, WithFlash};
     use stm32h7xx_hal::flash::FlashExt;
     use stm32h7xx_hal::{
@@ -689,12 +691,24 @@ mod app {
         period(cx.local.hw_spi, &mut cx.shared.ctl);
     }
 
-    /// The library's control period; the watchdog is fed only when the deadline held.
+    /// The library's control period; the watchdog is fed only when the deadline held. At
+    /// an MPC boundary of a deferred NMPC it pends the solver.
     #[inline(always)]
     fn period(hw: &mut Hw, ctl: &mut impl rtic::Mutex<T = Ctl>) {
         if control_period(&mut hw.io, &hw.clock, ctl) {
             hw.watchdog.feed();
         }
+        if ctl.lock(|c| c.nmpc_waiting()) {
+            rtic::pend(stm32h7xx_hal::pac::Interrupt::CEC);
+        }
+    }
+
+    /// NMPC's solve, deferred from the control step (priority 2: under the control task,
+    /// over the command line). Bound to HDMI-CEC's interrupt line, which this board never
+    /// enables: only the control task pends it.
+    #[task(binds = CEC, priority = 2, shared = [ctl])]
+    fn solver(mut cx: solver::Context) {
+        solve_nmpc(&mut cx.shared.ctl);
     }
 
     /// Command lines from the serial port (priority 1; the control task preempts it), and

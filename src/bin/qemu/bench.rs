@@ -5,7 +5,10 @@ use super::{chips, uart, Ctl};
 use core::hint::black_box;
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use piezo_core::command::Reply;
-use piezo_core::firmware::{c, Budget, AXES, FFS, LAWS, SAMPLE_HZ, WORST_M4F_BUILD};
+use piezo_core::firmware::{
+    c, Budget, AXES, FFS, LAWS, NMPC_DECIMATION, SAMPLE_HZ, SOLVER_LOCK_M4F_BUILD, SOLVE_M4F_BUILD,
+    WORST_M4F_BUILD,
+};
 use piezo_core::pipeline::Wave;
 
 /// Steps per benchmark row.
@@ -40,6 +43,11 @@ pub struct Row {
     /// Worst single step (instructions, SysTick resolution): every step of the run, from
     /// rest and across a parameter change.
     pub max_instr: u32,
+    /// Deferred NMPC: the worst run of the solver task (every axis' solve at one
+    /// boundary, instructions), and the worst copy of a law and its job under the lock
+    /// (what the solver's lock may delay the control interrupt by); 0 for other laws.
+    pub solve_max: u32,
+    pub copy_max: u32,
     /// The law or compensator could not be configured for this number type.
     pub unsupported: bool,
 }
@@ -97,6 +105,25 @@ fn configured(law: &str, ff: &str) -> Option<Ctl> {
     Some(ctl)
 }
 
+/// The solver task's work between two steps (deferred NMPC, [`piezo_core::firmware::solve_nmpc`]
+/// without the locks): its ticks, and the longest copy of a law and its job.
+fn solve_between_steps(ctl: &mut Ctl) -> (u32, u32) {
+    let (mut solve, mut copy) = (0, 0);
+    for axis in 0..AXES {
+        let t0 = SYST::get_current();
+        let Some((law, job)) = black_box(ctl.nmpc_job(axis)) else {
+            continue;
+        };
+        let t1 = SYST::get_current();
+        let plan = black_box(law.solve_job(black_box(&job)));
+        ctl.nmpc_deliver(axis, &job, plan);
+        let t2 = SYST::get_current();
+        copy = copy.max(ticks(t0, t1));
+        solve += ticks(t0, t2);
+    }
+    (solve, copy)
+}
+
 /// Runs every row; SysTick is left free-running (no interrupt).
 pub fn run(syst: &mut SYST) -> Table {
     syst.disable_interrupt();
@@ -142,6 +169,7 @@ pub fn run(syst: &mut SYST) -> Table {
             for c in codes.iter_mut() {
                 *c = stage.step(dac);
                 [dac, ..] = ctl.lp.step([*c; AXES]);
+                solve_between_steps(&mut ctl);
             }
             // Same codes, same initial state: the timed run repeats that trajectory.
             let Some(mut ctl) = configured(law, ff) else {
@@ -151,7 +179,7 @@ pub fn run(syst: &mut SYST) -> Table {
             // the law's start) and across a parameter change halfway (the law rebuilt and
             // restarted bumplessly, as `mode` or `set` do), each step's two SysTick reads
             // included.
-            let mut worst = 0;
+            let (mut worst, mut solve_worst, mut copy_worst) = (0, 0, 0);
             for (i, c) in codes.iter().enumerate() {
                 if i == BENCH_STEPS / 2 {
                     let name = if law == "open-loop" {
@@ -164,6 +192,9 @@ pub fn run(syst: &mut SYST) -> Table {
                 let t = SYST::get_current();
                 black_box(ctl.lp.step(black_box([*c; AXES])));
                 worst = worst.max(ticks(t, SYST::get_current()));
+                let (solve, copy) = solve_between_steps(&mut ctl);
+                solve_worst = solve_worst.max(solve);
+                copy_worst = copy_worst.max(copy);
             }
             let Some(mut ctl) = configured(law, ff) else {
                 continue;
@@ -177,7 +208,10 @@ pub fn run(syst: &mut SYST) -> Table {
             mark(2);
             row.instr_x100 =
                 ((dt as u64 * instr_per_tick_x1000 as u64) / (10 * BENCH_STEPS as u64)) as u32;
-            row.max_instr = ((worst as u64 * instr_per_tick_x1000 as u64) / 1000) as u32;
+            let instr = |t: u32| ((t as u64 * instr_per_tick_x1000 as u64) / 1000) as u32;
+            row.max_instr = instr(worst);
+            row.solve_max = instr(solve_worst);
+            row.copy_max = instr(copy_worst);
         }
     }
     // The driver path alone, on the codes of the last row: conversion (CNV high for
@@ -283,19 +317,24 @@ const OVERHEAD_INSTR: u32 = 400;
 /// period, less the driver path and [`OVERHEAD_INSTR`].
 pub fn budget(t: &Table) -> Budget {
     let mut worst = [[0u32; FFS.len()]; LAWS.len()];
+    let mut solve = [[0u32; FFS.len()]; LAWS.len()];
+    let mut lock = 0;
     for (i, row) in t.rows.iter().enumerate() {
-        if let Some(w) = worst
-            .get_mut(i / FFS.len())
-            .and_then(|r| r.get_mut(i % FFS.len()))
-        {
+        let (r, c) = (i / FFS.len(), i % FFS.len());
+        if let Some(w) = worst.get_mut(r).and_then(|r| r.get_mut(c)) {
             *w = if row.unsupported {
                 0
             } else {
                 row.max_instr.max(1)
             };
         }
+        if let Some(s) = solve.get_mut(r).and_then(|r| r.get_mut(c)) {
+            *s = if row.unsupported { 0 } else { row.solve_max };
+        }
+        lock = lock.max(row.copy_max);
     }
     Budget::measured(PERIOD_INSTR, t.drivers_x100 / 100 + OVERHEAD_INSTR, worst)
+        .with_solver(solve, lock)
 }
 
 /// Rows whose measured worst step exceeds the library's table for this build's axis count
@@ -303,12 +342,17 @@ pub fn budget(t: &Table) -> Budget {
 /// their count and the first. Only meaningful for the f32 build on the M4F.
 fn above_table(t: &Table) -> (usize, Option<&Row>) {
     let over = |(i, row): &(usize, &Row)| {
-        let stated = WORST_M4F_BUILD
-            .get(i / FFS.len())
-            .and_then(|r| r.get(i % FFS.len()))
-            .copied()
-            .unwrap_or(0);
-        !row.unsupported && row.max_instr > stated
+        let stated = |table: &[[u32; FFS.len()]; LAWS.len()]| {
+            table
+                .get(i / FFS.len())
+                .and_then(|r| r.get(i % FFS.len()))
+                .copied()
+                .unwrap_or(0)
+        };
+        !row.unsupported
+            && (row.max_instr > stated(&WORST_M4F_BUILD)
+                || row.solve_max > stated(&SOLVE_M4F_BUILD)
+                || row.copy_max > SOLVER_LOCK_M4F_BUILD)
     };
     let mut rows = t.rows.iter().enumerate().filter(over);
     let first = rows.next().map(|(_, r)| r);
@@ -366,6 +410,21 @@ pub fn print(t: &Table, log: bool) {
             row.instr_x100 / 100,
             row.instr_x100 % 100
         );
+    }
+    for row in t.rows.iter().filter(|row| row.solve_max > 0) {
+        r.clear();
+        r.push_str("bench: solver task (deferred NMPC, priority 2) ");
+        r.push_str(row.law);
+        r.push_str(" ");
+        r.push_str(row.ff);
+        r.push_str(": worst ");
+        r.push_u32(row.solve_max);
+        r.push_str(" instr per MPC boundary (every ");
+        r.push_u32(NMPC_DECIMATION);
+        r.push_str(" periods), lock copy ");
+        r.push_u32(row.copy_max);
+        r.push_str(" instr");
+        uart::line(r.as_str());
     }
     r.clear();
     r.push_str("budget: ");

@@ -153,6 +153,9 @@ mod board {
         pub enum Interrupt {
             /// CMSDK UART0 receive.
             UARTRX0 = 0,
+            /// CMSDK UART0 transmit: its interrupt is never enabled, so the line only runs
+            /// when software pends it (the NMPC solver task).
+            UARTTX0 = 1,
         }
 
         /// RTIC checks the bound interrupt's name here (a PAC's `rt` re-export).
@@ -178,9 +181,11 @@ mod board {
         unsafe extern "C" {
             fn DefaultHandler();
             fn UARTRX0();
+            fn UARTTX0();
         }
         let mut v: [unsafe extern "C" fn(); 32] = [DefaultHandler; 32];
         v[0] = UARTRX0;
+        v[1] = UARTTX0;
         v
     };
 
@@ -523,7 +528,7 @@ mod app {
     use core::sync::atomic::Ordering::Relaxed;
     use cortex_m::peripheral::syst::SystClkSource;
     use piezo_core::command::Reply;
-    use piezo_core::firmware::{c, control_period, Boot, CommandLine, AXES, SAMPLE_HZ};
+    use piezo_core::firmware::{c, control_period, solve_nmpc, Boot, CommandLine, AXES, SAMPLE_HZ};
     use piezo_core::firmware::{run_flash_job, FlashWork, SettingsFlash, SettingsJob, WithFlash};
     use piezo_core::firmware::{Converters, SpiPair, Timing};
     use piezo_core::pipeline::Wave;
@@ -636,6 +641,16 @@ mod app {
     #[task(binds = SysTick, priority = 3, shared = [ctl], local = [io])]
     fn sample(mut cx: sample::Context) {
         control_period(cx.local.io, &SysTickClock, &mut cx.shared.ctl);
+        if cx.shared.ctl.lock(|c| c.nmpc_waiting()) {
+            rtic::pend(crate::board::pac::Interrupt::UARTTX0);
+        }
+    }
+
+    /// NMPC's solve, deferred from the control step (priority 2: under the control task,
+    /// over the command line; pended by the control task at every MPC boundary).
+    #[task(binds = UARTTX0, priority = 2, shared = [ctl])]
+    fn solver(mut cx: solver::Context) {
+        solve_nmpc(&mut cx.shared.ctl);
     }
 
     /// Command lines from UART0 (priority 1, under the control task; the H743's USART3
