@@ -360,6 +360,36 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
     .await?;
     r.pass("mode ff+pid with ff ims-cbw selected: `ok ff ims-cbw; ok mode ff+pid` shown and in the header");
 
+    // A wave the firmware would refuse (60 kHz, above half the sample rate) is refused by
+    // the firmware's own check run in the console: shown, and no wave line sent.
+    r.tab("wave").await?;
+    r.select("#wave-shape", "sine").await?;
+    r.type_into("#wave-amp_um", "5").await?;
+    r.type_into("#wave-freq_hz", "60000").await?;
+    r.type_into("#wave-offset_um", "10").await?;
+    r.clear("wave-result").await?;
+    r.click("#wave-start").await?;
+    let why = r
+        .until(
+            "the refusal of wave sine at 60 kHz",
+            "const t = document.getElementById('wave-result').textContent; return t ? t : null;",
+        )
+        .await?;
+    let why = why.as_str().unwrap_or_default().to_string();
+    let went = r
+        .c
+        .execute_async(
+            "const done = arguments[0]; fetch('/api/wire').then(r => r.json()).then(j => done(j.last.some(l => l.includes('60000'))));",
+            vec![],
+        )
+        .await?;
+    if !(why.contains("err 8") && why.contains("nothing sent")) || went != json!(false) {
+        bail!("wave sine at 60 kHz: `{why}`, sent: {went}");
+    }
+    r.pass(&format!(
+        "a 60 kHz sine is refused in the console by the firmware's own check, nothing sent: {why}"
+    ));
+
     // 5. A sine, and the scope triggered on its start: ref_um rises through its centre at t = 0.
     r.tab("wave").await?;
     r.select("#wave-shape", "sine").await?;

@@ -111,6 +111,44 @@ async fn next_event(
     panic!("no `{kind}` event among {limit}");
 }
 
+/// The next whole capture as the scope streams it: its parts from frame 0 on, each
+/// starting where the last ended, to the one marked complete; the first part and the
+/// columns put together.
+async fn next_capture(
+    rx: &mut tokio::sync::broadcast::Receiver<Arc<str>>,
+    limit: usize,
+) -> (Value, Vec<Vec<f64>>, usize) {
+    let mut first: Option<Value> = None;
+    let mut columns: Vec<Vec<f64>> = Vec::new();
+    let mut parts = 0;
+    for _ in 0..limit {
+        let f = next_event(rx, "frame", limit).await;
+        if f["from"] == json!(0) {
+            columns = vec![Vec::new(); f["channels"].as_array().unwrap().len()];
+            first = Some(f.clone());
+            parts = 0;
+        }
+        let Some(head) = &first else { continue };
+        if f["seq"] != head["seq"] {
+            first = None;
+            continue;
+        }
+        assert_eq!(
+            f["from"].as_u64().unwrap() as usize,
+            columns[0].len(),
+            "a gap"
+        );
+        for (c, part) in columns.iter_mut().zip(f["columns"].as_array().unwrap()) {
+            c.extend(part.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()));
+        }
+        parts += 1;
+        if f["complete"] == json!(true) {
+            return (head.clone(), columns, parts);
+        }
+    }
+    panic!("no whole capture among {limit} events");
+}
+
 async fn connected(shared: &Shared) {
     let t = Instant::now();
     while !shared.link.lock().unwrap().0 {
@@ -124,13 +162,26 @@ async fn jobs_of_many_pages_never_interleave_and_the_scope_streams() {
     let shared = worker::spawn(conn(&spawn_firmware(None)));
     let mut rx = shared.events.subscribe();
     connected(&shared).await;
-    let f = next_event(&mut rx, "frame", 200).await;
+    // The capture streams in parts while it fills (the fake firmware runs 50 periods per
+    // line it answers: several status polls per capture).
+    let (f, columns, parts) = next_capture(&mut rx, 400).await;
     assert_eq!(
         f["channels"],
         json!(["ref_um", "y_um", "error_um", "u_volts"])
     );
-    assert_eq!(f["columns"][0].as_array().unwrap().len(), 256);
+    assert_eq!(f["total"], json!(256));
+    assert!(columns.iter().all(|c| c.len() == 256), "{parts} parts");
     assert_eq!(f["sample_hz"], json!(100_000.0 / 4.0));
+    // The export holds the same frames as the parts.
+    let caps = shared.captures.lock().unwrap();
+    let cap = caps.iter().find(|c| json!(c.seq) == f["seq"]).unwrap();
+    assert_eq!(cap.rec.frames.len(), 256);
+    for (k, c) in columns.iter().enumerate() {
+        for (i, v) in c.iter().enumerate() {
+            assert_eq!(cap.rec.frames[i][k], *v, "frame {i} channel {k}");
+        }
+    }
+    drop(caps);
 
     // Eight pages, each setting pid_kp to its own value and reading it back in one job:
     // a command of another page between the two would show as a wrong value.
@@ -180,6 +231,51 @@ async fn jobs_of_many_pages_never_interleave_and_the_scope_streams() {
         .unwrap_err();
     let body = hal_sim::console::jobs::refusal(&e);
     assert_eq!(body["code"], json!(9), "{body}");
+
+    // A wave the firmware would refuse (60 kHz at 100 kHz) is refused before it is sent,
+    // by the firmware's own executor run here; a good one goes out.
+    use hal_sim::console::jobs::{wave, Wave};
+    let sent = |s: &Shared| s.wire.lock().unwrap().sent;
+    let before = sent(&shared);
+    let e = shared
+        .job(Box::new(|c| {
+            let w = Wave::Sine {
+                amp_um: 5.0,
+                freq_hz: 60_000.0,
+                offset_um: 10.0,
+            };
+            wave(c, &w)
+        }))
+        .await
+        .unwrap_err();
+    let msg = format!("{e:#}");
+    assert!(
+        msg.contains("err 8") && msg.contains("nothing sent"),
+        "{msg}"
+    );
+    assert!(
+        !shared
+            .wire
+            .lock()
+            .unwrap()
+            .last
+            .iter()
+            .any(|l| l.contains("60000")),
+        "the refused wave went out"
+    );
+    let r = shared
+        .job(Box::new(|c| {
+            let w = Wave::Sine {
+                amp_um: 5.0,
+                freq_hz: 100.0,
+                offset_um: 10.0,
+            };
+            wave(c, &w)
+        }))
+        .await
+        .unwrap();
+    assert_eq!(r["reply"], json!("ok wave sine 5 100 10"));
+    assert!(sent(&shared) > before);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

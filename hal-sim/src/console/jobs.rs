@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use clap::Parser;
 use piezo_core::command::{Command, Shape};
-use piezo_core::firmware::{Access, SETTINGS};
+use piezo_core::firmware::{Access, Ctl, OnChip, SETTINGS};
 use serde::Deserialize;
 use serde_json::{json, Value};
 
@@ -13,6 +13,7 @@ use crate::cli::serial::bode::{self, BodeArgs};
 use crate::cli::serial::identify::{self, IdentifyArgs};
 use crate::cli::serial::params;
 use crate::cli::serial::units::f32_of;
+use crate::serial::lines::checked_line;
 use crate::serial::{Client, SerialError};
 
 /// A firmware's refusal as the page shows it: the command, `err N` and the error's name.
@@ -243,8 +244,25 @@ impl Wave {
     }
 }
 
+/// Starts `w`. A one-axis wave the firmware would refuse is refused here, before anything
+/// is sent: its line runs first on the firmware's own executor in this process (a scratch
+/// control state at the board's `sample_hz`; the wave checks depend on nothing else). The
+/// raster needs two axes, which only an xy board has: the board decides.
 pub fn wave(c: &mut Client, w: &Wave) -> Result<Value> {
-    let r = c.send(&w.command())?;
+    let cmd = w.command();
+    if !matches!(w, Wave::Raster { .. }) {
+        let line = checked_line(&cmd)?;
+        let hz = c.get("sample_hz")?;
+        let mut dry = Ctl::<OnChip>::new(piezo_core::firmware::c(hz));
+        let reply = dry.answer(&line);
+        if reply.as_str().starts_with("err") {
+            bail!(
+                "`{line}`: {} (the firmware's own check at {hz} Hz, run here first; nothing sent)",
+                reply.as_str()
+            );
+        }
+    }
+    let r = c.send(&cmd)?;
     Ok(json!({"reply": r.reply_line()}))
 }
 
