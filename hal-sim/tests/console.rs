@@ -173,15 +173,16 @@ async fn jobs_of_many_pages_never_interleave_and_the_scope_streams() {
     assert!(columns.iter().all(|c| c.len() == 256), "{parts} parts");
     assert_eq!(f["sample_hz"], json!(100_000.0 / 4.0));
     // The export holds the same frames as the parts.
-    let caps = shared.captures.lock().unwrap();
-    let cap = caps.iter().find(|c| json!(c.seq) == f["seq"]).unwrap();
-    assert_eq!(cap.rec.frames.len(), 256);
-    for (k, c) in columns.iter().enumerate() {
-        for (i, v) in c.iter().enumerate() {
-            assert_eq!(cap.rec.frames[i][k], *v, "frame {i} channel {k}");
+    {
+        let caps = shared.captures.lock().unwrap();
+        let cap = caps.iter().find(|c| json!(c.seq) == f["seq"]).unwrap();
+        assert_eq!(cap.rec.frames.len(), 256);
+        for (k, c) in columns.iter().enumerate() {
+            for (i, v) in c.iter().enumerate() {
+                assert_eq!(cap.rec.frames[i][k], *v, "frame {i} channel {k}");
+            }
         }
     }
-    drop(caps);
 
     // Eight pages, each setting pid_kp to its own value and reading it back in one job:
     // a command of another page between the two would show as a wrong value.
