@@ -41,16 +41,20 @@ s ping >/dev/null
 # A report for the console to open (`piezo demo`'s index.html; 100 Hz keeps it small).
 "$piezo" demo --rate-hz 100 --out "$work/demo" >/dev/null
 
-"$piezo" ui --tcp "127.0.0.1:$port" --timeout-s 60 --listen 0 --work "$work/ui" \
-  --report "$work/demo" >"$work/ui.txt" 2>&1 &
-ui_pid=$!
-start=$SECONDS
-until grep -q '^piezo ui: http://' "$work/ui.txt"; do
-  kill -0 "$ui_pid" 2>/dev/null || { cat "$work/ui.txt"; fail "piezo ui exited"; }
-  [ $((SECONDS - start)) -lt 120 ] || fail "piezo ui did not start listening"
-  sleep 0.1
-done
-url=$(sed -n 's/^piezo ui: \(http:[^ ]*\)$/\1/p' "$work/ui.txt")
+# start_ui <log> <piezo ui args...>: starts the console, sets $ui_pid and $url once it listens.
+start_ui() {
+  local log=$1 start=$SECONDS
+  shift
+  "$piezo" ui --timeout-s 60 --listen 0 "$@" >"$log" 2>&1 &
+  ui_pid=$!
+  until grep -q '^piezo ui: http://' "$log"; do
+    kill -0 "$ui_pid" 2>/dev/null || { cat "$log"; fail "piezo ui $* exited"; }
+    [ $((SECONDS - start)) -lt 120 ] || fail "piezo ui $* did not start listening"
+    sleep 0.1
+  done
+  url=$(sed -n 's/^piezo ui: \(http:[^ ]*\)$/\1/p' "$log")
+}
+start_ui "$work/ui.txt" --tcp "127.0.0.1:$port" --work "$work/ui" --report "$work/demo"
 echo "$url"
 
 wd_port=$(free_port)
@@ -97,15 +101,7 @@ until timeout 900 "$piezo" serial --port "$tty" --timeout-s 60 ping >"$work/ping
   [ $((SECONDS - start)) -lt 1800 ] || fail "no answer on $tty"
   sleep 0.2
 done
-"$piezo" ui --port "$tty" --timeout-s 60 --listen 0 --work "$work/ui-port" >"$work/ui-port.txt" 2>&1 &
-ui_pid=$!
-start=$SECONDS
-until grep -q '^piezo ui: http://' "$work/ui-port.txt"; do
-  kill -0 "$ui_pid" 2>/dev/null || { cat "$work/ui-port.txt"; fail "piezo ui --port exited"; }
-  [ $((SECONDS - start)) -lt 120 ] || fail "piezo ui --port did not start listening"
-  sleep 0.1
-done
-url=$(sed -n 's/^piezo ui: \(http:[^ ]*\)$/\1/p' "$work/ui-port.txt")
+start_ui "$work/ui-port.txt" --port "$tty" --work "$work/ui-port"
 python3 - "$url" "$tty" <<'PY' || fail "piezo ui --port"
 import json, sys, time, urllib.error, urllib.request
 url, tty = sys.argv[1], sys.argv[2]
