@@ -233,6 +233,20 @@ fn deferred_nmpc_tracks_like_the_inline_one() {
         );
         // 2 periods of 10 Hz at 100 kHz, a solve every 10 samples.
         assert!(solves >= 1999, "{solves} solves");
+        let mut law = deferred(nmpc(ff));
+        run_with(&mut law, cbw(1.0), 10.0, 0.0, |law| {
+            if let Feedback::Nmpc(n) = law {
+                if let Some(job) = n.job() {
+                    let plan = n.solve_job(&job);
+                    n.deliver(&job, plan);
+                }
+            }
+        });
+        let Feedback::Nmpc(n) = &law else {
+            unreachable!()
+        };
+        // Numbered in order; none missed.
+        assert_eq!((n.state().jobs, n.state().missed), (1999, 0));
         assert!(
             late < 0.5 && late < 2.0 * inline + 0.02,
             "ff={ff}: {late} vs {inline} um"
@@ -250,6 +264,8 @@ fn deferred_nmpc_without_a_solver_holds_its_plan() {
     let Feedback::Nmpc(n) = &mut law else {
         unreachable!()
     };
+    // Every boundary but the first found its job unanswered.
+    assert_eq!(n.state().missed, n.state().jobs - 1);
     let job = n.job().expect("a job is posted at every boundary");
     let plan = n.solve_job(&job);
     // A job of an older boundary: not the one asked.

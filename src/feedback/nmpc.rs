@@ -86,6 +86,11 @@ pub struct NmpcState<T, const H: usize = HORIZON> {
     pub asked: Option<NmpcJob<T, H>>,
     /// Deferred: the plan a solver delivered for the last job (from that boundary on).
     pub delivered: Option<[T; H]>,
+    /// Deferred: jobs posted since the law started (the last job's number).
+    pub jobs: u32,
+    /// Deferred: boundaries whose job had no plan back in time (the step went on with its
+    /// own plan, shifted).
+    pub missed: u32,
 }
 
 /// One deferred solve: the estimates and signals at an MPC boundary, the plan to start from
@@ -115,6 +120,8 @@ impl<T: Real, const H: usize> Default for NmpcState<T, H> {
             fresh: false,
             asked: None,
             delivered: None,
+            jobs: 0,
+            missed: 0,
         }
     }
 }
@@ -220,14 +227,17 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
     /// at the last boundary, shifted to this one; its first move applied; the next job
     /// posted. A few copies: the solve is the job's.
     fn boundary(&mut self, io: &LoopSignals<T>) {
+        if self.state.asked.is_some() {
+            self.state.missed = self.state.missed.wrapping_add(1);
+        }
         let mut plan = self.state.delivered.take().unwrap_or(self.state.plan);
         plan.rotate_left(1);
         plan[H - 1] = plan[H - 2];
         self.state.plan = plan;
         self.state.u_hold = plan[0];
-        let seq = self.state.asked.map_or(0, |j| j.seq).wrapping_add(1);
+        self.state.jobs = self.state.jobs.wrapping_add(1);
         self.state.asked = Some(NmpcJob {
-            seq,
+            seq: self.state.jobs,
             obs: self.state.obs,
             io: *io,
             warm: plan,
@@ -393,6 +403,8 @@ impl<T: Real, const H: usize> Nmpc<T, H> {
             fresh: false,
             asked: None,
             delivered: None,
+            jobs: 0,
+            missed: 0,
         };
     }
 
