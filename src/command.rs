@@ -29,7 +29,7 @@
 //! | `wave chirp <amp_um> <f0_hz> <f1_hz> <duration_s> [<offset_um>]` | linear sine sweep `f0_hz` -> `f1_hz` over `duration_s` (> 0), repeated; both frequencies below Nyquist | `ok wave chirp <amp> <f0> <f1> <duration> <offset>` |
 //! | `wave multisine <amp_um> <f0_hz> <harmonics> [<offset_um> [<seed>]]` | `harmonics` (1..=32) equal harmonics of `f0_hz` (period `1/f0_hz`), peak deviation `amp_um` around `offset_um`; seed 0 (default): Schroeder phases, else random phases | `ok wave multisine <amp> <f0> <harmonics> <offset> <seed>` |
 //! | `wave table <freq_hz>` | periodic spline through the table's points, one period per `1/freq_hz` (fewer than 2 points: `err 12`) | `ok wave table <freq_hz> <n>` |
-//! | `stats` / `stats reset` | timing (cycles min/max/last, overruns) / reset it | `ok ...` |
+//! | `stats` / `stats reset` | timing (cycles min/max/last, overruns, lost samples, latest start after the trigger or `-`; while NMPC runs its solver's jobs and missed plans since the mode) / reset the timing | `ok step ... overruns <n> lost <n> late <n> [nmpc_jobs <n> nmpc_missed <n>]` |
 //! | `rec sel <signal>...` | recorder channels (up to its channel count): `ref_um y_um error_um ff_volts u_volts adc_code dac_code` of axis 0, `ref1_um y1_um error1_um ff1_volts u1_volts adc1_code dac1_code` of axis 1 (1-axis board: `err 13`) | `ok rec sel ...` |
 //! | `rec trig now` | trigger at once when armed | `ok` |
 //! | `rec trig rise\|fall\|level <channel> <level> [<pre>]` | trigger on a channel | `ok` |

@@ -60,7 +60,7 @@ pub use storage::{decode, encode, stored, Boot, Record, SettingsFlash, MAX_RECOR
 pub use target::{
     c, LoopPipeline, RecStorage, AXES, FIXED, R, REC_CH, REC_N, REPLY_LEN, SAFE_VOLTS, SAMPLE_HZ,
 };
-pub use timing::{CycleStats, Timing};
+pub use timing::{CycleStats, NmpcCounts, Timing};
 
 /// Defines a board's `recorder_storage() -> Option<RecStorage>`: `$frames` frames of
 /// [`REC_CH`] values in the NOLOAD linker section `$section` (nothing copies or zeroes it

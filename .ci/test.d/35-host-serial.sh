@@ -123,7 +123,11 @@ rms=$(sed -n 's/^  tracking error axis 0: \([0-9.e+-]*\) um RMS$/\1/p' "$work/la
 awk -v r="$rms" 'BEGIN { exit !(r > 0 && r < 1.5) }' || fail "nmpc tracking error '$rms' um RMS (bound 1.5)"
 run stats
 grep -q '^samples [0-9]*  overruns 0$' "$work/last.txt" || fail "overruns under nmpc"
-echo "35-host-serial: nmpc at 100 kHz: ${rms} um RMS, 0 overruns"
+# The solver's record: every move's plan came back in time (the solve fits ten periods).
+solver=$(sed -n 's/^nmpc solver     \([0-9]*\) jobs, \([0-9]*\) missed.*/\1 \2/p' "$work/last.txt")
+read -r jobs missed <<<"$solver"
+[ "${jobs:-0}" -gt 1000 ] && [ "$missed" -eq 0 ] || fail "nmpc solver: '$solver' (jobs missed), expected > 1000 jobs, 0 missed"
+echo "35-host-serial: nmpc at 100 kHz: ${rms} um RMS, 0 overruns, $jobs solver jobs, 0 missed"
 
 qemu_stop
 if [ -n "${PIEZO_SERIAL_OUT:-}" ]; then

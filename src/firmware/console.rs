@@ -354,7 +354,10 @@ impl<C: Converters> CommandLine<C> {
                 }
                 Err(e) => reply.push_error(e),
             },
-            Ok(Command::Stats) => push_stats(&mut reply, &ctl.lock(|c| c.timing)),
+            Ok(Command::Stats) => {
+                let (t, nmpc) = ctl.lock(|c| (c.timing, c.nmpc_counts()));
+                push_stats(&mut reply, &t, nmpc)
+            }
             Ok(c @ (Command::StatsReset | Command::Rec(_))) => {
                 ctl.lock(|ctl| ctl.execute(c, &mut reply))
             }

@@ -3,7 +3,7 @@
 use super::control_loop::Loop;
 use super::converters::Converters;
 use super::target::{c, RecStorage, AXES, R, REC_CH};
-use super::timing::Timing;
+use super::timing::{NmpcCounts, Timing};
 use crate::command::Error;
 use crate::feedback::nmpc::{NmpcJob, HORIZON};
 use crate::feedback::{Feedback, Nmpc};
@@ -67,6 +67,20 @@ impl<C: Converters> Ctl<C> {
             Some(Feedback::Nmpc(n)) => n.deliver(job, plan),
             _ => false,
         }
+    }
+
+    /// The NMPC solver's counts summed over the axes that run NMPC (`None`: none does).
+    pub fn nmpc_counts(&self) -> Option<NmpcCounts> {
+        self.lp.p.feedback().iter().fold(None, |acc, f| match f {
+            Feedback::Nmpc(n) => {
+                let (s, a) = (n.state(), acc.unwrap_or_default());
+                Some(NmpcCounts {
+                    jobs: a.jobs.wrapping_add(s.jobs),
+                    missed: a.missed.wrapping_add(s.missed),
+                })
+            }
+            _ => acc,
+        })
     }
 
     /// True when some axis' NMPC waits for a plan (the control task pends the solver).

@@ -5,7 +5,7 @@ use super::control_loop::Loop;
 use super::converters::Converters;
 use super::ctl::{Ctl, PointTable};
 use super::target::{c, LoopPipeline, AXES, R, REC_CH, REPLY_LEN};
-use super::timing::Timing;
+use super::timing::{NmpcCounts, Timing};
 use crate::command::{self, Command, Error, RecCmd, Shape, TriggerCmd};
 use crate::pipeline::{lissajous, raster, Parts, Wave};
 use crate::recorder::{self, Signal};
@@ -40,7 +40,7 @@ impl<C: Converters> Ctl<C> {
         out: &mut command::Reply<N>,
     ) -> Result<(), Error> {
         match cmd {
-            Command::Stats => push_stats(out, &self.timing),
+            Command::Stats => push_stats(out, &self.timing, self.nmpc_counts()),
             Command::StatsReset => {
                 self.timing = Timing::new();
                 out.push_str("ok");
@@ -496,7 +496,15 @@ impl<C: Converters> Ctl<C> {
 }
 
 /// `ok step <min max last> isr <min max last> samples <n> overruns <n>`.
-pub fn push_stats<const N: usize>(out: &mut command::Reply<N>, t: &Timing) {
+/// `stats`: the control task's timing, then `lost` (samples lost entirely), `late` (the
+/// longest start after the period's trigger, `-` on a board whose counter does not tell) and,
+/// while an NMPC law runs, its solver's `nmpc_jobs` and `nmpc_missed` (boundaries whose plan
+/// came too late) since the mode was selected (`stats reset` leaves those).
+pub fn push_stats<const N: usize>(
+    out: &mut command::Reply<N>,
+    t: &Timing,
+    nmpc: Option<NmpcCounts>,
+) {
     out.push_str("ok step");
     for v in [t.step.min, t.step.max, t.step.last] {
         out.push_str(" ");
@@ -511,6 +519,20 @@ pub fn push_stats<const N: usize>(out: &mut command::Reply<N>, t: &Timing) {
     out.push_u32(t.isr.count);
     out.push_str(" overruns ");
     out.push_u32(t.overruns);
+    out.push_str(" lost ");
+    out.push_u32(t.lost);
+    out.push_str(" late ");
+    if t.delay.count == 0 {
+        out.push_str("-");
+    } else {
+        out.push_u32(t.delay.max);
+    }
+    if let Some(n) = nmpc {
+        out.push_str(" nmpc_jobs ");
+        out.push_u32(n.jobs);
+        out.push_str(" nmpc_missed ");
+        out.push_u32(n.missed);
+    }
 }
 
 /// Streams `rec read <start> <count>`: `frame(i)` fetches frame `i` (under a short lock;

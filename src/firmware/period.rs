@@ -198,4 +198,57 @@ mod tests {
         // A counter that wraps every period cannot tell (QEMU's SysTick).
         assert_eq!(run(&[10, 4 * PERIOD + 30], false), (0, 0));
     }
+
+    /// `stats` gives the NMPC solver's record: jobs posted, and boundaries whose plan had
+    /// not come back (here while no solver ran), then none missed while one runs.
+    #[test]
+    fn stats_name_the_nmpc_jobs_and_the_missed_ones() {
+        use crate::feedback::Feedback;
+        use crate::firmware::{Converters as _, NMPC_DECIMATION};
+        let mut ctl = crate::firmware::Ctl::<OnChip>::new(c(SAMPLE_HZ as f64));
+        let stats =
+            |ctl: &mut crate::firmware::Ctl<OnChip>| ctl.answer("stats").as_str().to_owned();
+        assert!(
+            stats(&mut ctl).ends_with(" lost 0 late -"),
+            "{}",
+            stats(&mut ctl)
+        );
+        assert!(!stats(&mut ctl).contains("nmpc"));
+        assert_eq!(ctl.answer("mode nmpc").as_str(), "ok mode nmpc");
+        for axis in 0..AXES {
+            if let Some(Feedback::Nmpc(n)) = ctl.lp.p.feedback_mut(axis) {
+                n.set_deferred(true);
+            }
+        }
+        let mid = 1 << (OnChip::ADC_BITS - 1);
+        let counts = |ctl: &mut crate::firmware::Ctl<OnChip>| {
+            let s = stats(ctl);
+            let w: Vec<&str> = s.split_whitespace().collect();
+            assert_eq!(w[w.len() - 4..w.len() - 3], ["nmpc_jobs"], "{s}");
+            assert_eq!(w[w.len() - 2], "nmpc_missed", "{s}");
+            let n = |i: usize| w[w.len() - i].parse::<u32>().unwrap();
+            (n(3), n(1))
+        };
+        let axes = AXES as u32;
+        for _ in 0..5 * NMPC_DECIMATION {
+            ctl.lp.step([mid; AXES]);
+        }
+        // Without a solver every job but each axis' first is missed.
+        let (jobs, missed) = counts(&mut ctl);
+        assert!(jobs >= 4 * axes && missed == jobs - axes, "{jobs} {missed}");
+        for _ in 0..5 * NMPC_DECIMATION {
+            ctl.lp.step([mid; AXES]);
+            solve_nmpc(&mut Exclusive(&mut ctl));
+        }
+        // With one, five more boundaries per axis; at most the job left unsolved when the
+        // solver started is missed.
+        let (jobs2, missed2) = counts(&mut ctl);
+        assert_eq!(jobs2, jobs + 5 * axes);
+        assert!(missed2 - missed <= axes, "{missed} -> {missed2}");
+        // `stats reset` clears the timing, not the solver's record (it is the mode's).
+        assert!(ctl.answer("stats reset").as_str().starts_with("ok"));
+        assert!(stats(&mut ctl).contains(" nmpc_jobs "));
+        assert_eq!(ctl.answer("mode hgo-robust").as_str(), "ok mode hgo-robust");
+        assert!(!stats(&mut ctl).contains("nmpc"));
+    }
 }

@@ -34,6 +34,15 @@ impl Default for CycleStats {
     }
 }
 
+/// The NMPC solver's record since its mode was selected (`stats`): boundaries that posted a
+/// job, and boundaries that found the previous job still unsolved (their step kept the
+/// shifted plan).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NmpcCounts {
+    pub jobs: u32,
+    pub missed: u32,
+}
+
 /// Timing of the control task, reported by `stats` and reset by `stats reset`.
 #[derive(Clone, Copy, Debug)]
 #[cfg_attr(target_os = "none", derive(defmt::Format))]

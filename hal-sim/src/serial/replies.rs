@@ -30,14 +30,27 @@ pub struct Stats {
     pub isr_last: u32,
     pub samples: u32,
     pub overruns: u32,
+    /// Samples lost entirely (firmware that reports it).
+    pub lost: Option<u32>,
+    /// The longest start of the control interrupt after its period's trigger, in the same
+    /// counts (boards whose counter tells).
+    pub late_max: Option<u32>,
+    /// While NMPC runs with its solver in a lower-priority task: jobs posted and boundaries
+    /// whose plan came too late, since the mode was selected.
+    pub nmpc_jobs: Option<u32>,
+    pub nmpc_missed: Option<u32>,
 }
 
-/// `ok step <min> <max> <last> isr <min> <max> <last> samples <n> overruns <n>`.
+/// `ok step <min> <max> <last> isr <min> <max> <last> samples <n> overruns <n>`, then
+/// `<key> <n>` pairs: `lost`, `late` (`-` where the board cannot tell), `nmpc_jobs`,
+/// `nmpc_missed`; keys a newer firmware adds are skipped.
 pub fn parse_stats(details: &str) -> Result<Stats, String> {
     let w: Vec<&str> = details.split_whitespace().collect();
-    let expect = "step <min> <max> <last> isr <min> <max> <last> samples <n> overruns <n>";
+    let expect =
+        "step <min> <max> <last> isr <min> <max> <last> samples <n> overruns <n> [<key> <n>]...";
     let keys = [(0, "step"), (4, "isr"), (8, "samples"), (10, "overruns")];
-    if w.len() != 12 || keys.iter().any(|&(i, k)| w.get(i) != Some(&k)) {
+    if w.len() < 12 || !w.len().is_multiple_of(2) || keys.iter().any(|&(i, k)| w.get(i) != Some(&k))
+    {
         return Err(format!("expected `{expect}`"));
     }
     let n = |i: usize| -> Result<u32, String> {
@@ -45,7 +58,25 @@ pub fn parse_stats(details: &str) -> Result<Stats, String> {
         s.parse::<u32>()
             .map_err(|_| format!("`{s}` is not a count in `{expect}`"))
     };
+    let mut extra = Stats::default();
+    for i in (12..w.len()).step_by(2) {
+        let slot = match w[i] {
+            "lost" => &mut extra.lost,
+            "late" => &mut extra.late_max,
+            "nmpc_jobs" => &mut extra.nmpc_jobs,
+            "nmpc_missed" => &mut extra.nmpc_missed,
+            _ => continue,
+        };
+        *slot = match w[i + 1] {
+            "-" if w[i] == "late" => None,
+            _ => Some(n(i + 1)?),
+        };
+    }
     Ok(Stats {
+        lost: extra.lost,
+        late_max: extra.late_max,
+        nmpc_jobs: extra.nmpc_jobs,
+        nmpc_missed: extra.nmpc_missed,
         step_min: n(1)?,
         step_max: n(2)?,
         step_last: n(3)?,
@@ -171,6 +202,18 @@ mod tests {
         assert!(parse_stats("step 10 20 isr 30 40 35 samples 1000 overruns 2").is_err());
         assert!(parse_stats("step a 20 15 isr 30 40 35 samples 1000 overruns 2").is_err());
         assert!(parse_stats("").is_err());
+        assert_eq!((s.lost, s.late_max, s.nmpc_jobs), (None, None, None));
+        let base = "step 10 20 15 isr 30 40 35 samples 1000 overruns 2";
+        let s = parse_stats(&format!("{base} lost 3 late 77 nmpc_jobs 99 nmpc_missed 1")).unwrap();
+        assert_eq!(
+            (s.lost, s.late_max, s.nmpc_jobs, s.nmpc_missed),
+            (Some(3), Some(77), Some(99), Some(1))
+        );
+        let s = parse_stats(&format!("{base} lost 0 late - future 5")).unwrap();
+        assert_eq!((s.lost, s.late_max), (Some(0), None));
+        assert!(parse_stats(&format!("{base} lost x")).is_err());
+        assert!(parse_stats(&format!("{base} lost")).is_err());
+        assert!(parse_stats(&format!("{base} nmpc_jobs -")).is_err());
         assert_eq!(
             parse_rec_status("rec done 1024").unwrap(),
             ("done".to_string(), 1024)

@@ -37,6 +37,19 @@ pub fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Re
         us(s.isr_last)
     )?;
     writeln!(out, "samples {}  overruns {}", s.samples, s.overruns)?;
+    if let Some(lost) = s.lost {
+        write!(out, "lost samples    {lost}")?;
+        match s.late_max {
+            Some(l) => writeln!(out, "  latest start after trigger {l}{}", us(l))?,
+            None => writeln!(out)?,
+        }
+    }
+    if let (Some(jobs), Some(missed)) = (s.nmpc_jobs, s.nmpc_missed) {
+        writeln!(
+            out,
+            "nmpc solver     {jobs} jobs, {missed} missed (since the mode)"
+        )?;
+    }
     Ok(())
 }
 
