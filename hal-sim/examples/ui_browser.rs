@@ -294,6 +294,21 @@ async fn checks(r: &mut Run, o: &Opts) -> Result<()> {
     ));
     r.shot("scope.png").await?;
 
+    // The header's timing badge: the firmware's `stats`, polled with the fault (no deadline
+    // missed while the scope streamed).
+    let timing = r
+        .until(
+            "the timing badge",
+            "const t = document.getElementById('timing');
+             return /^timing \\d+ overruns/.test(t.textContent) ? t.textContent + ' | ' + t.className : null;",
+        )
+        .await?;
+    let timing = timing.as_str().unwrap_or_default().to_string();
+    if !timing.starts_with("timing 0 overruns, 0 lost") || !timing.ends_with("good") {
+        bail!("timing badge: `{timing}`, expected 0 overruns and 0 lost, shown good");
+    }
+    r.pass(&format!("the header's timing badge: `{timing}`"));
+
     // 2. A valid setting reaches the firmware: set in the Settings panel, read back with `get`.
     r.tab("settings").await?;
     r.type_into("#set-pid_kp", "0.75").await?;

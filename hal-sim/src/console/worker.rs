@@ -326,6 +326,18 @@ fn run(conn: Conn, shared: &Shared, rx: mpsc::Receiver<Job>) {
                     continue;
                 }
             }
+            // The deadlines with it: overruns, lost samples, late starts, NMPC's missed plans.
+            match c.stats() {
+                Ok(s) => shared.event(json!({"type": "timing", "stats": s})),
+                Err(e) => {
+                    let e = anyhow::Error::from(e);
+                    if link_lost(&e) {
+                        client = None;
+                        shared.set_link(false, format!("connection lost: {e:#}"));
+                    }
+                    continue;
+                }
+            }
         }
         if scope_on {
             if let Err(e) = scope_step(c, shared, &mut scope) {

@@ -53,6 +53,22 @@ function setLink(up, detail) {
   if (!up) banner.textContent = "No connection to the controller: " + detail + " (retrying every second)";
 }
 
+// `stats` since boot or `stats reset`: bad once a deadline was missed (an overrun, a lost
+// sample, an NMPC plan not back by its boundary). Counts are the board's clock (QEMU: 25 MHz
+// SysTick ticks; H743: core cycles).
+function onTiming(s) {
+  const t = $("timing");
+  const missed = s.nmpc_missed ?? 0;
+  const parts = [`${s.overruns} overruns`];
+  if (s.lost != null) parts.push(`${s.lost} lost`);
+  if (s.nmpc_jobs != null) parts.push(`nmpc ${missed} of ${s.nmpc_jobs} plans late`);
+  t.textContent = "timing " + parts.join(", ");
+  t.className = "badge " + (s.overruns === 0 && (s.lost ?? 0) === 0 && missed === 0 ? "good" : "bad");
+  t.title = `${s.samples} samples; step max ${s.step_max}, interrupt max ${s.isr_max}` +
+    (s.late_max != null ? `, latest start after the trigger ${s.late_max}` : "") +
+    " (counts of the board's clock); `stats reset` starts again";
+}
+
 function connectEvents() {
   const ws = new WebSocket(`ws://${location.host}/ws`);
   ws.onmessage = (m) => {
@@ -68,6 +84,7 @@ function connectEvents() {
         f.className = "badge " + (/^fault none/.test(ev.detail) ? "good" : "bad");
         break;
       }
+      case "timing": onTiming(ev.stats); break;
       case "progress": onProgress(ev); break;
     }
   };
