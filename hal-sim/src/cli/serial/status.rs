@@ -16,6 +16,13 @@ pub fn print_stats(out: &mut impl Write, s: &Stats, clock_hz: Option<f64>) -> Re
         Some(f) if f > 0.0 => format!(" ({:.3} us)", n as f64 / f * 1e6),
         _ => String::new(),
     };
+    if s.samples == 0 {
+        // Right after `stats reset` (or boot) min is the firmware's "none yet", u32::MAX.
+        writeln!(out, "control step    no sample since the reset")?;
+        writeln!(out, "interrupt       no sample since the reset")?;
+        writeln!(out, "samples 0  overruns {}", s.overruns)?;
+        return Ok(());
+    }
     writeln!(
         out,
         "control step    min {}{} max {}{} last {}{}",
@@ -82,4 +89,39 @@ pub fn stats(
         writeln!(out, "counters reset")?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::serial::replies::parse_stats;
+
+    fn printed(reply: &str) -> String {
+        let mut out = Vec::new();
+        print_stats(&mut out, &parse_stats(reply).unwrap(), Some(25e6)).unwrap();
+        String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn stats_print_the_deadlines_and_no_min_before_a_sample() {
+        let p = printed(
+            "step 5 54 12 isr 36 86 44 samples 160676 overruns 0 lost 0 late 166 \
+             nmpc_jobs 2141 nmpc_missed 0",
+        );
+        assert!(p.contains("samples 160676  overruns 0\n"), "{p}");
+        assert!(
+            p.contains("lost samples    0  latest start after trigger 166 (6.640 us)\n"),
+            "{p}"
+        );
+        assert!(p.contains("nmpc solver     2141 jobs, 0 missed"), "{p}");
+        let p =
+            printed("step 4294967295 0 0 isr 4294967295 0 0 samples 0 overruns 0 lost 0 late -");
+        assert!(
+            !p.contains("4294967295") && p.contains("no sample since the reset"),
+            "{p}"
+        );
+        // An older firmware's reply: the lines it has.
+        let p = printed("step 5 54 12 isr 36 86 44 samples 10 overruns 1");
+        assert!(p.ends_with("samples 10  overruns 1\n"), "{p}");
+    }
 }
