@@ -495,7 +495,6 @@ impl<C: Converters> Ctl<C> {
     }
 }
 
-/// `ok step <min max last> isr <min max last> samples <n> overruns <n>`.
 /// `stats`: the control task's timing, then `lost` (samples lost entirely), `late` (the
 /// longest start after the period's trigger, `-` on a board whose counter does not tell) and,
 /// while an NMPC law runs, its solver's `nmpc_jobs` and `nmpc_missed` (boundaries whose plan
