@@ -315,28 +315,20 @@ fn run(conn: Conn, shared: &Shared, rx: mpsc::Receiver<Job>) {
         let Some(c) = client.as_mut() else { continue };
         if Instant::now() >= next_fault {
             next_fault = Instant::now() + Duration::from_secs(1);
-            match c.send(&Command::Fault) {
-                Ok(r) => shared.event(json!({"type": "fault", "detail": r.details})),
-                Err(e) => {
-                    let e = anyhow::Error::from(e);
-                    if link_lost(&e) {
-                        client = None;
-                        shared.set_link(false, format!("connection lost: {e:#}"));
-                    }
-                    continue;
+            // The fault, and the deadlines with it (overruns, lost samples, late starts,
+            // NMPC's missed plans).
+            let polled = c
+                .send(&Command::Fault)
+                .map(|r| shared.event(json!({"type": "fault", "detail": r.details})))
+                .and_then(|()| c.stats())
+                .map(|s| shared.event(json!({"type": "timing", "stats": s})));
+            if let Err(e) = polled {
+                let e = anyhow::Error::from(e);
+                if link_lost(&e) {
+                    client = None;
+                    shared.set_link(false, format!("connection lost: {e:#}"));
                 }
-            }
-            // The deadlines with it: overruns, lost samples, late starts, NMPC's missed plans.
-            match c.stats() {
-                Ok(s) => shared.event(json!({"type": "timing", "stats": s})),
-                Err(e) => {
-                    let e = anyhow::Error::from(e);
-                    if link_lost(&e) {
-                        client = None;
-                        shared.set_link(false, format!("connection lost: {e:#}"));
-                    }
-                    continue;
-                }
+                continue;
             }
         }
         if scope_on {
@@ -450,6 +442,25 @@ fn scope_step(c: &mut Client, shared: &Shared, run: &mut ScopeRun) -> Result<()>
                         .collect()
                 })
                 .collect();
+            // The export takes what the page shows: the capture so far, replaced as it grows;
+            // stored before the page hears of it (an export right after an event has its frames).
+            let rec = Recording {
+                channels: run.channels.clone(),
+                sample_hz: run.frame_hz,
+                pre: cfg.pre,
+                trigger: cfg.trigger.clone(),
+                frames: frames.clone(),
+            };
+            {
+                let mut caps = shared.captures.lock().unwrap_or_else(|e| e.into_inner());
+                if caps.back().is_some_and(|c| c.seq == run.seq) {
+                    caps.pop_back();
+                }
+                if caps.len() >= 16 {
+                    caps.pop_front();
+                }
+                caps.push_back(Arc::new(Capture { seq: run.seq, rec }));
+            }
             shared.event(json!({
                 "type": "frame",
                 "seq": run.seq,
@@ -468,22 +479,6 @@ fn scope_step(c: &mut Client, shared: &Shared, run: &mut ScopeRun) -> Result<()>
                 run.failed = false;
                 shared.event(json!({"type": "scope", "state": "running", "detail": ""}));
             }
-            // The export takes what the page shows: the capture so far, replaced as it grows.
-            let rec = Recording {
-                channels: run.channels.clone(),
-                sample_hz: run.frame_hz,
-                pre: cfg.pre,
-                trigger: cfg.trigger.clone(),
-                frames: frames.clone(),
-            };
-            let mut caps = shared.captures.lock().unwrap_or_else(|e| e.into_inner());
-            if caps.back().is_some_and(|c| c.seq == run.seq) {
-                caps.pop_back();
-            }
-            if caps.len() >= 16 {
-                caps.pop_front();
-            }
-            caps.push_back(Arc::new(Capture { seq: run.seq, rec }));
         }
         if done && frames.len() >= readable {
             return Ok(());
