@@ -98,12 +98,27 @@ fn lfr_beats_the_linear_model_on_a_held_out_level_and_predict_runs_it() {
     let valid = dir.join("valid.csv");
     record(&valid, 2.0, 99);
     let d = |p: &Path| p.display().to_string();
+    // The cubic feedback on outputs from the BLA of all levels: the truth's structure (the
+    // divergence below needs an unbounded basis).
     let fit = |model: &str| {
         let out = dir.join(model);
         let mut a: Vec<String> = ["fit", "--model", model, "--order", "3", "--quiet"]
             .iter()
             .map(|s| s.to_string())
             .collect();
+        if model == "lfr" {
+            a.extend(
+                [
+                    "--lfr-basis",
+                    "cubic",
+                    "--lfr-linear",
+                    "all",
+                    "--lfr-channels",
+                    "outputs",
+                ]
+                .map(String::from),
+            );
+        }
         for t in &train {
             a.extend(["--train".into(), d(t)]);
         }
@@ -200,5 +215,91 @@ fn lfr_beats_the_linear_model_on_a_held_out_level_and_predict_runs_it() {
     let o = piezo(&["predict", "--model", &d(&bad), "--input", &d(&valid)]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("LFR `f`"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The bounded basis, the linear part from the lowest level and one channel per mode: well
+/// below the linear model on a held-out level, bounded at twice the training inputs; bad
+/// settings refused by name.
+#[test]
+fn lfr_with_mode_channels_from_the_lowest_level_stays_bounded() {
+    let dir = std::env::temp_dir().join(format!("lfr_cli_modes_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = |p: &Path| p.display().to_string();
+    let mut args: Vec<String> = ["fit", "--model", "lfr", "--order", "3", "--quiet"]
+        .map(String::from)
+        .to_vec();
+    for (i, amp) in [0.5, 0.55, 1.5, 2.5].iter().enumerate() {
+        let p = dir.join(format!("train{i}.csv"));
+        record(&p, *amp, 20 + i as u64);
+        args.extend(["--train".into(), d(&p)]);
+    }
+    let valid = dir.join("valid.csv");
+    record(&valid, 2.0, 98);
+    let run = |extra: &[&str], out: &str| {
+        let mut a = args.clone();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a.extend(["--out".into(), d(&dir.join(out))]);
+        piezo(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let score = |out: &str, rec: &Path| {
+        official(&ok(&piezo(&[
+            "score",
+            "--model",
+            &d(&dir.join(out).join("fit.json")),
+            "--record",
+            &d(rec),
+        ])))
+    };
+    ok(&run(
+        &[
+            "--lfr-basis",
+            "soft-cubic",
+            "--lfr-linear",
+            "lowest",
+            "--lfr-channels",
+            "modes",
+            "--lfr-iterations",
+            "30",
+        ],
+        "modes",
+    ));
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("modes/fit.json")).unwrap())
+            .unwrap();
+    // The linear part from the two records of the lowest level; one mode, one channel.
+    assert_eq!(j["report"]["lfr_linear_records"], 2, "{}", j["report"]);
+    assert_eq!(j["lfr"]["f"].as_array().unwrap().len(), 1);
+    assert_eq!(j["lfr"]["basis"][0], "soft-cubic");
+    let lfr = score("modes", &valid);
+    // The linear model of all levels, as `--model ss` would fit it.
+    let mut lin_args = args.clone();
+    lin_args[2] = "ss".into();
+    lin_args.extend(["--out".into(), d(&dir.join("ss"))]);
+    ok(&piezo(
+        &lin_args.iter().map(String::as_str).collect::<Vec<_>>(),
+    ));
+    let lin = score("ss", &valid);
+    assert!(lfr < 0.5 * lin, "lfr {lfr} vs linear {lin}");
+    // The soft cubic's slope is bounded: the fit's own check (training inputs scaled up to
+    // 2x, from rest) finds no divergence, where the cubic's feedback runs away.
+    let scale = &j["report"]["lfr_input_scale"];
+    assert_eq!(scale["bounded"].as_f64(), Some(2.0), "{scale}");
+    assert!(scale["diverges"].is_null(), "{scale}");
+    for (extra, want) in [
+        (
+            &["--lfr-linear", "highest"][..],
+            "--lfr-linear `highest`: expected all or lowest",
+        ),
+        (
+            &["--lfr-channels", "states"][..],
+            "LFR channels `states`: expected outputs or modes",
+        ),
+        (&["--lfr-basis", "quintic"][..], "LFR basis `quintic`"),
+    ] {
+        let o = run(extra, "bad");
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && e.contains(want), "{extra:?}: {e}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -19,7 +19,7 @@ enum Cmd {
     /// Run control scenarios on the simulated stage and print tracking metrics.
     Sim(hal_sim::cli::sim::Args),
     /// Identify a model from a measured CSV record.
-    Fit(hal_sim::cli::fit::Args),
+    Fit(Box<hal_sim::cli::fit::Args>),
     /// Simulate a saved model (`fit.json`) from rest on an input record.
     Predict(hal_sim::cli::predict::Args),
     /// Score a saved model on periodic records by the FSM benchmark's official rule; noise floor and BLA distortion per level.
@@ -42,7 +42,7 @@ fn main() {
     let result = match cli.cmd {
         Cmd::Demo(a) => hal_sim::cli::demo::run(a),
         Cmd::Sim(a) => hal_sim::cli::sim::run(a),
-        Cmd::Fit(a) => hal_sim::cli::fit::run(a),
+        Cmd::Fit(a) => hal_sim::cli::fit::run(*a),
         Cmd::Predict(a) => hal_sim::cli::predict::run(a),
         Cmd::Score(a) => hal_sim::cli::score::run(a),
         Cmd::Diagnose(a) => hal_sim::cli::diagnose::run(a),

@@ -200,11 +200,22 @@ pub struct Args {
     #[arg(long, default_value_t = 0.15)]
     pub schedule_tau_s: f64,
     /// `lfr`: basis functions of the nonlinearity in feedback, applied to every channel
-    /// (comma list of `cubic` = z^3, `abs-square` = z |z|).
-    #[arg(long, value_delimiter = ',', default_value = "cubic")]
+    /// (comma list of `cubic` = z^3, `abs-square` = z |z|, `soft-cubic` = z - tanh z,
+    /// `play:R` = play operator of half-width R).
+    #[arg(long, value_delimiter = ',', default_value = "soft-cubic")]
     pub lfr_basis: Vec<String>,
-    /// `lfr`: Levenberg-Marquardt iterations on the simulation error.
-    #[arg(long, default_value_t = 4)]
+    /// `lfr`: the records the linear part is identified on: `all` (the BLA of every
+    /// training record) or `lowest` (the lowest input level's: the small-signal model the
+    /// feedback vanishes to; the feedback is then fitted on all). Default: lowest.
+    #[arg(long)]
+    pub lfr_linear: Option<String>,
+    /// `lfr`: the nonlinearity's channels: `outputs` (one per output, `E`, `F` full) or
+    /// `modes` (one per lightly damped mode, each reading and feeding only its own mode).
+    #[arg(long, default_value = "outputs")]
+    pub lfr_channels: String,
+    /// `lfr`: Levenberg-Marquardt iterations on the simulation error (it stops earlier when
+    /// a step no longer lowers the cost).
+    #[arg(long, default_value_t = 60)]
     pub lfr_iterations: usize,
     /// Columns and units of the records.
     #[command(flatten)]

@@ -68,7 +68,25 @@ pub fn run(args: &Args) -> Result<()> {
             Quantity::Length.internal()
         );
     }
-    let fit = identify(&recs, &opts)?;
+    let lowest = match (model, args.lfr_linear.as_deref()) {
+        ("lfr", Some("all")) => None,
+        ("lfr", None | Some("lowest")) => Some(lowest_level(&recs)?),
+        ("lfr", Some(o)) => anyhow::bail!("--lfr-linear `{o}`: expected all or lowest"),
+        (_, Some(_)) => anyhow::bail!("--lfr-linear applies to --model lfr only"),
+        (_, None) => None,
+    };
+    let fit = match &lowest {
+        Some(low) => {
+            if !args.quiet {
+                eprintln!(
+                    "lfr: the linear part from the {} records of the lowest input level",
+                    low.len()
+                );
+            }
+            identify(low, &opts)?
+        }
+        None => identify(&recs, &opts)?,
+    };
     let lfr_fit = if model == "lfr" {
         let lopts = LfrOptions {
             basis: args
@@ -76,6 +94,7 @@ pub fn run(args: &Args) -> Result<()> {
                 .iter()
                 .map(|b| Basis::parse(b))
                 .collect::<Result<_>>()?,
+            channels: lfr::Channels::parse(&args.lfr_channels)?,
             iterations: args.lfr_iterations,
             progress: !args.quiet,
             ..Default::default()
@@ -101,6 +120,7 @@ pub fn run(args: &Args) -> Result<()> {
         "train_rms_lfr_start": lfr_fit.as_ref().map(|f| f.start_rms),
         "train_rms_lfr": lfr_fit.as_ref().map(|f| f.rms),
         "lfr_iterations": lfr_fit.as_ref().map(|f| f.iterations),
+        "lfr_linear_records": lowest.as_ref().map_or(recs.len(), Vec::len),
         "lfr_input_scale": lfr_scale,
         "seconds": seconds,
     });
@@ -212,6 +232,20 @@ pub fn run(args: &Args) -> Result<()> {
 }
 
 /// Noise and distortion levels of the BLA of periodic records (`None` otherwise).
+/// The records of the lowest input level (grouped as `piezo score` groups them).
+fn lowest_level(recs: &[Record]) -> Result<Vec<Record>> {
+    use crate::ident::ss::{scheduled, score};
+    let levels = recs
+        .iter()
+        .map(|r| Ok(scheduled::record_level(r, score::period_of(r)?)))
+        .collect::<Result<Vec<_>>>()?;
+    let groups = scheduled::group_by_level(&levels);
+    Ok(groups
+        .first()
+        .map(|g| g.iter().map(|&i| recs[i].clone()).collect())
+        .unwrap_or_default())
+}
+
 pub fn bla_levels(recs: &[Record]) -> Result<Option<frf::Levels>> {
     let periods: Vec<usize> = recs.iter().map(frf::detect_period).collect();
     if periods.iter().zip(recs).any(|(&n, r)| n == r.len())

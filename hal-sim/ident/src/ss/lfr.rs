@@ -3,15 +3,17 @@
 //!
 //! `x[k+1] = A x + B u + E w`, `y = C x + D u`, `z = F x + G u`, `w = N(z)`,
 //!
-//! `N` acting on every channel `z_i` with a few odd basis functions (amplitude-dependent
-//! stiffness and damping: `z^3`, `z |z|`), `w` stacked basis by basis. For small signals
+//! `N` acting on every channel `z_i` with a few basis functions (amplitude-dependent
+//! stiffness and damping: `z^3`, its bounded-slope form `z - tanh z`, `z |z|`, play
+//! operators), `w` stacked basis by basis; the channels are the outputs or the modes. For small signals
 //! `N` vanishes and the model is its linear part; as the amplitude grows the feedback moves
 //! the resonances, differently per output: what the mirror does and no input-side
 //! hysteresis produces. One model for every level, simulated from rest.
 //!
-//! Identification: the linear part from the BLA (`super::identify`), `z` started as the
-//! outputs of the linear part scaled to unit RMS and `E = 0` (so the start is the linear
-//! model), then Levenberg-Marquardt on the simulation error of the benchmark's scoring rule
+//! Identification: the linear part from the BLA (`super::identify`; `piezo fit` takes the
+//! lowest level's records, the small-signal model), `z` started as the outputs (or each
+//! mode's first state) of the linear part scaled to unit RMS and `E = 0` (so the start is
+//! the linear model), then Levenberg-Marquardt on the simulation error of the benchmark's scoring rule
 //! (one period of warm-up, every period scored without its first samples). Forward
 //! sensitivities of the state give the Jacobian of the poles, `B`, `E`, `F`, `G`; `C` and
 //! `D`, on which the output depends linearly, are solved by least squares at every
@@ -31,6 +33,11 @@ pub enum Basis {
     Cubic,
     /// `z |z|`: a stiffness that grows linearly with the amplitude.
     AbsSquare,
+    /// `z - tanh z`: `z^3 / 3` for small signals, slope below 1 for large ones. The cubic's
+    /// stiffness change with a bound: the feedback's loop gain cannot run away at an
+    /// amplitude the training records did not reach (the converged cubic model diverged on
+    /// another realization of the mirror's 300 mV level).
+    SoftCubic,
     /// Play (backlash) operator of this half-width in `z`'s unit (the start makes `z` of
     /// unit RMS): rate-independent hysteresis, the Prandtl-Ishlinskii family's element; in
     /// feedback an amplitude-dependent stiffness and damping (energy lost per cycle).
@@ -42,16 +49,18 @@ impl Basis {
         match self {
             Basis::Cubic => "cubic".into(),
             Basis::AbsSquare => "abs-square".into(),
+            Basis::SoftCubic => "soft-cubic".into(),
             Basis::Play(r) => format!("play:{r}"),
         }
     }
 
-    /// `cubic`, `abs-square` or `play:R` (R >= 0, the half-width).
+    /// `cubic`, `abs-square`, `soft-cubic` or `play:R` (R >= 0, the half-width).
     pub fn parse(s: &str) -> anyhow::Result<Self> {
         let s = s.trim();
         match s {
             "cubic" => return Ok(Basis::Cubic),
             "abs-square" => return Ok(Basis::AbsSquare),
+            "soft-cubic" => return Ok(Basis::SoftCubic),
             _ => {}
         }
         if let Some(r) = s.strip_prefix("play:") {
@@ -61,7 +70,9 @@ impl Basis {
                 }
             }
         }
-        anyhow::bail!("LFR basis `{s}`: expected cubic, abs-square or play:R (half-width R >= 0)")
+        anyhow::bail!(
+            "LFR basis `{s}`: expected cubic, abs-square, soft-cubic or play:R (half-width R >= 0)"
+        )
     }
 
     fn valid(self) -> bool {
@@ -78,6 +89,10 @@ impl Basis {
         match self {
             Basis::Cubic => (z * z * z, 3.0 * z * z, true),
             Basis::AbsSquare => (z * z.abs(), 2.0 * z.abs(), true),
+            Basis::SoftCubic => {
+                let t = z.tanh();
+                (z - t, t * t, true)
+            }
             Basis::Play(r) => {
                 if *mem < z - r {
                     *mem = z - r;
@@ -364,13 +379,17 @@ enum Param {
     G(usize, usize),
 }
 
-fn layout(mdl: &Lfr) -> Vec<Param> {
+/// The parameters: every pole, `B`, and the entries of `E`, `F`, `G` the structure frees.
+/// `modes[c]`: the first state of channel `c`'s mode (`Channels::Modes`: `z_c` reads only
+/// its mode's two states and `w_c` feeds only them); `None`: `E`, `F` full.
+fn layout(mdl: &Lfr, modes: Option<&[usize]>) -> Vec<Param> {
     let (n, m, nz, nw) = (
         mdl.linear.order(),
         mdl.linear.inputs(),
         mdl.channels(),
         mdl.e.ncols(),
     );
+    let owns = |c: usize, s: usize| modes.is_none_or(|md| s == md[c] || s == md[c] + 1);
     let mut v = Vec::new();
     let mut i = 0;
     for b in &mdl.linear.blocks {
@@ -381,54 +400,87 @@ fn layout(mdl: &Lfr) -> Vec<Param> {
         i += b.states();
     }
     v.extend((0..n).flat_map(|s| (0..m).map(move |j| Param::B(s, j))));
-    v.extend((0..n).flat_map(|s| (0..nw).map(move |q| Param::E(s, q))));
-    v.extend((0..nz).flat_map(|c| (0..n).map(move |l| Param::F(c, l))));
+    v.extend(
+        (0..n)
+            .flat_map(|s| (0..nw).map(move |q| (s, q)))
+            .filter(|&(s, q)| owns(q % nz, s))
+            .map(|(s, q)| Param::E(s, q)),
+    );
+    v.extend(
+        (0..nz)
+            .flat_map(|c| (0..n).map(move |l| (c, l)))
+            .filter(|&(c, l)| owns(c, l))
+            .map(|(c, l)| Param::F(c, l)),
+    );
     v.extend((0..nz).flat_map(|c| (0..m).map(move |j| Param::G(c, j))));
     v
 }
 
-fn pack(mdl: &Lfr) -> Vec<f64> {
-    let mut v = Vec::new();
-    for b in &mdl.linear.blocks {
-        match *b {
-            Block::Real(l) => v.push(l),
-            Block::Pair(s, w) => v.extend([s, w]),
-        }
+/// The block starting at state `i`.
+fn block_at(blocks: &mut [Block], i: usize) -> &mut Block {
+    let mut s = 0;
+    let mut at = 0;
+    while s < i {
+        s += blocks[at].states();
+        at += 1;
     }
-    for mat in [&mdl.linear.b, &mdl.e, &mdl.f, &mdl.g] {
-        for i in 0..mat.nrows() {
-            v.extend(mat.row(i).iter());
-        }
-    }
-    v
+    &mut blocks[at]
 }
 
-/// Inverse of [`pack`] with the structure of `like`; poles pulled inside the stability
+/// `params`' values in `mdl`.
+fn pack(mdl: &Lfr, params: &[Param]) -> Vec<f64> {
+    let mut m = mdl.clone();
+    params
+        .iter()
+        .map(|p| match *p {
+            Param::Real(i) => match *block_at(&mut m.linear.blocks, i) {
+                Block::Real(l) => l,
+                Block::Pair(s, _) => s,
+            },
+            Param::Sigma(i) => match *block_at(&mut m.linear.blocks, i) {
+                Block::Pair(s, _) | Block::Real(s) => s,
+            },
+            Param::Omega(i) => match *block_at(&mut m.linear.blocks, i) {
+                Block::Pair(_, w) => w,
+                Block::Real(_) => 0.0,
+            },
+            Param::B(s, j) => mdl.linear.b[(s, j)],
+            Param::E(s, q) => mdl.e[(s, q)],
+            Param::F(c, l) => mdl.f[(c, l)],
+            Param::G(c, j) => mdl.g[(c, j)],
+        })
+        .collect()
+}
+
+/// Inverse of [`pack`]: `like` with `params` set to `v`; poles pulled inside the stability
 /// radius.
-fn unpack(like: &Lfr, v: &[f64]) -> Lfr {
+fn unpack(like: &Lfr, params: &[Param], v: &[f64]) -> Lfr {
     let mut out = like.clone();
-    let mut i = 0;
-    for b in out.linear.blocks.iter_mut() {
-        match b {
-            Block::Real(l) => {
-                *l = v[i];
-                i += 1;
+    for (p, &x) in params.iter().zip(v) {
+        match *p {
+            Param::Real(i) => {
+                if let Block::Real(l) = block_at(&mut out.linear.blocks, i) {
+                    *l = x;
+                }
             }
-            Block::Pair(s, w) => {
-                *s = v[i];
-                *w = v[i + 1].abs().max(1e-9);
-                i += 2;
+            Param::Sigma(i) => {
+                if let Block::Pair(s, _) = block_at(&mut out.linear.blocks, i) {
+                    *s = x;
+                }
             }
+            Param::Omega(i) => {
+                if let Block::Pair(_, w) = block_at(&mut out.linear.blocks, i) {
+                    *w = x.abs().max(1e-9);
+                }
+            }
+            Param::B(s, j) => out.linear.b[(s, j)] = x,
+            Param::E(s, q) => out.e[(s, q)] = x,
+            Param::F(c, l) => out.f[(c, l)] = x,
+            Param::G(c, j) => out.g[(c, j)] = x,
         }
-        b.clamp_radius(MAX_POLE_RADIUS);
     }
-    for mat in [&mut out.linear.b, &mut out.e, &mut out.f, &mut out.g] {
-        for r in 0..mat.nrows() {
-            for c in 0..mat.ncols() {
-                mat[(r, c)] = v[i];
-                i += 1;
-            }
-        }
+    for b in out.linear.blocks.iter_mut() {
+        b.clamp_radius(MAX_POLE_RADIUS);
     }
     out
 }
@@ -725,10 +777,34 @@ fn normal_record(
     Ok((h, g))
 }
 
+/// What the nonlinearity's channels `z` are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Channels {
+    /// One per output: `z` starts as the outputs scaled to unit RMS; `E`, `F` full.
+    Outputs,
+    /// One per lightly damped mode (complex pair of the linear part): `z_c` reads only its
+    /// mode's two states and `w_c` feeds only them, so each mode's stiffness and damping
+    /// move with its own amplitude (how the mirror's resonances soften and damp with the
+    /// drive level). Far fewer parameters than `Outputs` with more channels.
+    Modes,
+}
+
+impl Channels {
+    /// `outputs` or `modes`.
+    pub fn parse(s: &str) -> anyhow::Result<Self> {
+        match s.trim() {
+            "outputs" => Ok(Self::Outputs),
+            "modes" => Ok(Self::Modes),
+            o => anyhow::bail!("LFR channels `{o}`: expected outputs or modes"),
+        }
+    }
+}
+
 /// Settings of [`identify`].
 #[derive(Debug, Clone)]
 pub struct LfrOptions {
     pub basis: Vec<Basis>,
+    pub channels: Channels,
     /// Levenberg-Marquardt iterations.
     pub iterations: usize,
     /// `J^T J` from every `stride`-th scored sample (the gradient from all).
@@ -741,8 +817,9 @@ pub struct LfrOptions {
 impl Default for LfrOptions {
     fn default() -> Self {
         Self {
-            basis: vec![Basis::Cubic],
-            iterations: 4,
+            basis: vec![Basis::SoftCubic],
+            channels: Channels::Outputs,
+            iterations: 60,
             stride: 2,
             ftol: 1e-6,
             progress: false,
@@ -793,6 +870,62 @@ pub fn start(linear: &Modal, basis: &[Basis], recs: &[Scored]) -> anyhow::Result
     })
 }
 
+/// The start of `Channels::Modes`: one channel per complex pair, `z_c` its first state
+/// scaled to unit RMS over `recs`, `E = 0`. Returns the model and each channel's first state.
+pub fn start_modes(
+    linear: &Modal,
+    basis: &[Basis],
+    recs: &[Scored],
+) -> anyhow::Result<(Lfr, Vec<usize>)> {
+    let (n, m) = (linear.order(), linear.inputs());
+    let mut modes = Vec::new();
+    let mut i = 0;
+    for b in &linear.blocks {
+        if let Block::Pair(..) = b {
+            modes.push(i);
+        }
+        i += b.states();
+    }
+    anyhow::ensure!(
+        !modes.is_empty(),
+        "the LFR's mode channels need a lightly damped mode (a complex pair) in the linear part"
+    );
+    // The states' mean squares along the linear model (no feedback yet).
+    let probe = Lfr {
+        e: DMatrix::zeros(n, 1),
+        f: DMatrix::zeros(1, n),
+        g: DMatrix::zeros(1, m),
+        basis: vec![Basis::Cubic],
+        linear: linear.clone(),
+    };
+    let mut ms = vec![0.0; n];
+    let mut cnt = 0usize;
+    for r in recs {
+        probe.run(&r.u, |_, x, _| {
+            for (a, v) in ms.iter_mut().zip(x) {
+                *a += v * v;
+            }
+        })?;
+        cnt += r.u[0].len();
+    }
+    let nz = modes.len();
+    let mut f = DMatrix::zeros(nz, n);
+    for (c, &s) in modes.iter().enumerate() {
+        let rms = (ms[s] / cnt.max(1) as f64).sqrt();
+        f[(c, s)] = if rms > 0.0 { 1.0 / rms } else { 1.0 };
+    }
+    Ok((
+        Lfr {
+            f,
+            g: DMatrix::zeros(nz, m),
+            e: DMatrix::zeros(n, nz * basis.len()),
+            basis: basis.to_vec(),
+            linear: linear.clone(),
+        },
+        modes,
+    ))
+}
+
 /// Identifies the LFR on `recs` (periodic records), started from the linear model.
 pub fn identify(
     linear: &Modal,
@@ -813,7 +946,13 @@ pub fn identify(
         .sum::<usize>()
         * linear.outputs();
     let rms = |c: f64| (c / samples.max(1) as f64).sqrt();
-    let mut mdl = start(linear, &opts.basis, &data)?;
+    let (mut mdl, modes) = match opts.channels {
+        Channels::Outputs => (start(linear, &opts.basis, &data)?, None),
+        Channels::Modes => {
+            let (m, md) = start_modes(linear, &opts.basis, &data)?;
+            (m, Some(md))
+        }
+    };
     let mut c = project(&mut mdl, &data)?;
     let start_rms = rms(c);
     if opts.progress {
@@ -823,7 +962,7 @@ pub fn identify(
             samples / linear.outputs()
         );
     }
-    let params = layout(&mdl);
+    let params = layout(&mdl, modes.as_deref());
     let stride = opts.stride.max(1);
     let mut lambda = 1e-3;
     let mut it = 0;
@@ -841,7 +980,7 @@ pub fn identify(
                 },
                 |a, b| Ok((a.0 + b.0, a.1 + b.1)),
             )?;
-        let z0 = pack(&mdl);
+        let z0 = pack(&mdl, &params);
         let mut improved = None;
         for _ in 0..10 {
             let mut damped = h.clone();
@@ -855,7 +994,7 @@ pub fn identify(
             };
             let dz = ch.solve(&g);
             let zt: Vec<f64> = z0.iter().zip(dz.iter()).map(|(z, d)| z + d).collect();
-            let mut mt = unpack(&mdl, &zt);
+            let mut mt = unpack(&mdl, &params, &zt);
             match project(&mut mt, &data) {
                 Ok(ct) if ct < c => {
                     improved = Some((mt, ct));
@@ -961,8 +1100,24 @@ mod tests {
         let mut mdl = truth();
         mdl.f[(0, 1)] = 0.3;
         mdl.g[(0, 0)] = 0.2;
+        sensitivities_match(mdl.clone(), None);
+        // The mode structure: the channel reads and feeds the pair's states only.
+        sensitivities_match(mdl.clone(), Some(&[0]));
+        // Every smooth basis at once.
+        mdl.basis = vec![Basis::Cubic, Basis::SoftCubic, Basis::AbsSquare];
+        mdl.e =
+            DMatrix::from_row_slice(3, 3, &[-0.05, 0.2, 0.01, 0.03, -0.1, 0.0, 0.0, 0.05, -0.02]);
+        sensitivities_match(mdl, None);
+    }
+
+    fn sensitivities_match(mdl: Lfr, modes: Option<&[usize]>) {
         let rec = Scored::of(&record(&mdl, 1.0, 3)).unwrap();
-        let params = layout(&mdl);
+        let params = layout(&mdl, modes);
+        if modes.is_some() {
+            assert!(!params
+                .iter()
+                .any(|p| matches!(p, Param::F(0, 2) | Param::E(2, 0))));
+        }
         // g = J^T e = -1/2 d(cost)/dtheta with fixed C, D; a shifted target so that the
         // error is not zero.
         let cost = |m: &Lfr| -> f64 {
@@ -978,14 +1133,15 @@ mod tests {
             windows: rec.windows.clone(),
         };
         let (_, g) = normal_record(&mdl, &params, &shifted, 1).unwrap();
-        let z = pack(&mdl);
+        let z = pack(&mdl, &params);
         for (i, _) in params.iter().enumerate() {
             let hstep = 1e-6 * (1.0 + z[i].abs());
             let mut zp = z.clone();
             zp[i] += hstep;
             let mut zm = z.clone();
             zm[i] -= hstep;
-            let d = (cost(&unpack(&mdl, &zp)) - cost(&unpack(&mdl, &zm))) / (2.0 * hstep);
+            let d = (cost(&unpack(&mdl, &params, &zp)) - cost(&unpack(&mdl, &params, &zm)))
+                / (2.0 * hstep);
             let want = -0.5 * d;
             assert!(
                 (g[i] - want).abs() <= 1e-5 * (1.0 + want.abs()),
@@ -1004,6 +1160,7 @@ mod tests {
             .map(|&(a, s)| record(&t, a, s))
             .collect();
         let opts = LfrOptions {
+            basis: vec![Basis::Cubic],
             iterations: 40,
             stride: 1,
             ..Default::default()
@@ -1053,6 +1210,44 @@ mod tests {
         let far = t.bounded_input_scale(&[&u(1e4)], &INPUT_SCALES);
         assert_eq!(far.bounded, None);
         assert_eq!(far.diverges, Some(1.0));
+    }
+
+    #[test]
+    fn the_soft_cubic_stays_bounded_where_the_cubic_diverges() {
+        let cubic = truth();
+        let soft = Lfr {
+            basis: vec![Basis::SoftCubic],
+            ..truth()
+        };
+        let u = vec![multisine(512, 2, 1e4, 4)];
+        assert_eq!(
+            cubic.bounded_input_scale(&[&u], &INPUT_SCALES).diverges,
+            Some(1.0)
+        );
+        assert_eq!(
+            soft.bounded_input_scale(&[&u], &INPUT_SCALES),
+            InputScale {
+                bounded: Some(2.0),
+                diverges: None
+            }
+        );
+        // Small signals: both near the linear part, the soft one about a third as far
+        // (z^3 / 3 against z^3).
+        let small = vec![multisine(512, 2, 0.05, 4)];
+        let lin = cubic.linear.simulate(&small).unwrap();
+        let peak = lin[0].iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let off = |m: &Lfr| {
+            let y = m.simulate(&small).unwrap();
+            y[0].iter()
+                .zip(&lin[0])
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        };
+        let (dc, ds) = (off(&cubic), off(&soft));
+        assert!(dc < 0.03 * peak && dc > 0.0, "{dc} vs {peak}");
+        assert!(ds > 0.25 * dc && ds < 0.45 * dc, "{ds} vs {dc}");
+        assert_eq!(Basis::parse("soft-cubic").unwrap(), Basis::SoftCubic);
+        assert_eq!(Basis::SoftCubic.name(), "soft-cubic");
     }
 
     #[test]
