@@ -416,31 +416,27 @@ fn layout(mdl: &Lfr, modes: Option<&[usize]>) -> Vec<Param> {
     v
 }
 
-/// The block starting at state `i`.
-fn block_at(blocks: &mut [Block], i: usize) -> &mut Block {
+/// Index of the block starting at state `i`.
+fn block_at(blocks: &[Block], i: usize) -> usize {
     let mut s = 0;
     let mut at = 0;
     while s < i {
         s += blocks[at].states();
         at += 1;
     }
-    &mut blocks[at]
+    at
 }
 
 /// `params`' values in `mdl`.
 fn pack(mdl: &Lfr, params: &[Param]) -> Vec<f64> {
-    let mut m = mdl.clone();
+    let blocks = &mdl.linear.blocks;
     params
         .iter()
         .map(|p| match *p {
-            Param::Real(i) => match *block_at(&mut m.linear.blocks, i) {
-                Block::Real(l) => l,
-                Block::Pair(s, _) => s,
-            },
-            Param::Sigma(i) => match *block_at(&mut m.linear.blocks, i) {
+            Param::Real(i) | Param::Sigma(i) => match blocks[block_at(blocks, i)] {
                 Block::Pair(s, _) | Block::Real(s) => s,
             },
-            Param::Omega(i) => match *block_at(&mut m.linear.blocks, i) {
+            Param::Omega(i) => match blocks[block_at(blocks, i)] {
                 Block::Pair(_, w) => w,
                 Block::Real(_) => 0.0,
             },
@@ -456,20 +452,18 @@ fn pack(mdl: &Lfr, params: &[Param]) -> Vec<f64> {
 /// radius.
 fn unpack(like: &Lfr, params: &[Param], v: &[f64]) -> Lfr {
     let mut out = like.clone();
+    let blocks = &mut out.linear.blocks;
     for (p, &x) in params.iter().zip(v) {
         match *p {
-            Param::Real(i) => {
-                if let Block::Real(l) = block_at(&mut out.linear.blocks, i) {
-                    *l = x;
-                }
-            }
-            Param::Sigma(i) => {
-                if let Block::Pair(s, _) = block_at(&mut out.linear.blocks, i) {
-                    *s = x;
+            Param::Real(i) | Param::Sigma(i) => {
+                let at = block_at(blocks, i);
+                match &mut blocks[at] {
+                    Block::Real(s) | Block::Pair(s, _) => *s = x,
                 }
             }
             Param::Omega(i) => {
-                if let Block::Pair(_, w) = block_at(&mut out.linear.blocks, i) {
+                let at = block_at(blocks, i);
+                if let Block::Pair(_, w) = &mut blocks[at] {
                     *w = x.abs().max(1e-9);
                 }
             }
@@ -479,7 +473,7 @@ fn unpack(like: &Lfr, params: &[Param], v: &[f64]) -> Lfr {
             Param::G(c, j) => out.g[(c, j)] = x,
         }
     }
-    for b in out.linear.blocks.iter_mut() {
+    for b in blocks.iter_mut() {
         b.clamp_radius(MAX_POLE_RADIUS);
     }
     out
