@@ -120,7 +120,9 @@ pub fn run(args: &Args) -> Result<()> {
         "train_rms_lfr_start": lfr_fit.as_ref().map(|f| f.start_rms),
         "train_rms_lfr": lfr_fit.as_ref().map(|f| f.rms),
         "lfr_iterations": lfr_fit.as_ref().map(|f| f.iterations),
-        "lfr_linear_records": lowest.as_ref().map_or(recs.len(), Vec::len),
+        "lfr_linear_records": lfr_fit
+            .as_ref()
+            .map(|_| lowest.as_ref().map_or(recs.len(), Vec::len)),
         "lfr_input_scale": lfr_scale,
         "seconds": seconds,
     });
@@ -231,7 +233,6 @@ pub fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// Noise and distortion levels of the BLA of periodic records (`None` otherwise).
 /// The records of the lowest input level (grouped as `piezo score` groups them).
 fn lowest_level(recs: &[Record]) -> Result<Vec<Record>> {
     use crate::ident::ss::{scheduled, score};
@@ -246,6 +247,7 @@ fn lowest_level(recs: &[Record]) -> Result<Vec<Record>> {
         .unwrap_or_default())
 }
 
+/// Noise and distortion levels of the BLA of periodic records (`None` otherwise).
 pub fn bla_levels(recs: &[Record]) -> Result<Option<frf::Levels>> {
     let periods: Vec<usize> = recs.iter().map(frf::detect_period).collect();
     if periods.iter().zip(recs).any(|(&n, r)| n == r.len())
