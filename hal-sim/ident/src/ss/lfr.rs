@@ -5,16 +5,16 @@
 //!
 //! `N` acting on every channel `z_i` with a few basis functions (amplitude-dependent
 //! stiffness and damping: `z^3`, its bounded-slope form `z - tanh z`, `z |z|`, play
-//! operators), `w` stacked basis by basis; the channels are the outputs or the modes. For small signals
-//! `N` vanishes and the model is its linear part; as the amplitude grows the feedback moves
+//! operators), `w` stacked basis by basis; the channels are the outputs or the modes. For
+//! small signals `N` vanishes and the model is its linear part; as the amplitude grows the feedback moves
 //! the resonances, differently per output: what the mirror does and no input-side
 //! hysteresis produces. One model for every level, simulated from rest.
 //!
 //! Identification: the linear part from the BLA (`super::identify`; `piezo fit` takes the
 //! lowest level's records, the small-signal model), `z` started as the outputs (or each
 //! mode's first state) of the linear part scaled to unit RMS and `E = 0` (so the start is
-//! the linear model), then Levenberg-Marquardt on the simulation error of the benchmark's scoring rule
-//! (one period of warm-up, every period scored without its first samples). Forward
+//! the linear model), then Levenberg-Marquardt on the simulation error of the benchmark's
+//! scoring rule (one period of warm-up, every period scored without its first samples). Forward
 //! sensitivities of the state give the Jacobian of the poles, `B`, `E`, `F`, `G`; `C` and
 //! `D`, on which the output depends linearly, are solved by least squares at every
 //! parameter set (variable projection, Kaufman's Jacobian).
@@ -34,9 +34,10 @@ pub enum Basis {
     /// `z |z|`: a stiffness that grows linearly with the amplitude.
     AbsSquare,
     /// `z - tanh z`: `z^3 / 3` for small signals, slope below 1 for large ones. The cubic's
-    /// stiffness change with a bound: the feedback's loop gain cannot run away at an
-    /// amplitude the training records did not reach (the converged cubic model diverged on
-    /// another realization of the mirror's 300 mV level).
+    /// stiffness change with a bound: the feedback grows no faster than linearly beyond the
+    /// training amplitudes (the converged cubic model diverged on another realization of the
+    /// mirror's 300 mV level). Not a proof of stability: the large-signal loop can still be
+    /// unstable.
     SoftCubic,
     /// Play (backlash) operator of this half-width in `z`'s unit (the start makes `z` of
     /// unit RMS): rate-independent hysteresis, the Prandtl-Ishlinskii family's element; in
@@ -832,10 +833,9 @@ pub struct LfrFit {
     pub iterations: usize,
 }
 
-/// The start: `linear` with `z` = its outputs scaled to unit RMS over `recs`, `E = 0`.
-pub fn start(linear: &Modal, basis: &[Basis], recs: &[Scored]) -> anyhow::Result<Lfr> {
-    let (n, p) = (linear.order(), linear.outputs());
-    let mut ms = vec![0.0; p];
+/// 1 / RMS of each output of `linear` over `recs` (1 for a silent output).
+fn inverse_rms(linear: &Modal, recs: &[Scored]) -> anyhow::Result<Vec<f64>> {
+    let mut ms = vec![0.0; linear.outputs()];
     let mut cnt = 0usize;
     for r in recs {
         let y = linear.simulate(&r.u)?;
@@ -844,7 +844,7 @@ pub fn start(linear: &Modal, basis: &[Basis], recs: &[Scored]) -> anyhow::Result
         }
         cnt += r.u[0].len();
     }
-    let scale: Vec<f64> = ms
+    Ok(ms
         .iter()
         .map(|s| {
             let rms = (s / cnt.max(1) as f64).sqrt();
@@ -854,7 +854,13 @@ pub fn start(linear: &Modal, basis: &[Basis], recs: &[Scored]) -> anyhow::Result
                 1.0
             }
         })
-        .collect();
+        .collect())
+}
+
+/// The start: `linear` with `z` = its outputs scaled to unit RMS over `recs`, `E = 0`.
+pub fn start(linear: &Modal, basis: &[Basis], recs: &[Scored]) -> anyhow::Result<Lfr> {
+    let (n, p) = (linear.order(), linear.outputs());
+    let scale = inverse_rms(linear, recs)?;
     Ok(Lfr {
         f: DMatrix::from_fn(p, n, |o, i| linear.c[(o, i)] * scale[o]),
         g: DMatrix::from_fn(p, linear.inputs(), |o, j| linear.d[(o, j)] * scale[o]),
@@ -884,29 +890,17 @@ pub fn start_modes(
         !modes.is_empty(),
         "the LFR's mode channels need a lightly damped mode (a complex pair) in the linear part"
     );
-    // The states' mean squares along the linear model (no feedback yet).
-    let probe = Lfr {
-        e: DMatrix::zeros(n, 1),
-        f: DMatrix::zeros(1, n),
-        g: DMatrix::zeros(1, m),
-        basis: vec![Basis::Cubic],
-        linear: linear.clone(),
+    // The states' RMS along the linear model: its states as outputs.
+    let states = Modal {
+        c: DMatrix::identity(n, n),
+        d: DMatrix::zeros(n, m),
+        ..linear.clone()
     };
-    let mut ms = vec![0.0; n];
-    let mut cnt = 0usize;
-    for r in recs {
-        probe.run(&r.u, |_, x, _| {
-            for (a, v) in ms.iter_mut().zip(x) {
-                *a += v * v;
-            }
-        })?;
-        cnt += r.u[0].len();
-    }
+    let scale = inverse_rms(&states, recs)?;
     let nz = modes.len();
     let mut f = DMatrix::zeros(nz, n);
     for (c, &s) in modes.iter().enumerate() {
-        let rms = (ms[s] / cnt.max(1) as f64).sqrt();
-        f[(c, s)] = if rms > 0.0 { 1.0 / rms } else { 1.0 };
+        f[(c, s)] = scale[s];
     }
     Ok((
         Lfr {
