@@ -251,7 +251,7 @@ fn lfr_with_mode_channels_from_the_lowest_level_stays_bounded() {
             &d(rec),
         ])))
     };
-    ok(&run(
+    let fit_modes = run(
         &[
             "--lfr-basis",
             "soft-cubic",
@@ -263,7 +263,8 @@ fn lfr_with_mode_channels_from_the_lowest_level_stays_bounded() {
             "30",
         ],
         "modes",
-    ));
+    );
+    ok(&fit_modes);
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("modes/fit.json")).unwrap())
             .unwrap();
@@ -286,6 +287,41 @@ fn lfr_with_mode_channels_from_the_lowest_level_stays_bounded() {
     let scale = &j["report"]["lfr_input_scale"];
     assert_eq!(scale["bounded"].as_f64(), Some(2.0), "{scale}");
     assert!(scale["diverges"].is_null(), "{scale}");
+    // Far above them it is not: the loop with every channel at slope 1 (where the soft
+    // cubic tends) is unstable, and the fit says so.
+    let r = j["report"]["lfr_large_signal_radius"].as_f64().unwrap();
+    assert!(r > 1.0, "{r}");
+    let e = String::from_utf8_lossy(&fit_modes.stderr);
+    assert!(
+        e.contains("large-signal loop A + E F has spectral radius"),
+        "{e}"
+    );
+    let big = dir.join("big.csv");
+    let mut v = Record::read(&valid).unwrap();
+    v.u[0].iter_mut().for_each(|x| *x *= 200.0);
+    v.write(&big).unwrap();
+    let o = piezo(&[
+        "predict",
+        "--model",
+        &d(&dir.join("modes").join("fit.json")),
+        "--input",
+        &d(&big),
+        "--out",
+        &d(&dir.join("big_y.csv")),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("diverged"), "{e}");
+    // Two channels per output at input gains 1/sqrt(2) and sqrt(2): two rows of F, and
+    // also better than the linear model.
+    ok(&run(
+        &["--lfr-channels", "outputs:2", "--lfr-iterations", "10"],
+        "two",
+    ));
+    let j2: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("two/fit.json")).unwrap()).unwrap();
+    assert_eq!(j2["lfr"]["f"].as_array().unwrap().len(), 2);
+    let two = score("two", &valid);
+    assert!(two < 0.5 * lin, "lfr outputs:2 {two} vs linear {lin}");
     for (extra, want) in [
         (
             &["--lfr-linear", "highest"][..],
@@ -293,7 +329,11 @@ fn lfr_with_mode_channels_from_the_lowest_level_stays_bounded() {
         ),
         (
             &["--lfr-channels", "states"][..],
-            "LFR channels `states`: expected outputs or modes",
+            "LFR channels `states`: expected outputs, outputs:K (K = 1..=8) or modes",
+        ),
+        (
+            &["--lfr-channels", "outputs:9"][..],
+            "LFR channels `outputs:9`: expected",
         ),
         (&["--lfr-basis", "quintic"][..], "LFR basis `quintic`"),
     ] {

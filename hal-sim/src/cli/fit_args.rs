@@ -209,8 +209,10 @@ pub struct Args {
     /// feedback vanishes to; the feedback is then fitted on all). Default: lowest.
     #[arg(long)]
     pub lfr_linear: Option<String>,
-    /// `lfr`: the nonlinearity's channels: `outputs` (one per output, `E`, `F` full) or
-    /// `modes` (one per lightly damped mode, each reading and feeding only its own mode).
+    /// `lfr`: the nonlinearity's channels: `outputs` (one per output, `E`, `F` full),
+    /// `outputs:K` (K per output at input gains spread by factors of 2, like the neurons of
+    /// one hidden layer) or `modes` (one per lightly damped mode, each reading and feeding
+    /// only its own mode).
     #[arg(long, default_value = "outputs")]
     pub lfr_channels: String,
     /// `lfr`: Levenberg-Marquardt iterations on the simulation error (it stops earlier when

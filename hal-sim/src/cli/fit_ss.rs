@@ -124,6 +124,7 @@ pub fn run(args: &Args) -> Result<()> {
             .as_ref()
             .map(|_| lowest.as_ref().map_or(recs.len(), Vec::len)),
         "lfr_input_scale": lfr_scale,
+        "lfr_large_signal_radius": lfr_fit.as_ref().and_then(|f| f.model.large_signal_radius()),
         "seconds": seconds,
     });
     let saved = SsJson::new(
@@ -196,6 +197,20 @@ pub fn run(args: &Args) -> Result<()> {
                 }
             }
             (None, None) => {}
+        }
+    }
+    if let Some(f) = &lfr_fit {
+        match f.model.large_signal_radius() {
+            Some(r) if r < 1.0 => println!(
+                "  lfr: large-signal loop A + E F (every channel at slope 1) has spectral radius {r:.4} < 1: stable far above the training amplitudes (necessary for bounded responses; amplitudes in between are checked only up to the scale above)"
+            ),
+            Some(r) => eprintln!(
+                "warning: the LFR's large-signal loop A + E F has spectral radius {r:.4} >= 1: far outside its training amplitudes the model diverges (keep `sim --stage` and `predict` inputs near the training amplitudes)"
+            ),
+            None => println!(
+                "  lfr: basis of unbounded slope ({}): no large-signal bound",
+                f.model.basis.iter().map(|b| b.name()).collect::<Vec<_>>().join(", ")
+            ),
         }
     }
     for (f, p) in &fit.model.fronts.iter().enumerate().collect::<Vec<_>>() {

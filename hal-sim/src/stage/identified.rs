@@ -73,6 +73,14 @@ impl IdentifiedPlant {
             .to_model()
             .with_context(|| path.display().to_string())?;
         let lfr = saved.to_lfr().with_context(|| path.display().to_string())?;
+        if let Some(r) = lfr.as_ref().and_then(Lfr::large_signal_radius) {
+            if r >= 1.0 {
+                eprintln!(
+                    "warning: {}: the LFR's large-signal loop A + E F has spectral radius {r:.4} >= 1: the simulated stage diverges for drives far above the fit's training amplitudes",
+                    path.display()
+                );
+            }
+        }
         let (m, p) = (model.linear.inputs(), model.linear.outputs());
         anyhow::ensure!(
             axes <= m.min(p),

@@ -289,6 +289,35 @@ impl Lfr {
 }
 
 impl Lfr {
+    /// Spectral radius of the large-signal loop `A + sum_b E_b F`. Every basis of bounded
+    /// slope (`soft-cubic`, `play`) tends to `w = z` plus a bounded term far outside the
+    /// training amplitudes, so there the model is linear with this state matrix: above 1 it
+    /// diverges for large enough inputs, whatever [`Self::bounded_input_scale`] found at
+    /// 2x. `None` with a basis of unbounded slope (`cubic`, `abs-square`: their feedback
+    /// outgrows any linear loop).
+    pub fn large_signal_radius(&self) -> Option<f64> {
+        if self
+            .basis
+            .iter()
+            .any(|b| matches!(b, Basis::Cubic | Basis::AbsSquare))
+        {
+            return None;
+        }
+        let (n, nz) = (self.linear.order(), self.channels());
+        let mut a = self.linear.a();
+        for b in 0..self.basis.len() {
+            let e = self.e.columns(b * nz, nz);
+            a += e * &self.f;
+        }
+        debug_assert_eq!(a.shape(), (n, n));
+        Some(
+            a.complex_eigenvalues()
+                .iter()
+                .map(|l| l.norm())
+                .fold(0.0, f64::max),
+        )
+    }
+
     /// Memory of the hysteresis operators at rest (`channels * basis`).
     pub fn rest_memory(&self) -> Vec<f64> {
         vec![0.0; self.e.ncols()]
@@ -775,8 +804,10 @@ fn normal_record(
 /// What the nonlinearity's channels `z` are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Channels {
-    /// One per output: `z` starts as the outputs scaled to unit RMS; `E`, `F` full.
-    Outputs,
+    /// `k` per output: `z` starts as the outputs scaled to unit RMS times `2^(j - (k-1)/2)`,
+    /// `j = 0..k` (so one channel per output at unit RMS for `k = 1`; a few neurons of one
+    /// hidden layer at spread input gains for more); `E`, `F` full.
+    Outputs(usize),
     /// One per lightly damped mode (complex pair of the linear part): `z_c` reads only its
     /// mode's two states and `w_c` feeds only them, so each mode's stiffness and damping
     /// move with its own amplitude (how the mirror's resonances soften and damp with the
@@ -785,12 +816,30 @@ pub enum Channels {
 }
 
 impl Channels {
-    /// `outputs` or `modes`.
+    /// `outputs`, `outputs:K` (K = 1..=8 channels per output) or `modes`.
     pub fn parse(s: &str) -> anyhow::Result<Self> {
+        let bad = |o: &str| {
+            anyhow::anyhow!("LFR channels `{o}`: expected outputs, outputs:K (K = 1..=8) or modes")
+        };
         match s.trim() {
-            "outputs" => Ok(Self::Outputs),
+            "outputs" => Ok(Self::Outputs(1)),
             "modes" => Ok(Self::Modes),
-            o => anyhow::bail!("LFR channels `{o}`: expected outputs or modes"),
+            o => match o
+                .strip_prefix("outputs:")
+                .map(|k| k.trim().parse::<usize>())
+            {
+                Some(Ok(k)) if (1..=8).contains(&k) => Ok(Self::Outputs(k)),
+                _ => Err(bad(o)),
+            },
+        }
+    }
+
+    /// The name [`Channels::parse`] reads.
+    pub fn name(self) -> String {
+        match self {
+            Self::Outputs(1) => "outputs".into(),
+            Self::Outputs(k) => format!("outputs:{k}"),
+            Self::Modes => "modes".into(),
         }
     }
 }
@@ -813,7 +862,7 @@ impl Default for LfrOptions {
     fn default() -> Self {
         Self {
             basis: vec![Basis::SoftCubic],
-            channels: Channels::Outputs,
+            channels: Channels::Outputs(1),
             iterations: 60,
             stride: 2,
             ftol: 1e-6,
@@ -857,14 +906,24 @@ fn inverse_rms(linear: &Modal, recs: &[Scored]) -> anyhow::Result<Vec<f64>> {
         .collect())
 }
 
-/// The start: `linear` with `z` = its outputs scaled to unit RMS over `recs`, `E = 0`.
-pub fn start(linear: &Modal, basis: &[Basis], recs: &[Scored]) -> anyhow::Result<Lfr> {
-    let (n, p) = (linear.order(), linear.outputs());
-    let scale = inverse_rms(linear, recs)?;
+/// The start: `linear` with `z` = its outputs scaled to unit RMS over `recs` (`per_output`
+/// channels each, at gains `2^(j - (per_output - 1)/2)` of that), `E = 0`.
+pub fn start(
+    linear: &Modal,
+    basis: &[Basis],
+    recs: &[Scored],
+    per_output: usize,
+) -> anyhow::Result<Lfr> {
+    let (n, p, k) = (linear.order(), linear.outputs(), per_output.max(1));
+    let unit = inverse_rms(linear, recs)?;
+    // Channel c reads output c % p at gain index c / p.
+    let scale = |c: usize| unit[c % p] * 2f64.powf((c / p) as f64 - (k as f64 - 1.0) / 2.0);
     Ok(Lfr {
-        f: DMatrix::from_fn(p, n, |o, i| linear.c[(o, i)] * scale[o]),
-        g: DMatrix::from_fn(p, linear.inputs(), |o, j| linear.d[(o, j)] * scale[o]),
-        e: DMatrix::zeros(n, p * basis.len()),
+        f: DMatrix::from_fn(p * k, n, |c, i| linear.c[(c % p, i)] * scale(c)),
+        g: DMatrix::from_fn(p * k, linear.inputs(), |c, j| {
+            linear.d[(c % p, j)] * scale(c)
+        }),
+        e: DMatrix::zeros(n, p * k * basis.len()),
         basis: basis.to_vec(),
         linear: linear.clone(),
     })
@@ -935,7 +994,7 @@ pub fn identify(
         * linear.outputs();
     let rms = |c: f64| (c / samples.max(1) as f64).sqrt();
     let (mut mdl, modes) = match opts.channels {
-        Channels::Outputs => (start(linear, &opts.basis, &data)?, None),
+        Channels::Outputs(k) => (start(linear, &opts.basis, &data, k)?, None),
         Channels::Modes => {
             let (m, md) = start_modes(linear, &opts.basis, &data)?;
             (m, Some(md))
@@ -1095,7 +1154,80 @@ mod tests {
         mdl.basis = vec![Basis::Cubic, Basis::SoftCubic, Basis::AbsSquare];
         mdl.e =
             DMatrix::from_row_slice(3, 3, &[-0.05, 0.2, 0.01, 0.03, -0.1, 0.0, 0.0, 0.05, -0.02]);
+        sensitivities_match(mdl.clone(), None);
+        // Two channels on one output (`outputs:2`), each with its own E column.
+        mdl.basis = vec![Basis::SoftCubic];
+        mdl.f = DMatrix::from_row_slice(2, 3, &[1.0, 0.3, 0.0, 2.0, 0.0, -0.2]);
+        mdl.g = DMatrix::from_row_slice(2, 1, &[0.2, -0.1]);
+        mdl.e = DMatrix::from_row_slice(3, 2, &[-0.05, 0.02, 0.03, -0.01, 0.0, 0.01]);
         sensitivities_match(mdl, None);
+    }
+
+    #[test]
+    fn the_large_signal_radius_is_that_of_a_plus_e_f() {
+        let mut m = truth();
+        // The cubic outgrows any linear loop.
+        assert_eq!(m.large_signal_radius(), None);
+        m.basis = vec![Basis::SoftCubic];
+        let lin = m.linear.spectral_radius();
+        let pair = m.linear.blocks[0].radius();
+        // No feedback: the linear part's radius.
+        m.e.fill(0.0);
+        assert!((m.large_signal_radius().unwrap() - lin).abs() < 1e-12);
+        // Feedback that pushes the real pole (0.6) out of the unit circle: 0.6 + 0.5.
+        m.e = DMatrix::from_row_slice(3, 1, &[0.0, 0.0, 0.5]);
+        m.f = DMatrix::from_row_slice(1, 3, &[0.0, 0.0, 1.0]);
+        assert!((m.large_signal_radius().unwrap() - 1.1).abs() < 1e-9);
+        // Two bases on one channel add their columns (play and soft cubic both slope 1).
+        m.basis = vec![Basis::SoftCubic, Basis::Play(0.5)];
+        m.e = DMatrix::from_row_slice(3, 2, &[0.0, 0.0, 0.0, 0.0, 0.2, 0.1]);
+        assert!((m.large_signal_radius().unwrap() - pair.max(0.9)).abs() < 1e-9);
+        // And the simulation agrees: far outside, the 1.1 loop diverges, the 0.9 one does not.
+        let u = vec![multisine(256, 4, 1e4, 7)];
+        assert!(m.simulate(&u).is_ok());
+        m.e = DMatrix::from_row_slice(3, 2, &[0.0, 0.0, 0.0, 0.0, 0.3, 0.2]);
+        assert!(m.large_signal_radius().unwrap() > 1.0);
+        assert!(m.simulate(&u).is_err());
+    }
+
+    #[test]
+    fn channels_per_output_start_at_gains_spread_by_two() {
+        assert_eq!(Channels::parse("outputs").unwrap(), Channels::Outputs(1));
+        assert_eq!(Channels::parse("outputs:3").unwrap(), Channels::Outputs(3));
+        assert_eq!(Channels::parse(" modes ").unwrap(), Channels::Modes);
+        for bad in ["outputs:0", "outputs:9", "outputs:x", "output", ""] {
+            let e = Channels::parse(bad).unwrap_err().to_string();
+            assert!(e.contains("outputs:K"), "{bad}: {e}");
+        }
+        for c in [Channels::Outputs(1), Channels::Outputs(4), Channels::Modes] {
+            assert_eq!(Channels::parse(&c.name()).unwrap(), c);
+        }
+        let t = truth();
+        let rec = Scored::of(&record(&t, 1.0, 5)).unwrap();
+        let one = start(
+            &t.linear,
+            &[Basis::SoftCubic],
+            std::slice::from_ref(&rec),
+            1,
+        )
+        .unwrap();
+        let three = start(&t.linear, &[Basis::SoftCubic], &[rec], 3).unwrap();
+        assert_eq!((three.channels(), three.e.shape()), (3, (3, 3)));
+        assert!(three.e.iter().all(|&v| v == 0.0));
+        // Gains 1/2, 1, 2 of the unit-RMS channel.
+        for (c, gain) in [0.5, 1.0, 2.0].into_iter().enumerate() {
+            for i in 0..3 {
+                let want = gain * one.f[(0, i)];
+                assert!((three.f[(c, i)] - want).abs() <= 1e-12 * (1.0 + want.abs()));
+            }
+        }
+        // The feedback vanishes at the start: the linear model's output.
+        let u = vec![multisine(256, 1, 1.0, 2)];
+        let (yl, y3) = (t.linear.simulate(&u).unwrap(), three.simulate(&u).unwrap());
+        assert!(yl[0]
+            .iter()
+            .zip(&y3[0])
+            .all(|(a, b)| (a - b).abs() <= 1e-12));
     }
 
     fn sensitivities_match(mdl: Lfr, modes: Option<&[usize]>) {
