@@ -115,6 +115,8 @@ fn lfr_beats_the_linear_model_on_a_held_out_level_and_predict_runs_it() {
                     "all",
                     "--lfr-channels",
                     "outputs",
+                    "--lfr-iterations",
+                    "60",
                 ]
                 .map(String::from),
             );

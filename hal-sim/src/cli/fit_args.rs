@@ -213,11 +213,11 @@ pub struct Args {
     /// `outputs:K` (K per output at input gains spread by factors of 2, like the neurons of
     /// one hidden layer) or `modes` (one per lightly damped mode, each reading and feeding
     /// only its own mode).
-    #[arg(long, default_value = "outputs")]
+    #[arg(long, default_value = "outputs:2")]
     pub lfr_channels: String,
     /// `lfr`: Levenberg-Marquardt iterations on the simulation error (it stops earlier when
     /// a step no longer lowers the cost).
-    #[arg(long, default_value_t = 60)]
+    #[arg(long, default_value_t = 30)]
     pub lfr_iterations: usize,
     /// Columns and units of the records.
     #[command(flatten)]
