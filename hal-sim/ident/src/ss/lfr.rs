@@ -646,7 +646,8 @@ const TRI_BLOCK: usize = if cfg!(test) { 4 } else { 64 };
 /// np`): `dz = F S`, `dy = C S` and `S+ = A S + E (dN/dz dz)` are matrix products (BLAS-like
 /// kernels), then each parameter adds its own term. Per sample that is `O((nz + p + nw) n
 /// np)` either way; as products an iteration with `outputs:3` on three mirror records took
-/// 4.9 s instead of 8.9 s column by column, with the same iterates.
+/// 4.9 s instead of 8.9 s column by column, with the same training errors to the printed
+/// digits.
 fn normal_record(
     mdl: &Lfr,
     params: &[Param],
@@ -674,8 +675,8 @@ fn normal_record(
     let mut s = DMatrix::<f64>::zeros(n, np);
     let mut sn = DMatrix::<f64>::zeros(n, np);
     // [F; C] S: dz/dtheta (rows 0..nz) and dy/dtheta (rows nz..), one product (nalgebra
-    // hands products to matrixmultiply's kernels above five rows; C alone has p). dw/dtheta (nw x np): a holding play
-    // keeps its row from the last sample.
+    // hands products to matrixmultiply's kernels above five rows; C alone has p).
+    // dw/dtheta (nw x np): a holding play keeps its row from the last sample.
     let fc = DMatrix::<f64>::from_fn(nz + p, n, |r, l| {
         if r < nz {
             mdl.f[(r, l)]
