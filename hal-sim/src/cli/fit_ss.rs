@@ -108,6 +108,7 @@ pub fn run(args: &Args) -> Result<()> {
         let inputs: Vec<&[Vec<f64>]> = recs.iter().map(|r| r.u.as_slice()).collect();
         f.model.bounded_input_scale(&inputs, &lfr::INPUT_SCALES)
     });
+    let lfr_radius = lfr_fit.as_ref().and_then(|f| f.model.large_signal_radius());
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = serde_json::json!({
         "train": args.records.train.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
@@ -124,7 +125,7 @@ pub fn run(args: &Args) -> Result<()> {
             .as_ref()
             .map(|_| lowest.as_ref().map_or(recs.len(), Vec::len)),
         "lfr_input_scale": lfr_scale,
-        "lfr_large_signal_radius": lfr_fit.as_ref().and_then(|f| f.model.large_signal_radius()),
+        "lfr_large_signal_radius": lfr_radius,
         "seconds": seconds,
     });
     let saved = SsJson::new(
@@ -200,7 +201,7 @@ pub fn run(args: &Args) -> Result<()> {
         }
     }
     if let Some(f) = &lfr_fit {
-        match f.model.large_signal_radius() {
+        match lfr_radius {
             Some(r) if r < 1.0 => println!(
                 "  lfr: large-signal loop A + E F (every channel at slope 1) has spectral radius {r:.4} < 1: stable far above the training amplitudes (necessary for bounded responses; amplitudes in between are checked only up to the scale above)"
             ),
