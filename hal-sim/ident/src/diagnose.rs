@@ -34,6 +34,7 @@ pub mod criterion;
 mod dynamics;
 pub mod evidence;
 mod fitting;
+pub mod from_base;
 pub mod model;
 mod output;
 pub mod plots;

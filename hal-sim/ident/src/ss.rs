@@ -293,6 +293,34 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
     Ok(fit)
 }
 
+/// A hysteresis `def` ahead of each input of `linear`, refined jointly with it on the
+/// periodic records `recs` (`iterations` of the joint refinement): the Hammerstein fit of
+/// [`identify`] from a given linear part. Returns the model and its training RMS output error.
+pub fn hammerstein_around(
+    linear: &Modal,
+    recs: &[Record],
+    def: &'static ModelDef,
+    iterations: usize,
+) -> anyhow::Result<(Hammerstein, f64)> {
+    let (_, spectra) = frequency_data(recs, &SsOptions::default())?;
+    anyhow::ensure!(
+        !spectra.is_empty(),
+        "the Hammerstein fit needs periodic records (multisines of whole periods)"
+    );
+    let per: Vec<Periodic> = spectra
+        .iter()
+        .zip(recs)
+        .map(|(s, r)| Periodic::of(s, &r.u))
+        .collect();
+    let cfg = PemConfig {
+        iterations,
+        ..Default::default()
+    };
+    let fs = recs[0].sample_rate_hz();
+    let (h, c) = hammerstein::identify(def, &per, 1.0 / fs, linear, &cfg)?;
+    Ok((h, (c / (recs.len() * linear.outputs()) as f64).sqrt()))
+}
+
 /// Statistics of periodic records for the full output-error cost of a linear model.
 fn val_stats_periodic(sp: &[PeriodicSpectra]) -> Vec<LineStats> {
     let (n, m, p) = (sp[0].period, sp[0].u.len(), sp[0].y.len());

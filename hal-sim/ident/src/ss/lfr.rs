@@ -996,6 +996,24 @@ pub fn start_modes(
     ))
 }
 
+/// `linear` refined on the simulation error of `recs` by the LFR's own Levenberg-Marquardt
+/// (`iterations`), with a feedback that never acts: a play wider than any signal keeps
+/// `w = 0`, so `E` has no sensitivity and only the linear part moves. The control a
+/// nonlinearity in feedback must beat: what the same optimiser gains without it.
+pub fn refine_linear(
+    linear: &Modal,
+    recs: &[crate::record::Record],
+    iterations: usize,
+) -> anyhow::Result<LfrFit> {
+    let opts = LfrOptions {
+        basis: vec![Basis::Play(1e300)],
+        channels: Channels::Outputs(1),
+        iterations,
+        ..Default::default()
+    };
+    identify(linear, recs, &opts)
+}
+
 /// Identifies the LFR on `recs` (periodic records), started from the linear model.
 pub fn identify(
     linear: &Modal,
