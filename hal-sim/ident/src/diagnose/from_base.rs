@@ -9,7 +9,7 @@
 //! | cause | extension | tried while the model has no |
 //! |---|---|---|
 //! | `structure-nonlinearity` | a nonlinearity in feedback around the linear part ([`crate::ss::lfr`], its defaults: soft cubic, two channels per output, 30 iterations); the modes move with the amplitude | LFR or schedule |
-//! | `input-hysteresis` | a CBW hysteresis ahead of each input, refined jointly with the linear part ([`crate::ss::hammerstein_around`]) | hysteresis, LFR or schedule |
+//! | `input-hysteresis` | a CBW hysteresis ahead of each input, refined jointly with the linear part from three starts ([`crate::ss::hammerstein_around`]) | hysteresis, LFR or schedule |
 //! | `creep` | per input, first-order lags of 1/30, 1/3 and 1 period added to each output (least squares on the residual) | creep |
 //! | `drift` | per output, a rate (output unit / s; least squares on the residual) | drift |
 //! | `delay` | the inputs delayed by 1..=8 samples (the best on the training records) | delay |
@@ -17,11 +17,12 @@
 //! `cross-coupling` is not a candidate: a multivariable state space couples every input to
 //! every output already.
 //!
-//! The rule, forward selection: each round refines the linear part on the training records'
-//! simulation error without any cause ([`crate::ss::lfr::refine_linear`], the control),
-//! fits every remaining cause on the model so far and orders them by their relative gain on
-//! the validation records over the better of the model so far and the control (a cause must
-//! gain over what the optimiser gains without it). The first whose gain is
+//! The rule, forward selection: each round refines the model so far without a new cause (the
+//! controls: its linear part on the training records' simulation error,
+//! [`crate::ss::lfr::refine_linear`]; a named hysteresis' joint fit continued), fits every
+//! remaining cause on the model so far and orders them by their relative gain on the
+//! validation records over the best of the model so far and the controls (a cause must gain
+//! over what the optimisers gain without it). The first whose gain is
 //! at least [`MIN_GAIN`] is refitted on half the training records (every other one) and
 //! scored on the validation records again; if it gains [`MIN_GAIN`] there too it is named and
 //! the next round starts from the model with it; if not it is reported `uncertain` (its gain
@@ -51,6 +52,8 @@ use crate::ss::score::{self, noise_floor, period_of, scored_windows, with_warmup
 pub const MIN_GAIN: f64 = 0.05;
 /// The search stops when the validation score is below this multiple of the noise floor.
 pub const FLOOR_MARGIN: f64 = 1.1;
+/// Joint iterations of the input hysteresis (`piezo fit --model hammerstein-ss`'s default).
+const HYSTERESIS_ITERATIONS: usize = 30;
 /// Delays tried (samples).
 const MAX_DELAY: usize = 8;
 /// Creep lags as fractions of the period.
@@ -283,8 +286,13 @@ pub fn extend(model: &Model, cause: &str, recs: &[Record]) -> Result<Option<Mode
         },
         "input-hysteresis" => match &model.core {
             Core::Linear(m) if model.fronts.is_empty() => {
-                let (h, _) =
-                    crate::ss::hammerstein_around(m, &core_recs()?, models::find("cbw")?, 30)?;
+                let (h, _) = crate::ss::hammerstein_around(
+                    m,
+                    &core_recs()?,
+                    models::find("cbw")?,
+                    HYSTERESIS_ITERATIONS,
+                    None,
+                )?;
                 Some(Model {
                     fronts: h.fronts,
                     core: Core::Linear(h.linear),
@@ -394,13 +402,14 @@ pub struct Trial {
     pub seconds: f64,
 }
 
-/// A round's control: the linear part refined on the simulation error without a cause.
+/// A round's control: the model so far refined without a new cause.
 #[derive(Debug, Clone, Serialize)]
 pub struct Control {
     pub round: usize,
+    /// What was refined.
+    pub what: String,
     pub valid_before: f64,
     pub valid_after: f64,
-    pub seconds: f64,
 }
 
 /// The report of [`diagnose`].
@@ -417,7 +426,7 @@ pub struct BaseDiagnosis {
     /// two periods or more.
     pub noise_floor: Option<f64>,
     pub rounds: Vec<Vec<Trial>>,
-    /// Each round's control (the linear part refined without a cause), where it applies.
+    /// Each round's controls (the model so far refined without a new cause), where they apply.
     pub controls: Vec<Control>,
     /// Whether the final model is the last round's control (it beat the model so far).
     pub refined: bool,
@@ -547,8 +556,49 @@ pub fn diagnose(
         // far and the control (a cause that only finishes the linear fit is not a cause);
         // the control replaces the model only at the end, when no cause is named.
         let mut control: Option<(Model, f64)> = None;
+        // With a hysteresis named, its refinement is a second control: the joint fit
+        // continued from where it stopped.
+        if let (Core::Linear(m), false) = (&model.core, model.fronts.is_empty()) {
+            let ps: Vec<Vec<f64>> = model.fronts.iter().map(|f| f.params.clone()).collect();
+            let def = model.fronts[0].def;
+            let raw = Model {
+                fronts: Vec::new(),
+                ..model.clone()
+            };
+            let cont = raw
+                .core_records(train)
+                .and_then(|r| {
+                    crate::ss::hammerstein_around(m, &r, def, HYSTERESIS_ITERATIONS, Some(&ps))
+                })
+                .and_then(|(h, _)| {
+                    let c = Model {
+                        fronts: h.fronts,
+                        core: Core::Linear(h.linear),
+                        ..model.clone()
+                    };
+                    score_on(&c, valid).map(|s| (c, s))
+                });
+            match cont {
+                Ok((c, s)) => {
+                    say(format!(
+                        "  control (the hysteresis refined further): validation {cur_valid:.4e} -> {s:.4e}"
+                    ));
+                    out.controls.push(Control {
+                        round: out.rounds.len() + 1,
+                        what: "the hysteresis and the linear part refined further".into(),
+                        valid_before: cur_valid,
+                        valid_after: s,
+                    });
+                    if s.is_finite() && s < cur_valid {
+                        control = Some((c, s));
+                    }
+                }
+                Err(e) => say(format!(
+                    "  control (the hysteresis refined further) failed: {e:#}"
+                )),
+            }
+        }
         if let Core::Linear(m) = &model.core {
-            let t0 = std::time::Instant::now();
             say(format!(
                 "round {}: refining the linear part on the training records (the control)",
                 out.rounds.len() + 1
@@ -568,11 +618,12 @@ pub fn diagnose(
                     say(format!("  control: validation {cur_valid:.4e} -> {s:.4e}"));
                     out.controls.push(Control {
                         round: out.rounds.len() + 1,
+                        what: "the linear part refined on the simulation error".into(),
                         valid_before: cur_valid,
                         valid_after: s,
-                        seconds: t0.elapsed().as_secs_f64(),
                     });
-                    if s.is_finite() && s < cur_valid {
+                    let best = control.as_ref().map_or(cur_valid, |c| c.1);
+                    if s.is_finite() && s < best {
                         control = Some((c, s));
                     }
                 }
@@ -753,8 +804,8 @@ impl BaseDiagnosis {
             s += &format!("round {}:\n", i + 1);
             for c in self.controls.iter().filter(|c| c.round == i + 1) {
                 s += &format!(
-                    "  {:<24} {:.4} -> {:.4} {unit} (the linear part refined on the simulation error, no cause; the causes' reference)\n",
-                    "control", c.valid_before, c.valid_after
+                    "  {:<24} {:.4} -> {:.4} {unit} ({}, no new cause)\n",
+                    "control", c.valid_before, c.valid_after, c.what
                 );
             }
             for t in r {

@@ -65,7 +65,6 @@ struct Coords {
     log: Vec<bool>,
     lo: Vec<f64>,
     hi: Vec<f64>,
-    start: Vec<f64>,
 }
 
 impl Coords {
@@ -84,8 +83,7 @@ impl Coords {
         let edge = |s: &models::ParamSpec| 1e-3 * (to(s, s.hi) - to(s, s.lo));
         let lo: Vec<f64> = specs.iter().map(|s| to(s, s.lo) + edge(s)).collect();
         let hi: Vec<f64> = specs.iter().map(|s| to(s, s.hi) - edge(s)).collect();
-        let start = lo.iter().zip(&hi).map(|(a, b)| 0.5 * (a + b)).collect();
-        Self { log, lo, hi, start }
+        Self { log, lo, hi }
     }
     fn params(&self, z: &[f64]) -> Vec<f64> {
         z.iter()
@@ -142,6 +140,30 @@ pub fn identify(
     linear: &Modal,
     cfg: &PemConfig,
 ) -> anyhow::Result<(Hammerstein, f64)> {
+    identify_from(def, recs, dt, linear, cfg, Start::Box(0.5))
+}
+
+/// Where the joint refinement starts the hysteresis.
+#[derive(Debug, Clone, Copy)]
+pub enum Start<'a> {
+    /// At this fraction (0..1) of each parameter's search box (in its search coordinate:
+    /// log10 for log-scaled parameters), `linear` rescaled per input by the front's
+    /// least-squares gain; [`identify`] starts at the middle.
+    Box(f64),
+    /// At these parameters per input (clamped into the box), `linear` as given: the
+    /// continuation of an earlier fit.
+    Params(&'a [Vec<f64>]),
+}
+
+/// [`identify`] from a given start.
+pub fn identify_from(
+    def: &'static ModelDef,
+    recs: &[Periodic],
+    dt: f64,
+    linear: &Modal,
+    cfg: &PemConfig,
+    from: Start,
+) -> anyhow::Result<(Hammerstein, f64)> {
     anyhow::ensure!(
         !def.dynamic,
         "`{}` has its own dynamics; the Hammerstein front end needs a rate-independent hysteresis model",
@@ -163,10 +185,35 @@ pub fn identify(
             Some(o)
         })
         .collect();
-    let theta0: Vec<f64> = coords
-        .iter()
-        .flat_map(|c| c.start.iter().copied())
-        .collect();
+    let theta0: Vec<f64> = match from {
+        Start::Box(at) => {
+            let at = at.clamp(0.0, 1.0);
+            coords
+                .iter()
+                .flat_map(|c| c.lo.iter().zip(&c.hi).map(move |(a, b)| a + at * (b - a)))
+                .collect()
+        }
+        Start::Params(ps) => {
+            anyhow::ensure!(
+                ps.len() == m && ps.iter().zip(&coords).all(|(p, c)| p.len() == c.lo.len()),
+                "the start has {} hysteresis parameter sets for {m} inputs",
+                ps.len()
+            );
+            ps.iter()
+                .zip(&coords)
+                .flat_map(|(p, c)| {
+                    p.iter().enumerate().map(move |(i, v)| {
+                        let z = if c.log[i] {
+                            v.max(f64::MIN_POSITIVE).log10()
+                        } else {
+                            *v
+                        };
+                        z.clamp(c.lo[i], c.hi[i])
+                    })
+                })
+                .collect()
+        }
+    };
     let lo: Vec<f64> = coords.iter().flat_map(|c| c.lo.iter().copied()).collect();
     let hi: Vec<f64> = coords.iter().flat_map(|c| c.hi.iter().copied()).collect();
     let nt = theta0.len();
@@ -271,10 +318,11 @@ pub fn identify(
             .collect();
         Ok(out)
     };
-    // Start: the linear block rescaled per input by the front's least-squares gain.
+    // Start: the linear block rescaled per input by the front's least-squares gain (a
+    // continuation keeps it as given).
     let mut start = linear.clone();
     let ps0 = fronts_at(&theta0);
-    for j in 0..m {
+    for j in 0..if matches!(from, Start::Box(_)) { m } else { 0 } {
         let mut v = vec![0.0; all_u[j].len()];
         (def.simulate)(&ps0[j], &all_u[j], dt, &mut v)
             .map_err(|e| anyhow::anyhow!("hysteresis `{}`: {e}", def.name))?;
