@@ -239,7 +239,10 @@ fn a_base_that_is_not_a_state_space_model_is_refused_by_name() {
     ]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("fit.json"), "{err}");
+    assert!(
+        err.contains("model `cbw`: --base takes a state-space fit.json"),
+        "{err}"
+    );
     let o = piezo(&[
         "diagnose",
         "--base",

@@ -328,16 +328,21 @@ pub fn hammerstein_around(
         None => [0.5, 0.25, 0.75].map(hammerstein::Start::Box).to_vec(),
     };
     let mut best: Option<(Hammerstein, f64)> = None;
+    let mut last_err = None;
     for from in starts {
-        let Ok((h, c)) = hammerstein::identify_from(def, &per, 1.0 / fs, linear, &cfg, from) else {
-            continue;
-        };
-        if c.is_finite() && best.as_ref().is_none_or(|b| c < b.1) {
-            best = Some((h, c));
+        match hammerstein::identify_from(def, &per, 1.0 / fs, linear, &cfg, from) {
+            Ok((h, c)) if c.is_finite() && best.as_ref().is_none_or(|b| c < b.1) => {
+                best = Some((h, c))
+            }
+            Ok(_) => {}
+            Err(e) => last_err = Some(e),
         }
     }
-    let (h, c) =
-        best.ok_or_else(|| anyhow::anyhow!("the Hammerstein fit failed from every start"))?;
+    let (h, c) = match (best, last_err) {
+        (Some(b), _) => b,
+        (None, Some(e)) => return Err(e.context("the Hammerstein fit failed from every start")),
+        (None, None) => anyhow::bail!("the Hammerstein fit gave no finite cost from any start"),
+    };
     Ok((h, (c / (recs.len() * linear.outputs()) as f64).sqrt()))
 }
 

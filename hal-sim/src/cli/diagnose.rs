@@ -303,12 +303,20 @@ fn run_from_base(args: &Args, base: &Path) -> Result<()> {
         rs.split.is_none() && rs.train_window.is_none() && rs.valid_window.is_none(),
         "--base scores whole periodic records: --split and the windows do not apply"
     );
-    let saved = match Loaded::read(base)? {
-        Loaded::Ss(s) => s,
-        _ => anyhow::bail!(
-            "{}: --base takes a state-space fit.json (piezo fit --model ss | hammerstein-ss | scheduled-ss | lfr); the per-axis hysteresis fits are diagnose's own base already",
-            base.display()
-        ),
+    // The kind first: a per-axis fit is refused by name, not by what it lacks.
+    let text =
+        std::fs::read_to_string(base).with_context(|| format!("cannot read {}", base.display()))?;
+    let kind = serde_json::from_str::<serde_json::Value>(&text)
+        .ok()
+        .and_then(|v| v.get("model").and_then(|m| m.as_str()).map(String::from))
+        .unwrap_or_default();
+    anyhow::ensure!(
+        crate::ident::saved::handles(&kind),
+        "{}: model `{kind}`: --base takes a state-space fit.json (piezo fit --model ss | hammerstein-ss | scheduled-ss | lfr); the per-axis hysteresis fits are diagnose's own base already (leave --base out)",
+        base.display()
+    );
+    let Loaded::Ss(saved) = Loaded::parse(&text, &base.display().to_string())? else {
+        anyhow::bail!("{}: not a state-space fit.json", base.display());
     };
     let read = |p: &PathBuf| args.columns.read(p, true);
     let train = rs.train.iter().map(read).collect::<Result<Vec<_>>>()?;
