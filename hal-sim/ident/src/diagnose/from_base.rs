@@ -839,6 +839,9 @@ impl BaseDiagnosis {
                 self.named.join(", ")
             }
         );
+        if !self.confirmed {
+            s += "(one training record: the names were not confirmed on half of the training records)\n";
+        }
         if !self.uncertain.is_empty() {
             s += &format!(
                 "uncertain (gained when fitted on all training records, not on half of them): {}\n",
@@ -932,6 +935,22 @@ mod tests {
         let (d, _) = diagnose(base(), "ss", &train, &valid, false).unwrap();
         assert_eq!(d.named, vec!["delay".to_string()], "{}", d.text("um"));
         assert!(d.final_valid < 1e-6 * d.base_valid, "{}", d.text("um"));
+    }
+
+    #[test]
+    fn one_training_record_names_unconfirmed_and_says_so() {
+        let p = plant();
+        let mut r = record(&p, 1.0, 1, |_, _| 0.0);
+        let d = Model { delay: 2, ..base() };
+        let y = d.simulate(&with_warmup(&r.u, 512), r.dt()).unwrap();
+        r.y = vec![y[0][512..].to_vec()];
+        let mut v = record(&p, 1.0, 3, |_, _| 0.0);
+        let y = d.simulate(&with_warmup(&v.u, 512), v.dt()).unwrap();
+        v.y = vec![y[0][512..].to_vec()];
+        let (d, _) = diagnose(base(), "ss", &[r], &[v], false).unwrap();
+        assert_eq!(d.named, vec!["delay".to_string()], "{}", d.text("um"));
+        assert!(!d.confirmed);
+        assert!(d.text("um").contains("not confirmed"), "{}", d.text("um"));
     }
 
     #[test]
