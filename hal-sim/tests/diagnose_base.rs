@@ -154,6 +154,32 @@ fn named(cause: Cause, seed: u64, dir: &Path) -> (Vec<String>, String) {
         (from_file / reported - 1.0).abs() < 1e-9,
         "--predict gives {from_file}, the report {reported}"
     );
+    // The extended model written beside the report scores the same with `piezo score`
+    // (its own simulation of the saved extensions).
+    let mut score = vec![
+        "score".to_string(),
+        "--model".into(),
+        s(&report.join("fit.json")),
+        "--json".into(),
+    ];
+    for p in &files[1] {
+        score.extend(["--record".into(), s(p)]);
+    }
+    let sj: serde_json::Value = serde_json::from_str(&ok(&piezo(
+        &score.iter().map(String::as_str).collect::<Vec<_>>(),
+    )))
+    .unwrap();
+    let per: Vec<f64> = sj["records"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["official"]["mean"].as_f64().unwrap())
+        .collect();
+    let saved = per.iter().sum::<f64>() / per.len() as f64;
+    assert!(
+        (saved / reported - 1.0).abs() < 1e-9,
+        "the saved extended model scores {saved}, the report {reported}"
+    );
     for (i, r) in j["rounds"].as_array().unwrap().iter().enumerate() {
         for t in r.as_array().unwrap() {
             eprintln!(

@@ -3,6 +3,7 @@
 //! subspace ([`subspace`]), output-error refinement ([`pem`]) of a modal state-space
 //! model ([`model`]), hysteresis fronts per actuator ([`hammerstein`]).
 
+pub mod extended;
 pub mod frf;
 pub mod hammerstein;
 pub mod lfr;

@@ -49,6 +49,7 @@ pub struct Args {
     /// apply to it (structure-nonlinearity, input-hysteresis, creep, drift, delay) are fitted
     /// on --train and scored on --valid by the benchmark's official rule, any number of
     /// inputs and outputs; the records must be periodic (whole periods of a multisine).
+    /// With --out, the final model is written as DIR/fit.json (predict, score, sim --stage).
     #[arg(long, value_name = "DIR/fit.json")]
     pub base: Option<PathBuf>,
     /// Columns and units of the records.
@@ -350,8 +351,26 @@ fn run_from_base(args: &Args, base: &Path) -> Result<()> {
             serde_json::to_string_pretty(&j)?,
         )
         .with_context(|| format!("cannot write {}", dir.join("diagnosis.json").display()))?;
+        // The final model, for predict, score, sim --stage and another --base.
+        let report = serde_json::json!({
+            "extended_by": "piezo diagnose --base",
+            "base_file": base.display().to_string(),
+            "train": j["train"],
+            "valid": j["valid"],
+            "named": d.named,
+            "refined": d.refined,
+            "official_rmse_valid_base": d.base_valid,
+            "official_rmse_valid": d.final_valid,
+        });
+        let fit = dir.join("fit.json");
+        std::fs::write(
+            &fit,
+            serde_json::to_string_pretty(&last.to_saved(&saved, report))?,
+        )
+        .with_context(|| format!("cannot write {}", fit.display()))?;
         if !args.json {
             println!("report: {}", index.display());
+            println!("extended model: {}", fit.display());
         }
     }
     if args.json {

@@ -12,14 +12,17 @@
 //! drives input `i` and reads output `i`; the model's other inputs rest at the middle of
 //! their range. The model runs at its own sample rate with
 //! its input held between samples (zero-order hold) and its output held between its
+//! samples. The extensions `piezo diagnose --base` writes (an input delay, creep lags, a
+//! drift) run as [`crate::ident::ss::extended::Model::simulate`] runs them, at the model's
 //! samples.
 
 use crate::ident::ss::lfr::Lfr;
 use crate::ident::ss::model::Modal;
-use crate::ident::ss::saved::SsJson;
+use crate::ident::ss::saved::{Extensions, SsJson};
 use anyhow::{Context, Result};
 use piezo_core::hysteresis::{BwState, Cbw, Hysteresis};
 use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
 use std::path::PathBuf;
 
 /// `[stage.identified]` of a scenario.
@@ -60,6 +63,15 @@ pub struct IdentifiedPlant {
     u_mid: Vec<f64>,
     um_per_unit: Vec<f64>,
     centre_um: f64,
+    /// Delay, creep and drift of an extended model (empty: none).
+    ext: Extensions,
+    /// Per input, its last `delay_samples` values (oldest first).
+    delay_lines: Vec<VecDeque<f64>>,
+    /// Creep lag states, input-major, and their per-sample factors `1 - exp(-ts/tau)`.
+    creep_state: Vec<f64>,
+    creep_a: Vec<f64>,
+    /// Model time since the start (s), for the drift.
+    t_model: f64,
 }
 
 impl IdentifiedPlant {
@@ -82,6 +94,9 @@ impl IdentifiedPlant {
             }
         }
         let (m, p) = (model.linear.inputs(), model.linear.outputs());
+        let ext = saved.extensions.clone();
+        ext.check(m, p)
+            .with_context(|| path.display().to_string())?;
         anyhow::ensure!(
             axes <= m.min(p),
             "stage.identified: {axes} axes, but the model has {m} inputs and {p} outputs"
@@ -169,6 +184,16 @@ impl IdentifiedPlant {
             modal: model.linear,
             lfr_mem: lfr.as_ref().map_or(Vec::new(), Lfr::rest_memory),
             lfr,
+            delay_lines: vec![VecDeque::new(); m],
+            creep_state: Vec::new(),
+            creep_a: ext.creep.as_ref().map_or(Vec::new(), |c| {
+                c.tau_s
+                    .iter()
+                    .map(|tau| -(-1.0 / (saved.sample_rate_hz * tau)).exp_m1())
+                    .collect()
+            }),
+            ext,
+            t_model: 0.0,
         };
         let v0 = vec![cfg.volts_min; axes];
         plant.settle(&v0);
@@ -184,9 +209,25 @@ impl IdentifiedPlant {
         }
     }
 
-    /// The linear block's input now (after the fronts).
-    fn front_out(&mut self, dt: f64) -> Vec<f64> {
-        let mut v = self.u.clone();
+    /// The model's input now: the inputs delayed by the extension's delay.
+    fn delayed(&mut self) -> Vec<f64> {
+        let d = self.ext.delay_samples;
+        if d == 0 {
+            return self.u.clone();
+        }
+        self.u
+            .iter()
+            .zip(self.delay_lines.iter_mut())
+            .map(|(&u, line)| {
+                line.push_back(u);
+                line.pop_front().unwrap_or(u)
+            })
+            .collect()
+    }
+
+    /// The linear block's input for the model input `ud` (after the fronts).
+    fn front_out(&mut self, ud: &[f64], dt: f64) -> Vec<f64> {
+        let mut v = ud.to_vec();
         for (vi, f) in v.iter_mut().zip(self.fronts.iter_mut()) {
             if let Some((m, s)) = f {
                 *vi = m.step(s, *vi, dt);
@@ -203,7 +244,20 @@ impl IdentifiedPlant {
                 *s = m.init(u);
             }
         }
-        let v = self.front_out(self.ts);
+        // The extensions at rest: the delay lines and the creep lags hold the inputs.
+        let d = self.ext.delay_samples;
+        for (line, &u) in self.delay_lines.iter_mut().zip(&self.u) {
+            *line = std::iter::repeat_n(u, d).collect();
+        }
+        let lags = self.creep_a.len();
+        self.creep_state = self
+            .u
+            .iter()
+            .flat_map(|&u| std::iter::repeat_n(u, lags))
+            .collect();
+        self.t_model = 0.0;
+        let ud = self.u.clone();
+        let v = self.front_out(&ud, self.ts);
         let a = self.modal.a();
         let n = a.nrows();
         let ia = nalgebra::DMatrix::<f64>::identity(n, n) - a;
@@ -252,6 +306,33 @@ impl IdentifiedPlant {
             }
             *y = s;
         }
+        if let Some(c) = &self.ext.creep {
+            for (y, co) in self.y.iter_mut().zip(&c.c) {
+                *y += co
+                    .iter()
+                    .zip(&self.creep_state)
+                    .map(|(c, s)| c * s)
+                    .sum::<f64>();
+            }
+        }
+        if let Some(rates) = &self.ext.drift_per_s {
+            for (y, r) in self.y.iter_mut().zip(rates) {
+                *y += r * self.t_model;
+            }
+        }
+    }
+
+    /// The creep lags and the drift's clock after a model sample with input `ud`.
+    fn advance_extensions(&mut self, ud: &[f64]) {
+        let lags = self.creep_a.len();
+        if lags > 0 {
+            for (states, &u) in self.creep_state.chunks_mut(lags).zip(ud) {
+                for (s, a) in states.iter_mut().zip(&self.creep_a) {
+                    *s += a * (u - *s);
+                }
+            }
+        }
+        self.t_model += self.ts;
     }
 
     /// Advances `h` seconds with the amplifier outputs `volts` (one per axis).
@@ -260,8 +341,10 @@ impl IdentifiedPlant {
         self.since += h;
         while self.since >= self.ts {
             self.since -= self.ts;
-            let v = self.front_out(self.ts);
+            let ud = self.delayed();
+            let v = self.front_out(&ud, self.ts);
             self.output(&v);
+            self.advance_extensions(&ud);
             let mut i = 0;
             for blk in &self.modal.blocks {
                 match *blk {
@@ -322,5 +405,76 @@ impl super::Stage {
             }
         }
         self.identified = Some(plant);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ident::ss::extended::{Creep, Model};
+    use crate::ident::ss::hammerstein::Hammerstein;
+    use crate::ident::ss::model::Block;
+    use nalgebra::DMatrix;
+
+    /// The simulator's stage runs an extended model's delay, creep and drift as the
+    /// model's own simulation does, sample for sample (inputs mapped one to one).
+    #[test]
+    fn the_stage_runs_the_extensions_as_the_model_simulates_them() {
+        let linear = Modal {
+            blocks: vec![Block::Real(0.9), Block::Pair(0.95, 0.2)],
+            b: DMatrix::from_row_slice(3, 1, &[1.0, 0.5, 0.0]),
+            c: DMatrix::from_row_slice(1, 3, &[0.4, 0.1, 0.2]),
+            d: DMatrix::from_row_slice(1, 1, &[0.0]),
+        };
+        let fs = 1000.0;
+        let mut base = SsJson::new(
+            &Hammerstein {
+                fronts: Vec::new(),
+                linear,
+            },
+            fs,
+            ("V", "um"),
+            serde_json::Value::Null,
+        );
+        base.input_range = vec![(0.0, 10.0)];
+        base.output_range = vec![(-5.0, 5.0)];
+        let model = Model {
+            delay: 3,
+            creep: Some(Creep {
+                tau_s: vec![0.01, 0.1],
+                c: vec![vec![0.05, 0.02]],
+            }),
+            drift: Some(vec![0.5]),
+            ..Model::of_saved(&base).unwrap()
+        };
+        let path = std::env::temp_dir().join(format!("piezo-ext-{}.json", std::process::id()));
+        std::fs::write(
+            &path,
+            serde_json::to_string(&model.to_saved(&base, serde_json::Value::Null)).unwrap(),
+        )
+        .unwrap();
+        let cfg = IdentifiedCfg {
+            fit_json: path.clone(),
+            volts_min: 0.0,
+            volts_max: 10.0,
+            centre_um: 0.0,
+            half_span_um: 1.0,
+        };
+        let mut plant = IdentifiedPlant::load(&cfg, 1).unwrap();
+        std::fs::remove_file(&path).ok();
+        let u: Vec<f64> = (0..300)
+            .map(|k| 5.0 + 4.0 * (k as f64 * 0.07).sin())
+            .collect();
+        let want = model.simulate(std::slice::from_ref(&u), 1.0 / fs).unwrap();
+        for (k, &v) in u.iter().enumerate() {
+            // Rest at 0 V is the model's rest: the first sample is the model's first.
+            plant.advance(&[v], 1.0 / fs);
+            assert!(
+                (plant.y[0] - want[0][k]).abs() < 1e-9,
+                "sample {k}: stage {} model {}",
+                plant.y[0],
+                want[0][k]
+            );
+        }
     }
 }

@@ -39,11 +39,9 @@ use serde::Serialize;
 
 use crate::fit::models;
 use crate::record::Record;
-use crate::ss::hammerstein::Front;
-use crate::ss::lfr::{self, Lfr, LfrOptions};
-use crate::ss::model::Modal;
-use crate::ss::saved::SsJson;
-use crate::ss::scheduled::Schedule;
+use crate::ss::extended::creep_regressors;
+pub use crate::ss::extended::{Core, Creep, Model};
+use crate::ss::lfr::{self, LfrOptions};
 use crate::ss::score::{self, noise_floor, period_of, scored_windows, with_warmup};
 
 /// Smallest relative gain (on the validation records, and on the training records with the
@@ -67,158 +65,6 @@ pub const CANDIDATES: [&str; 5] = [
     "drift",
     "delay",
 ];
-
-/// The linear part of the model: as identified, scheduled, or inside an LFR.
-#[derive(Debug, Clone)]
-pub enum Core {
-    Linear(Modal),
-    Scheduled(Schedule, Modal),
-    Lfr(Lfr),
-}
-
-/// Additive creep: `y_o += sum_{j,l} c[o][j L + l] lag_l(u_j)`.
-#[derive(Debug, Clone)]
-pub struct Creep {
-    /// Lag time constants (s).
-    pub tau_s: Vec<f64>,
-    /// `c[o]`, `inputs * tau_s.len()` coefficients per output.
-    pub c: Vec<Vec<f64>>,
-}
-
-/// The base and the extensions named so far.
-#[derive(Debug, Clone)]
-pub struct Model {
-    /// Input delay (samples).
-    pub delay: usize,
-    /// Hysteresis ahead of each input (empty: none).
-    pub fronts: Vec<Front>,
-    pub core: Core,
-    pub creep: Option<Creep>,
-    /// Drift rate per output (output unit / s), from the first simulated sample.
-    pub drift: Option<Vec<f64>>,
-}
-
-impl Model {
-    /// The base: a `fit.json` of the state-space family.
-    pub fn of_saved(s: &SsJson) -> Result<Self> {
-        let h = s.to_model()?;
-        let core = match (s.to_lfr()?, &s.schedule) {
-            (Some(l), _) => Core::Lfr(l),
-            (None, Some(sch)) => Core::Scheduled(sch.clone(), h.linear.clone()),
-            (None, None) => Core::Linear(h.linear.clone()),
-        };
-        Ok(Self {
-            delay: 0,
-            fronts: h.fronts,
-            core,
-            creep: None,
-            drift: None,
-        })
-    }
-
-    fn inputs(&self) -> usize {
-        self.linear().inputs()
-    }
-
-    fn linear(&self) -> &Modal {
-        match &self.core {
-            Core::Linear(m) | Core::Scheduled(_, m) => m,
-            Core::Lfr(l) => &l.linear,
-        }
-    }
-
-    /// What the core sees: the inputs delayed, then through the hysteresis.
-    fn core_input(&self, u: &[Vec<f64>], dt: f64) -> Result<Vec<Vec<f64>>> {
-        let delayed: Vec<Vec<f64>> = u.iter().map(|x| delay(x, self.delay)).collect();
-        if self.fronts.is_empty() {
-            return Ok(delayed);
-        }
-        self.fronts
-            .iter()
-            .zip(&delayed)
-            .map(|(f, x)| f.apply(x, dt))
-            .collect()
-    }
-
-    /// Simulates from rest; `u[j][k]` is input `j` at sample `k`, every `dt` s.
-    pub fn simulate(&self, u: &[Vec<f64>], dt: f64) -> Result<Vec<Vec<f64>>> {
-        anyhow::ensure!(
-            u.len() == self.inputs(),
-            "the model has {} inputs, the record {}",
-            self.inputs(),
-            u.len()
-        );
-        let v = self.core_input(u, dt)?;
-        let mut y = match &self.core {
-            Core::Linear(m) => m.simulate(&v)?,
-            Core::Scheduled(s, m) => s.simulate(m, &v, dt)?,
-            Core::Lfr(l) => l.simulate(&v)?,
-        };
-        if let Some(c) = &self.creep {
-            let regs = creep_regressors(u, self.delay, &c.tau_s, dt);
-            for (yo, co) in y.iter_mut().zip(&c.c) {
-                for (r, ci) in regs.iter().zip(co) {
-                    for (a, b) in yo.iter_mut().zip(r) {
-                        *a += ci * b;
-                    }
-                }
-            }
-        }
-        if let Some(rates) = &self.drift {
-            for (yo, rate) in y.iter_mut().zip(rates) {
-                for (k, a) in yo.iter_mut().enumerate() {
-                    *a += rate * k as f64 * dt;
-                }
-            }
-        }
-        Ok(y)
-    }
-
-    fn core_records(&self, recs: &[Record]) -> Result<Vec<Record>> {
-        recs.iter().map(|r| self.core_record(r)).collect()
-    }
-
-    /// The model's record `rec` with the core's input in place of `u` (steady state: the
-    /// record's first period ran through first).
-    fn core_record(&self, rec: &Record) -> Result<Record> {
-        let n = period_of(rec)?;
-        let v = self.core_input(&with_warmup(&rec.u, n), rec.dt())?;
-        Ok(Record {
-            u: v.into_iter().map(|x| x[n..].to_vec()).collect(),
-            ..rec.clone()
-        })
-    }
-}
-
-/// `x` delayed by `d` samples (zeros first).
-fn delay(x: &[f64], d: usize) -> Vec<f64> {
-    let d = d.min(x.len());
-    std::iter::repeat_n(0.0, d)
-        .chain(x[..x.len() - d].iter().copied())
-        .collect()
-}
-
-/// `lag_l(u_j)` for every input `j` (delayed by `d`) and lag `l`, `j`-major.
-fn creep_regressors(u: &[Vec<f64>], d: usize, tau_s: &[f64], dt: f64) -> Vec<Vec<f64>> {
-    let mut out = Vec::new();
-    for x in u {
-        let x = delay(x, d);
-        for &tau in tau_s {
-            let a = 1.0 - (-dt / tau).exp();
-            let mut s = 0.0;
-            out.push(
-                x.iter()
-                    .map(|v| {
-                        let now = s;
-                        s += a * (v - s);
-                        now
-                    })
-                    .collect(),
-            );
-        }
-    }
-    out
-}
 
 /// Official score of `model` on `recs` (mean over records).
 pub fn score_on(model: &Model, recs: &[Record]) -> Result<f64> {
@@ -866,8 +712,8 @@ impl BaseDiagnosis {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ss::lfr::Basis;
-    use crate::ss::model::Block;
+    use crate::ss::lfr::{Basis, Lfr};
+    use crate::ss::model::{Block, Modal};
 
     /// A periodic record of `linear` plus `extra(u, k)` on each output: two periods, steady.
     fn record(linear: &Modal, amp: f64, seed: u64, extra: impl Fn(&[f64], usize) -> f64) -> Record {

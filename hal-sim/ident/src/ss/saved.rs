@@ -1,5 +1,6 @@
 //! `fit.json` of the state-space models: everything needed to simulate them.
 
+use super::extended::{Creep, Model};
 use super::hammerstein::{Front, Hammerstein};
 use super::lfr::{Lfr, LfrJson};
 use super::model::{Modal, ModalJson};
@@ -14,6 +15,73 @@ pub struct FrontJson {
     pub model: String,
     /// Parameter names and values, in the units of the model (input unit in, input unit out).
     pub params: Vec<(String, f64)>,
+}
+
+impl FrontJson {
+    pub fn of(f: &Front) -> Self {
+        Self {
+            model: f.def.name.into(),
+            params: param_names(f.def)
+                .into_iter()
+                .zip(f.params.iter().copied())
+                .collect(),
+        }
+    }
+}
+
+/// What `piezo diagnose --base` added to the identified model (all absent in a `piezo fit`
+/// model): the inputs delayed, creep lags and a drift added to the outputs
+/// ([`crate::ss::extended::Model::simulate`]).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Extensions {
+    /// Input delay (samples at `sample_rate_hz`).
+    #[serde(default)]
+    pub delay_samples: usize,
+    /// Per input, first-order lags of the (delayed) input added to each output.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub creep: Option<Creep>,
+    /// Per output, a rate (output unit / s) from the first simulated sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift_per_s: Option<Vec<f64>>,
+}
+
+/// A delay longer than this (samples) is refused as a corrupt file.
+const MAX_DELAY_SAMPLES: usize = 1 << 20;
+
+impl Extensions {
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Sizes and values a model with `inputs` and `outputs` can run.
+    pub fn check(&self, inputs: usize, outputs: usize) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.delay_samples <= MAX_DELAY_SAMPLES,
+            "fit.json: extensions.delay_samples {} is above {MAX_DELAY_SAMPLES}",
+            self.delay_samples
+        );
+        if let Some(c) = &self.creep {
+            anyhow::ensure!(
+                !c.tau_s.is_empty() && c.tau_s.iter().all(|t| t.is_finite() && *t > 0.0),
+                "fit.json: extensions.creep.tau_s must be positive time constants (s)"
+            );
+            anyhow::ensure!(
+                c.c.len() == outputs
+                    && c.c.iter().all(|row| {
+                        row.len() == inputs * c.tau_s.len() && row.iter().all(|v| v.is_finite())
+                    }),
+                "fit.json: extensions.creep.c needs {outputs} rows of {} finite coefficients (inputs x lags)",
+                inputs * c.tau_s.len()
+            );
+        }
+        if let Some(d) = &self.drift_per_s {
+            anyhow::ensure!(
+                d.len() == outputs && d.iter().all(|v| v.is_finite()),
+                "fit.json: extensions.drift_per_s needs {outputs} finite rates"
+            );
+        }
+        Ok(())
+    }
 }
 
 /// The saved model.
@@ -54,6 +122,9 @@ pub struct SsJson {
     /// How the model was identified (report; not needed to simulate).
     #[serde(default)]
     pub report: serde_json::Value,
+    /// Extensions `piezo diagnose --base` named (none in a `piezo fit` model).
+    #[serde(default, skip_serializing_if = "Extensions::is_empty")]
+    pub extensions: Extensions,
 }
 
 impl SsJson {
@@ -77,17 +148,7 @@ impl SsJson {
             input_unit: units.0.into(),
             output_unit: units.1.into(),
             order: model.linear.order(),
-            hysteresis: model
-                .fronts
-                .iter()
-                .map(|f| FrontJson {
-                    model: f.def.name.into(),
-                    params: param_names(f.def)
-                        .into_iter()
-                        .zip(f.params.iter().copied())
-                        .collect(),
-                })
-                .collect(),
+            hysteresis: model.fronts.iter().map(FrontJson::of).collect(),
             linear: model.linear.to_json(),
             schedule: None,
             lfr: None,
@@ -95,6 +156,7 @@ impl SsJson {
             output_range: Vec::new(),
             modes_hz: model.linear.modes_hz(fs_hz),
             report,
+            extensions: Extensions::default(),
         }
     }
 
@@ -126,14 +188,7 @@ impl SsJson {
 
     /// Simulates the saved model from rest on inputs `u` sampled every `dt` s.
     pub fn simulate(&self, u: &[Vec<f64>], dt: f64) -> anyhow::Result<Vec<Vec<f64>>> {
-        if let Some(l) = self.to_lfr()? {
-            return l.simulate(u);
-        }
-        let model = self.to_model()?;
-        match &self.schedule {
-            Some(s) => s.simulate(&model.linear, u, dt),
-            None => model.simulate(u, dt),
-        }
+        Model::of_saved(self)?.simulate(u, dt)
     }
 
     /// The model, checked (with a schedule: the block at its center level).
@@ -183,8 +238,8 @@ impl SsJson {
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
         anyhow::ensure!(
-            self.lfr.is_none() || (fronts.is_empty() && self.schedule.is_none()),
-            "fit.json: an LFR is not combined with a schedule or hysteresis fronts"
+            self.lfr.is_none() || self.schedule.is_none(),
+            "fit.json: an LFR is not combined with a schedule"
         );
         anyhow::ensure!(
             self.lfr.is_some() == (self.model == "lfr"),
