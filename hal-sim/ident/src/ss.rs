@@ -271,11 +271,6 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
             !spectra.is_empty(),
             "the Hammerstein fit needs periodic records (multisines of whole periods)"
         );
-        let per: Vec<Periodic> = spectra
-            .iter()
-            .zip(recs)
-            .map(|(s, r)| Periodic::of(s, &r.u))
-            .collect();
         let cfg = PemConfig {
             iterations: opts.joint_iterations,
             progress: opts
@@ -283,7 +278,7 @@ pub fn identify(recs: &[Record], opts: &SsOptions) -> anyhow::Result<SsFit> {
                 .then(|| format!("hammerstein {} + order {order}", def.name)),
             ..Default::default()
         };
-        let (h, c) = hammerstein::identify(def, &per, 1.0 / fs, &linear, &cfg)?;
+        let (h, c) = hammerstein_starts(&linear, &spectra, recs, def, &cfg, None)?;
         let rms = (c / records).sqrt();
         progress(opts.progress, || {
             format!("hammerstein model: RMS output error {rms:.4e} on the training records")
@@ -311,19 +306,33 @@ pub fn hammerstein_around(
         !spectra.is_empty(),
         "the Hammerstein fit needs periodic records (multisines of whole periods)"
     );
+    let cfg = PemConfig {
+        iterations,
+        ..Default::default()
+    };
+    let (h, c) = hammerstein_starts(linear, &spectra, recs, def, &cfg, fronts)?;
+    Ok((h, (c / (recs.len() * linear.outputs()) as f64).sqrt()))
+}
+
+/// The joint Hammerstein refinement of [`identify`] and [`hammerstein_around`] on the
+/// periodic `spectra` of `recs`: from three starts (the middle of the hysteresis' search box,
+/// a quarter and three quarters of it; from the middle alone it stalled on strongly
+/// hysteretic records, 1-2 % gain where the hysteresis is the main effect), or from
+/// `fronts`' parameters; the lowest training cost kept. Returns the model and that cost.
+fn hammerstein_starts(
+    linear: &Modal,
+    spectra: &[PeriodicSpectra],
+    recs: &[Record],
+    def: &'static ModelDef,
+    cfg: &PemConfig,
+    fronts: Option<&[Vec<f64>]>,
+) -> anyhow::Result<(Hammerstein, f64)> {
     let per: Vec<Periodic> = spectra
         .iter()
         .zip(recs)
         .map(|(s, r)| Periodic::of(s, &r.u))
         .collect();
-    let cfg = PemConfig {
-        iterations,
-        ..Default::default()
-    };
-    let fs = recs[0].sample_rate_hz();
-    // Three starts (the middle of the hysteresis' search box, a quarter and three quarters
-    // of it), the lowest cost kept: from the middle alone the joint refinement stalled on
-    // strongly hysteretic records (1-2 % gain where the hysteresis is the main effect).
+    let dt = 1.0 / anyhow::Context::context(recs.first(), "no records")?.sample_rate_hz();
     let starts: Vec<hammerstein::Start> = match fronts {
         Some(p) => vec![hammerstein::Start::Params(p)],
         None => [0.5, 0.25, 0.75].map(hammerstein::Start::Box).to_vec(),
@@ -331,7 +340,7 @@ pub fn hammerstein_around(
     let mut best: Option<(Hammerstein, f64)> = None;
     let mut last_err = None;
     for from in starts {
-        match hammerstein::identify_from(def, &per, 1.0 / fs, linear, &cfg, from) {
+        match hammerstein::identify_from(def, &per, dt, linear, cfg, from) {
             Ok((h, c)) if c.is_finite() && best.as_ref().is_none_or(|b| c < b.1) => {
                 best = Some((h, c))
             }
@@ -339,12 +348,11 @@ pub fn hammerstein_around(
             Err(e) => last_err = Some(e),
         }
     }
-    let (h, c) = match (best, last_err) {
-        (Some(b), _) => b,
-        (None, Some(e)) => return Err(e.context("the Hammerstein fit failed from every start")),
+    match (best, last_err) {
+        (Some(b), _) => Ok(b),
+        (None, Some(e)) => Err(e.context("the Hammerstein fit failed from every start")),
         (None, None) => anyhow::bail!("the Hammerstein fit gave no finite cost from any start"),
-    };
-    Ok((h, (c / (recs.len() * linear.outputs()) as f64).sqrt()))
+    }
 }
 
 /// Statistics of periodic records for the full output-error cost of a linear model.
@@ -375,4 +383,81 @@ fn val_stats_periodic(sp: &[PeriodicSpectra]) -> Vec<LineStats> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ss::extended::{Core, Model};
+    use crate::ss::hammerstein::Front;
+    use crate::ss::model::Block;
+    use nalgebra::DMatrix;
+
+    /// Periodic records of a CBW ahead of a three-state plant (steady state, two periods of
+    /// a random-phase multisine per record).
+    fn records() -> Vec<Record> {
+        let plant = Model {
+            delay: 0,
+            fronts: vec![Front {
+                def: crate::fit::models::find("cbw").unwrap(),
+                params: vec![1.0, 0.6, 3.0, 0.5],
+            }],
+            core: Core::Linear(Modal {
+                blocks: vec![Block::Pair(0.9, 0.3), Block::Real(0.6)],
+                b: DMatrix::from_row_slice(3, 1, &[0.2, -0.1, 0.4]),
+                c: DMatrix::from_row_slice(1, 3, &[1.0, 0.3, 0.5]),
+                d: DMatrix::from_row_slice(1, 1, &[0.02]),
+            }),
+            creep: None,
+            drift: None,
+        };
+        let (n, fs) = (512, 1000.0);
+        (1..=4u64)
+            .map(|seed| {
+                let mut r = crate::numeric::Rng::new(seed);
+                let ph: Vec<f64> = (1..60)
+                    .map(|_| r.range(0.0, std::f64::consts::TAU))
+                    .collect();
+                let one: Vec<f64> = (0..n)
+                    .map(|k| {
+                        ph.iter()
+                            .enumerate()
+                            .map(|(l, p)| {
+                                (std::f64::consts::TAU * (l + 1) as f64 * k as f64 / n as f64 + p)
+                                    .cos()
+                            })
+                            .sum::<f64>()
+                            / 6.0
+                    })
+                    .collect();
+                let u: Vec<f64> = (0..3 * n).map(|k| one[k % n]).collect();
+                let y = plant.simulate(std::slice::from_ref(&u), 1.0 / fs).unwrap();
+                let t = (0..2 * n).map(|k| k as f64 / fs).collect();
+                Record::new(t, vec![u[n..].to_vec()], vec![y[0][n..].to_vec()]).unwrap()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_hammerstein_fit_takes_in_the_input_hysteresis() {
+        let recs = records();
+        let fit = identify(
+            &recs,
+            &SsOptions {
+                order: Some(3),
+                hysteresis: Some(crate::fit::models::find("cbw").unwrap()),
+                iterations: 30,
+                joint_iterations: 30,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let h = fit.hammerstein_rms.unwrap();
+        assert_eq!(fit.model.fronts.len(), 1);
+        assert!(
+            h < 0.2 * fit.linear_rms,
+            "Hammerstein {h:.3e} against linear {:.3e}",
+            fit.linear_rms
+        );
+    }
 }

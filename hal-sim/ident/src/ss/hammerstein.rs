@@ -131,31 +131,21 @@ fn front_spectrum(
     Ok(period_spectra(&v[n..], n).remove(0))
 }
 
-/// Joint identification of the hysteresis fronts and the linear block, starting from
-/// the linear model `linear` (identified on the inputs themselves).
-pub fn identify(
-    def: &'static ModelDef,
-    recs: &[Periodic],
-    dt: f64,
-    linear: &Modal,
-    cfg: &PemConfig,
-) -> anyhow::Result<(Hammerstein, f64)> {
-    identify_from(def, recs, dt, linear, cfg, Start::Box(0.5))
-}
-
 /// Where the joint refinement starts the hysteresis.
 #[derive(Debug, Clone, Copy)]
 pub enum Start<'a> {
     /// At this fraction (0..1) of each parameter's search box (in its search coordinate:
     /// log10 for log-scaled parameters), `linear` rescaled per input by the front's
-    /// least-squares gain; [`identify`] starts at the middle.
+    /// least-squares gain.
     Box(f64),
     /// At these parameters per input (clamped into the box), `linear` as given: the
     /// continuation of an earlier fit.
     Params(&'a [Vec<f64>]),
 }
 
-/// [`identify`] from a given start.
+/// Joint identification of the hysteresis fronts and the linear block from `start`, the
+/// linear model `linear` identified on the inputs themselves (`crate::ss::identify` tries
+/// three starts).
 pub fn identify_from(
     def: &'static ModelDef,
     recs: &[Periodic],
