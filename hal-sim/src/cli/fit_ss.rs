@@ -109,11 +109,18 @@ pub fn run(args: &Args) -> Result<()> {
         f.model.bounded_input_scale(&inputs, &lfr::INPUT_SCALES)
     });
     let lfr_radius = lfr_fit.as_ref().and_then(|f| f.model.large_signal_radius());
+    if fit.modes_to_peak > crate::ident::ss::MAX_CANCELLATION {
+        eprintln!(
+            "warning: the order-{} model's modes add up to {:.1e} times the measured response's peak: they cancel (huge gains of opposite effect), so it is no model of the stage; give a lower --order",
+            fit.order, fit.modes_to_peak
+        );
+    }
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = serde_json::json!({
         "train": args.records.train.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         "period_samples": fit.period,
         "order_scan": fit.order_scan,
+        "modes_to_peak": fit.modes_to_peak,
         "train_rms_linear": fit.linear_rms,
         "train_rms_hammerstein": fit.hammerstein_rms,
         "train_rms_scheduled_bla": fit.scheduled_rms,

@@ -121,6 +121,23 @@ impl Modal {
         self.c.nrows()
     }
 
+    /// A bound on the sum of the modes' peak gains: per block `|C_i| |B_i| / (1 - r_i)`
+    /// (Frobenius norms, `r_i` its pole modulus), plus `|D|`. Far above the response's own
+    /// peak it says the modes cancel (huge input and output gains of opposite effect): the
+    /// model simulates, but it is no model of a stage.
+    pub fn modal_gain_bound(&self) -> f64 {
+        let mut i = 0;
+        let mut sum = self.d.norm();
+        for blk in &self.blocks {
+            let k = blk.states();
+            let b = self.b.rows(i, k).norm();
+            let c = self.c.columns(i, k).norm();
+            sum += b * c / (1.0 - blk.radius()).max(1e-12);
+            i += k;
+        }
+        sum
+    }
+
     /// Largest pole modulus.
     pub fn spectral_radius(&self) -> f64 {
         self.blocks.iter().map(Block::radius).fold(0.0, f64::max)
