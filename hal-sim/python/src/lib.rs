@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
-use piezo_ident::diagnose::{consistency, diagnose_records, report, Options, Signals};
+use piezo_ident::diagnose::{consistency, diagnose_records, from_base, report, Options, Signals};
 use piezo_ident::fit::{models, FitOptions};
 use piezo_ident::identify::{self, fit_linear_part, FitInput};
 use piezo_ident::optim::Optimizer;
@@ -349,6 +349,54 @@ fn diagnose<'py>(
     py.detach(run).map_err(|e| raise(py, e))
 }
 
+/// `piezo diagnose --base`: discovery from an identified state-space model (the text of a
+/// `fit.json`, or without it the file `name`) on periodic records. Returns the JSON report
+/// (`piezo diagnose --base --json`), the text report and the final model's `fit.json`.
+#[pyfunction]
+#[pyo3(signature = (base_json, name, train, valid))]
+fn diagnose_base<'py>(
+    py: Python<'py>,
+    base_json: Option<String>,
+    name: String,
+    train: Vec<RecordIn<'py>>,
+    valid: Vec<RecordIn<'py>>,
+) -> PyResult<(String, String, String)> {
+    let read = |set: &[RecordIn<'py>]| -> anyhow::Result<(Vec<String>, Vec<Record>)> {
+        Ok(set
+            .iter()
+            .map(|r| record(r, false))
+            .collect::<anyhow::Result<Vec<_>>>()?
+            .into_iter()
+            .unzip())
+    };
+    let (train_names, train) = read(&train).map_err(|e| raise(py, e))?;
+    let (valid_names, valid) = read(&valid).map_err(|e| raise(py, e))?;
+    let run = move || -> anyhow::Result<(String, String, String)> {
+        let model = match base_json {
+            Some(text) => Loaded::parse(&text, &name)?,
+            None => Loaded::read(&PathBuf::from(&name))?,
+        };
+        let Loaded::Ss(saved) = model else {
+            anyhow::bail!(
+                "{name}: base= takes a state-space fit.json (piezo fit --model ss | hammerstein-ss | scheduled-ss | lfr); the per-axis hysteresis fits are diagnose's own base already"
+            );
+        };
+        let r = from_base::run(
+            &saved,
+            &name,
+            (&train, &train_names),
+            (&valid, &valid_names),
+            false,
+        )?;
+        Ok((
+            serde_json::to_string_pretty(&r.json)?,
+            r.diagnosis.text(&saved.output_unit),
+            serde_json::to_string_pretty(&r.fit)?,
+        ))
+    };
+    py.detach(run).map_err(|e| raise(py, e))
+}
+
 #[pymodule]
 #[pyo3(name = "_native")]
 fn native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -357,6 +405,7 @@ fn native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(predict, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnose_base, m)?)?;
     m.add("FORMAT", piezo_ident::FORMAT)?;
     Ok(())
 }

@@ -293,7 +293,7 @@ fn write_predict(path: &PathBuf, d: &Diagnosis, valid: &[Signals]) -> Result<()>
 /// `--base`: discovery from an identified state-space model
 /// ([`crate::ident::diagnose::from_base`]).
 fn run_from_base(args: &Args, base: &Path) -> Result<()> {
-    use crate::ident::diagnose::from_base::{self, Model};
+    use crate::ident::diagnose::from_base;
     use crate::ident::saved::Loaded;
     let rs = &args.records;
     anyhow::ensure!(
@@ -322,52 +322,36 @@ fn run_from_base(args: &Args, base: &Path) -> Result<()> {
     let read = |p: &PathBuf| args.columns.read(p, true);
     let train = rs.train.iter().map(read).collect::<Result<Vec<_>>>()?;
     let valid = rs.valid.iter().map(read).collect::<Result<Vec<_>>>()?;
-    for r in train.iter().chain(&valid) {
-        anyhow::ensure!(
-            (r.sample_rate_hz() / saved.sample_rate_hz - 1.0).abs() < 1e-3,
-            "a record is sampled at {:.6} Hz, the base at {:.6} Hz",
-            r.sample_rate_hz(),
-            saved.sample_rate_hz
-        );
-    }
-    let model = Model::of_saved(&saved).with_context(|| base.display().to_string())?;
-    let (d, last) = from_base::diagnose(model.clone(), &saved.model, &train, &valid, !args.json)?;
+    let names = |ps: &[PathBuf]| {
+        ps.iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+    };
+    let (train_names, valid_names) = (names(&rs.train), names(&rs.valid));
+    let run = from_base::run(
+        &saved,
+        &base.display().to_string(),
+        (&train, &train_names),
+        (&valid, &valid_names),
+        !args.json,
+    )?;
     if let Some(path) = &args.predict {
-        write_predict_base(path, &model, &last, &valid)?;
+        write_predict_base(path, &run.base, &run.last, &valid)?;
     }
-    let text = d.text(&saved.output_unit);
-    let mut j = serde_json::to_value(&d)?;
-    j["base_file"] = base.display().to_string().into();
-    j["train"] = rs.train.iter().map(|p| p.display().to_string()).collect();
-    j["valid"] = rs.valid.iter().map(|p| p.display().to_string()).collect();
+    let text = run.diagnosis.text(&saved.output_unit);
+    let j = &run.json;
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let mut r = Report::start("piezo diagnose --base");
         r.section("Diagnosis from an identified model").pre(&text);
-        r.json("The report in numbers (piezo diagnose --base --json)", &j);
+        r.json("The report in numbers (piezo diagnose --base --json)", j);
         let index = r.write(dir)?;
-        std::fs::write(
-            dir.join("diagnosis.json"),
-            serde_json::to_string_pretty(&j)?,
-        )
-        .with_context(|| format!("cannot write {}", dir.join("diagnosis.json").display()))?;
+        std::fs::write(dir.join("diagnosis.json"), serde_json::to_string_pretty(j)?)
+            .with_context(|| format!("cannot write {}", dir.join("diagnosis.json").display()))?;
         // The final model, for predict, score, sim --stage and another --base.
-        let report = serde_json::json!({
-            "extended_by": "piezo diagnose --base",
-            "base_file": base.display().to_string(),
-            "train": j["train"],
-            "valid": j["valid"],
-            "named": d.named,
-            "refined": d.refined,
-            "official_rmse_valid_base": d.base_valid,
-            "official_rmse_valid": d.final_valid,
-        });
         let fit = dir.join("fit.json");
-        std::fs::write(
-            &fit,
-            serde_json::to_string_pretty(&last.to_saved(&saved, report))?,
-        )
-        .with_context(|| format!("cannot write {}", fit.display()))?;
+        std::fs::write(&fit, serde_json::to_string_pretty(&run.fit)?)
+            .with_context(|| format!("cannot write {}", fit.display()))?;
         if !args.json {
             println!("report: {}", index.display());
             println!("extended model: {}", fit.display());

@@ -14,6 +14,7 @@ the serial client of the firmware (`from piezo.client import Piezo`).
 from . import errors
 from .errors import FileError, InputError, PiezoIdentError
 from .ident import (
+    BaseDiagnosis,
     Diagnosis,
     FitResult,
     Prediction,
@@ -27,6 +28,6 @@ from .ident import (
 )
 
 __all__ = [
-    "Diagnosis", "FileError", "FitResult", "InputError", "PiezoIdentError", "Prediction",
+    "BaseDiagnosis", "Diagnosis", "FileError", "FitResult", "InputError", "PiezoIdentError", "Prediction",
     "Record", "as_record", "diagnose", "errors", "fit", "models", "predict", "read_record",
 ]

@@ -229,13 +229,7 @@ def predict(model, input: RecordLike, *, columns: Optional[dict] = None) -> Pred
     """`piezo predict --model MODEL --input INPUT`: simulates a saved model from rest on the
     inputs of a record. `model` is a `fit.json` path (or the folder holding it), a
     `FitResult`, or the text of a `fit.json`. The record's outputs are optional."""
-    if isinstance(model, FitResult):
-        text, name = model.fit_json, "<FitResult>"
-    elif isinstance(model, str) and model.lstrip().startswith("{"):
-        text, name = model, "<fit.json text>"
-    else:
-        p = pathlib.Path(model)
-        text, name = None, os.fspath(p / "fit.json" if p.is_dir() else p)
+    text, name = _model_text(model)
     rec = as_record(input, outputs_optional=True, columns=columns)
     d = _lib().predict(text, name, rec._native())
     return Prediction(rec.t, d["y"], d["rmse_last_period"], d["rmse_mean"],
@@ -296,17 +290,71 @@ def _records(x) -> list:
     return [x]
 
 
+@dataclasses.dataclass
+class BaseDiagnosis:
+    """`diagnose(..., base=...)`'s answer. `report` is the JSON of `piezo diagnose --base
+    --json` as a dict, `summary` its text report (also `str(...)`), `fit` the final model (the
+    base with the causes named), whose `save` and `predict` work as for `fit`'s answer."""
+
+    report: dict
+    summary: str
+    fit: FitResult
+
+    @property
+    def named(self) -> list:
+        """Causes named (confirmed), in the order found."""
+        return self.report["named"]
+
+    @property
+    def uncertain(self) -> list:
+        """Causes that gained when fitted on all training records, not on half of them."""
+        return self.report["uncertain"]
+
+    @property
+    def gain(self) -> float:
+        """Relative gain of the final model over the base on the validation records
+        (benchmark's official rule)."""
+        return 1.0 - self.report["final_valid"] / self.report["base_valid"]
+
+    def __str__(self) -> str:
+        return self.summary
+
+
+def _model_text(model) -> tuple:
+    """`(text or None, name)` of a model given as a `FitResult`, the text of a `fit.json`,
+    a `fit.json` path or the folder holding it."""
+    if isinstance(model, FitResult):
+        return model.fit_json, "<FitResult>"
+    if isinstance(model, str) and model.lstrip().startswith("{"):
+        return model, "<fit.json text>"
+    p = pathlib.Path(model)
+    return None, os.fspath(p / "fit.json" if p.is_dir() else p)
+
+
 def diagnose(train, valid=None, *, split: Optional[float] = None,
-             columns: Optional[dict] = None, consistency: bool = True) -> Diagnosis:
+             columns: Optional[dict] = None, consistency: bool = True, base=None):
     """`piezo diagnose --train TRAIN [--valid VALID | --split F]`: what the classical
     Bouc-Wen model misses on the stage, named as a cause, with its gain on the validation
     records. `train` and `valid` are a record or a list of records (one model fits all
     training records); without `valid` each training record is split at `split` (0.5).
     Like the CLI it checks itself on the other splits (or the swapped pair) and reports each
     cause as confident or uncertain (`report["consistency"]`); `consistency=False` skips that
-    (`--no-consistency`)."""
+    (`--no-consistency`).
+
+    With `base` (a state-space `fit.json` of `piezo fit --model ss | hammerstein-ss |
+    scheduled-ss | lfr`: path, folder, text or `FitResult`), `piezo diagnose --base`:
+    discovery from that model on periodic records (`valid` required), returning a
+    `BaseDiagnosis` with the extended model."""
     lib = _lib()
     rec = lambda r: as_record(r, columns=columns)._native()  # noqa: E731
+    if base is not None:
+        if valid is None or split is not None:
+            raise InputError("base= needs valid records (periodic); split does not apply")
+        text, name = _model_text(base)
+        report, summary, fit_json = lib.diagnose_base(
+            text, name, [rec(r) for r in _records(train)], [rec(r) for r in _records(valid)])
+        ext = FitResult(fit_json, json.loads(fit_json), np.empty((0, 0)))
+        return BaseDiagnosis(json.loads(report), summary, ext)
     text, summary = lib.diagnose([rec(r) for r in _records(train)],
                                  [rec(r) for r in _records(valid)], split, consistency)
     return Diagnosis(json.loads(text), summary)
