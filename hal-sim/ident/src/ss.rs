@@ -443,22 +443,7 @@ mod tests {
         let (n, fs) = (512, 1000.0);
         (1..=4u64)
             .map(|seed| {
-                let mut r = crate::numeric::Rng::new(seed);
-                let ph: Vec<f64> = (1..60)
-                    .map(|_| r.range(0.0, std::f64::consts::TAU))
-                    .collect();
-                let one: Vec<f64> = (0..n)
-                    .map(|k| {
-                        ph.iter()
-                            .enumerate()
-                            .map(|(l, p)| {
-                                (std::f64::consts::TAU * (l + 1) as f64 * k as f64 / n as f64 + p)
-                                    .cos()
-                            })
-                            .sum::<f64>()
-                            / 6.0
-                    })
-                    .collect();
+                let one = crate::numeric::random_phase_period(n, 60, seed);
                 let u: Vec<f64> = (0..3 * n).map(|k| one[k % n]).collect();
                 let y = plant.simulate(std::slice::from_ref(&u), 1.0 / fs).unwrap();
                 let t = (0..2 * n).map(|k| k as f64 / fs).collect();

@@ -809,23 +809,9 @@ mod tests {
     /// A periodic record of `linear` plus `extra(u, k)` on each output: two periods, steady.
     fn record(linear: &Modal, amp: f64, seed: u64, extra: impl Fn(&[f64], usize) -> f64) -> Record {
         let (period, fs) = (512, 1000.0);
-        let mut r = crate::numeric::Rng::new(seed);
-        let phases: Vec<f64> = (1..60)
-            .map(|_| r.range(0.0, std::f64::consts::TAU))
-            .collect();
-        let one: Vec<f64> = (0..period)
-            .map(|k| {
-                phases
-                    .iter()
-                    .enumerate()
-                    .map(|(l, p)| {
-                        (std::f64::consts::TAU * (l + 1) as f64 * k as f64 / period as f64 + p)
-                            .cos()
-                    })
-                    .sum::<f64>()
-                    * amp
-                    / 6.0
-            })
+        let one: Vec<f64> = crate::numeric::random_phase_period(period, 60, seed)
+            .into_iter()
+            .map(|v| v * amp)
             .collect();
         let u: Vec<f64> = (0..3 * period).map(|k| one[k % period]).collect();
         let y = linear.simulate(std::slice::from_ref(&u)).unwrap();
