@@ -295,7 +295,7 @@ impl Loaded {
                     "the record is sampled at {fs:.6} Hz, the model at {:.6} Hz",
                     s.sample_rate_hz
                 );
-                s.simulate(&rec.u, rec.dt())
+                crate::ss::extended::Model::of_saved(s)?.simulate(&rec.u, rec.dt())
             }
             Self::MultiBw(m) => m.simulate(&rec.u),
             Self::Parts { parts, outputs } => {

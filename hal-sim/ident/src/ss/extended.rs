@@ -4,12 +4,12 @@
 //! drift per output. The one simulation of every `fit.json` of the state-space family
 //! ([`Model::of_saved`]); [`Model::to_saved`] writes an extended model back.
 use anyhow::Result;
-use serde::{Deserialize, Serialize};
 
 use crate::record::Record;
 use crate::ss::hammerstein::Front;
 use crate::ss::lfr::Lfr;
 use crate::ss::model::Modal;
+pub use crate::ss::saved::Creep;
 use crate::ss::saved::{Extensions, FrontJson, SsJson};
 use crate::ss::scheduled::Schedule;
 use crate::ss::score::{period_of, with_warmup};
@@ -20,15 +20,6 @@ pub enum Core {
     Linear(Modal),
     Scheduled(Schedule, Modal),
     Lfr(Lfr),
-}
-
-/// Additive creep: `y_o += sum_{j,l} c[o][j L + l] lag_l(u_j)`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Creep {
-    /// Lag time constants (s).
-    pub tau_s: Vec<f64>,
-    /// `c[o]`, `inputs * tau_s.len()` coefficients per output.
-    pub c: Vec<Vec<f64>>,
 }
 
 /// The base and the extensions named so far.
@@ -256,9 +247,10 @@ mod tests {
             })
             .collect();
         let want = model.simulate(&u, 1e-3).unwrap();
-        assert_eq!(loaded.simulate(&u, 1e-3).unwrap(), want);
+        let sim = |s: &SsJson| Model::of_saved(s).unwrap().simulate(&u, 1e-3).unwrap();
+        assert_eq!(sim(&loaded), want);
         // Each extension shows: without them the output differs.
-        assert_ne!(base.simulate(&u, 1e-3).unwrap(), want);
+        assert_ne!(sim(&base), want);
         // A plain fit.json keeps no extensions section.
         assert!(!serde_json::to_string(&base).unwrap().contains("extensions"));
     }
@@ -270,12 +262,7 @@ mod tests {
         if let Some(d) = saved.extensions.drift_per_s.as_mut() {
             d.pop();
         }
-        let e = format!(
-            "{:#}",
-            saved
-                .simulate(&[vec![0.0; 4], vec![0.0; 4]], 1e-3)
-                .unwrap_err()
-        );
+        let e = format!("{:#}", Model::of_saved(&saved).unwrap_err());
         assert!(e.contains("drift_per_s needs 2 finite rates"), "{e}");
         let mut saved = model.to_saved(&base, serde_json::Value::Null);
         if let Some(c) = saved.extensions.creep.as_mut() {

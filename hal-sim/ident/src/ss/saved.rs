@@ -1,6 +1,5 @@
 //! `fit.json` of the state-space models: everything needed to simulate them.
 
-use super::extended::{Creep, Model};
 use super::hammerstein::{Front, Hammerstein};
 use super::lfr::{Lfr, LfrJson};
 use super::model::{Modal, ModalJson};
@@ -27,6 +26,15 @@ impl FrontJson {
                 .collect(),
         }
     }
+}
+
+/// Additive creep: `y_o += sum_{j,l} c[o][j L + l] lag_l(u_j)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Creep {
+    /// Lag time constants (s).
+    pub tau_s: Vec<f64>,
+    /// `c[o]`, `inputs * tau_s.len()` coefficients per output.
+    pub c: Vec<Vec<f64>>,
 }
 
 /// What `piezo diagnose --base` added to the identified model (all absent in a `piezo fit`
@@ -184,11 +192,6 @@ impl SsJson {
             None => Ok(None),
             Some(j) => Ok(Some(Lfr::from_json(self.to_model()?.linear, j)?)),
         }
-    }
-
-    /// Simulates the saved model from rest on inputs `u` sampled every `dt` s.
-    pub fn simulate(&self, u: &[Vec<f64>], dt: f64) -> anyhow::Result<Vec<Vec<f64>>> {
-        Model::of_saved(self)?.simulate(u, dt)
     }
 
     /// The model, checked (with a schedule: the block at its center level).
