@@ -53,6 +53,10 @@ fn fit_and_write(args: &Args) -> Result<()> {
     if super::fit_ss::handles(model) {
         return super::fit_ss::run(args);
     }
+    anyhow::ensure!(
+        args.input_delay == 0,
+        "--input-delay applies to the state-space models (ss, hammerstein-ss, scheduled-ss, lfr), not to `{model}`"
+    );
     let rs = &args.records;
     let train_path = match rs.train.as_slice() {
         [one] => one,

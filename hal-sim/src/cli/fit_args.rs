@@ -219,6 +219,11 @@ pub struct Args {
     /// a step no longer lowers the cost).
     #[arg(long, default_value_t = 30)]
     pub lfr_iterations: usize,
+    /// State-space models (`ss`, `hammerstein-ss`, `scheduled-ss`, `lfr`): the inputs reach
+    /// the model this many samples late (an input delay, as `piezo diagnose --base` names
+    /// it; periodic records are shifted within each period). Saved in fit.json.
+    #[arg(long, default_value_t = 0, value_name = "SAMPLES")]
+    pub input_delay: usize,
     /// Columns and units of the records.
     #[command(flatten)]
     pub columns: Columns,

@@ -24,8 +24,45 @@ fn read_all(args: &Args) -> Result<Vec<Record>> {
     );
     rs.train
         .iter()
-        .map(|p| args.columns.read(p, args.quiet))
+        .map(|p| {
+            let r = args.columns.read(p, args.quiet)?;
+            delayed(r, args.input_delay).with_context(|| p.display().to_string())
+        })
         .collect()
+}
+
+/// `rec` with its inputs `d` samples late: shifted within each period of a periodic record
+/// (its steady state: what the model's delay gives after a warm-up period), else the first
+/// value held.
+fn delayed(mut rec: Record, d: usize) -> Result<Record> {
+    if d == 0 {
+        return Ok(rec);
+    }
+    anyhow::ensure!(
+        d < rec.len(),
+        "--input-delay {d} is not shorter than the record ({} samples)",
+        rec.len()
+    );
+    // Whole periods only; otherwise the record is one stretch with its first value held.
+    let n = crate::ident::ss::score::period_of(&rec)
+        .ok()
+        .filter(|&n| d < n && rec.len().is_multiple_of(n))
+        .unwrap_or(rec.len());
+    let periodic = n < rec.len();
+    for u in &mut rec.u {
+        let old = u.clone();
+        for (k, v) in u.iter_mut().enumerate() {
+            let (q, i) = (k / n * n, k % n);
+            *v = if i >= d {
+                old[k - d]
+            } else if periodic {
+                old[q + n - d + i]
+            } else {
+                old[0]
+            };
+        }
+    }
+    Ok(rec)
 }
 
 pub fn run(args: &Args) -> Result<()> {
@@ -142,10 +179,11 @@ pub fn run(args: &Args) -> Result<()> {
         serde_json::Value::Null,
     )
     .with_schedule(fit.schedule.clone());
-    let saved = match &lfr_fit {
+    let mut saved = match &lfr_fit {
         Some(f) => saved.with_lfr(&f.model),
         None => saved,
     };
+    saved.extensions.delay_samples = args.input_delay;
     let loaded = Loaded::Ss(Box::new(saved.clone()));
     let mut valid = Vec::new();
     for v in &args.records.valid {
@@ -283,4 +321,40 @@ pub fn bla_levels(recs: &[Record]) -> Result<Option<frf::Levels>> {
         .map(|r| PeriodicSpectra::of(r, periods[0]))
         .collect::<Result<Vec<_>>>()?;
     Ok(Some(frf::bla(&sp)?.levels()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(u: Vec<f64>) -> Record {
+        let n = u.len();
+        Record::new(
+            (0..n).map(|k| k as f64 * 1e-3).collect(),
+            vec![u],
+            vec![vec![0.0; n]],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn the_input_delay_shifts_within_each_period_or_holds_the_first_value() {
+        let period: Vec<f64> = (0..512)
+            .map(|k| {
+                let x = k as f64 * std::f64::consts::TAU / 512.0;
+                x.sin() + 0.5 * (3.0 * x + 1.0).cos() + 0.2 * (7.0 * x).sin()
+            })
+            .collect();
+        let u: Vec<f64> = period.iter().chain(&period).copied().collect();
+        let d = delayed(record(u.clone()), 3).unwrap();
+        for k in 0..u.len() {
+            // The periodic steady state, three samples late.
+            assert_eq!(d.u[0][k], period[(k + 512 - 3) % 512], "sample {k}");
+        }
+        // Not periodic: the first value held.
+        let ramp: Vec<f64> = (0..300).map(|k| k as f64).collect();
+        let d = delayed(record(ramp), 2).unwrap();
+        assert_eq!(&d.u[0][..4], &[0.0, 0.0, 0.0, 1.0]);
+        assert!(delayed(record(vec![0.0; 300]), 300).is_err());
+    }
 }
