@@ -32,8 +32,8 @@ fn read_all(args: &Args) -> Result<Vec<Record>> {
 }
 
 /// `rec` with its inputs `d` samples late: shifted within each period of a periodic record
-/// (its steady state: what the model's delay gives after a warm-up period), else the first
-/// value held.
+/// (its steady state: what the model's delay gives after a warm-up period), else zeros
+/// first, as the saved model simulates from rest ([`crate::ident::ss::extended::delay`]).
 fn delayed(mut rec: Record, d: usize) -> Result<Record> {
     if d == 0 {
         return Ok(rec);
@@ -43,22 +43,25 @@ fn delayed(mut rec: Record, d: usize) -> Result<Record> {
         "--input-delay {d} is not shorter than the record ({} samples)",
         rec.len()
     );
-    // Whole periods only; otherwise the record is one stretch with its first value held.
+    // Whole periods only; otherwise the record is one stretch from rest.
     let n = crate::ident::ss::score::period_of(&rec)
         .ok()
         .filter(|&n| d < n && rec.len().is_multiple_of(n))
         .unwrap_or(rec.len());
-    let periodic = n < rec.len();
+    if n == rec.len() {
+        for u in &mut rec.u {
+            *u = crate::ident::ss::extended::delay(u, d);
+        }
+        return Ok(rec);
+    }
     for u in &mut rec.u {
         let old = u.clone();
         for (k, v) in u.iter_mut().enumerate() {
             let (q, i) = (k / n * n, k % n);
             *v = if i >= d {
                 old[k - d]
-            } else if periodic {
-                old[q + n - d + i]
             } else {
-                old[0]
+                old[q + n - d + i]
             };
         }
     }
@@ -338,7 +341,7 @@ mod tests {
     }
 
     #[test]
-    fn the_input_delay_shifts_within_each_period_or_holds_the_first_value() {
+    fn the_input_delay_shifts_within_each_period_or_starts_from_rest() {
         let period: Vec<f64> = (0..512)
             .map(|k| {
                 let x = k as f64 * std::f64::consts::TAU / 512.0;
@@ -351,10 +354,10 @@ mod tests {
             // The periodic steady state, three samples late.
             assert_eq!(d.u[0][k], period[(k + 512 - 3) % 512], "sample {k}");
         }
-        // Not periodic: the first value held.
-        let ramp: Vec<f64> = (0..300).map(|k| k as f64).collect();
+        // Not periodic: from rest, as the saved model simulates it.
+        let ramp: Vec<f64> = (0..300).map(|k| k as f64 + 5.0).collect();
         let d = delayed(record(ramp), 2).unwrap();
-        assert_eq!(&d.u[0][..4], &[0.0, 0.0, 0.0, 1.0]);
+        assert_eq!(&d.u[0][..4], &[0.0, 0.0, 5.0, 6.0]);
         assert!(delayed(record(vec![0.0; 300]), 300).is_err());
     }
 }

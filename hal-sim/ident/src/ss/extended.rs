@@ -164,7 +164,7 @@ impl Model {
 }
 
 /// `x` delayed by `d` samples (zeros first).
-pub(crate) fn delay(x: &[f64], d: usize) -> Vec<f64> {
+pub fn delay(x: &[f64], d: usize) -> Vec<f64> {
     let d = d.min(x.len());
     std::iter::repeat_n(0.0, d)
         .chain(x[..x.len() - d].iter().copied())
