@@ -37,9 +37,9 @@ pub struct Creep {
     pub c: Vec<Vec<f64>>,
 }
 
-/// What `piezo diagnose --base` added to the identified model (all absent in a `piezo fit`
-/// model): the inputs delayed, creep lags and a drift added to the outputs
-/// ([`crate::ss::extended::Model::simulate`]).
+/// What `piezo diagnose --base` added to the identified model (a `piezo fit` model has at
+/// most the delay, from `--input-delay`): the inputs delayed, creep lags and a drift added to
+/// the outputs ([`crate::ss::extended::Model::simulate`]).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Extensions {
     /// Input delay (samples at `sample_rate_hz`).
@@ -130,7 +130,7 @@ pub struct SsJson {
     /// How the model was identified (report; not needed to simulate).
     #[serde(default)]
     pub report: serde_json::Value,
-    /// Extensions `piezo diagnose --base` named (none in a `piezo fit` model).
+    /// Extensions `piezo diagnose --base` named, or `piezo fit --input-delay`'s delay.
     #[serde(default, skip_serializing_if = "Extensions::is_empty")]
     pub extensions: Extensions,
 }
