@@ -12,7 +12,7 @@ use crate::ident::ss::{identify, SsOptions};
 use crate::record::{Quantity, Record};
 use anyhow::{Context, Result};
 
-fn read_all(args: &Args) -> Result<Vec<Record>> {
+fn read_all(args: &Args, delay: usize) -> Result<Vec<Record>> {
     let rs = &args.records;
     anyhow::ensure!(
         !rs.train.is_empty(),
@@ -26,7 +26,7 @@ fn read_all(args: &Args) -> Result<Vec<Record>> {
         .iter()
         .map(|p| {
             let r = args.columns.read(p, args.quiet)?;
-            delayed(r, args.input_delay).with_context(|| p.display().to_string())
+            delayed(r, delay).with_context(|| p.display().to_string())
         })
         .collect()
 }
@@ -71,7 +71,11 @@ fn delayed(mut rec: Record, d: usize) -> Result<Record> {
 pub fn run(args: &Args) -> Result<()> {
     let model = args.model.as_deref().unwrap_or("ss");
     let t0 = std::time::Instant::now();
-    let recs = read_all(args)?;
+    let delay = args.input_delay;
+    let recs = read_all(args, delay)?;
+    if delay > 0 && !args.quiet {
+        eprintln!("the inputs reach the model {delay} sample(s) late (--input-delay {delay})");
+    }
     let order_arg = args
         .order
         .as_deref()
@@ -186,7 +190,7 @@ pub fn run(args: &Args) -> Result<()> {
         Some(f) => saved.with_lfr(&f.model),
         None => saved,
     };
-    saved.extensions.delay_samples = args.input_delay;
+    saved.extensions.delay_samples = delay;
     let loaded = Loaded::Ss(Box::new(saved.clone()));
     let mut valid = Vec::new();
     for v in &args.records.valid {

@@ -7,7 +7,8 @@
 //! input (`input_range` in fit.json), and the model output `y` (its own unit) becomes
 //! `centre_um + um_per_unit * y` with `um_per_unit` such that the full voltage range moves
 //! axis `i` by `2 half_span_um` at low frequency (static gain of input `i` to output `i`:
-//! the front's major-loop chord slope times the linear block's `G(1)`), signed so the
+//! the front's major-loop chord slope times the linear block's `G(1)`, plus creep's static
+//! gain), signed so the
 //! position rises with the voltage (the controllers assume a positive gain). Axis `i`
 //! drives input `i` and reads output `i`; the model's other inputs rest at the middle of
 //! their range. The model runs at its own sample rate with
@@ -159,7 +160,13 @@ impl IdentifiedPlant {
                     }
                     None => 1.0,
                 };
-                let dc = g1[(i, i)].re * chord;
+                // Creep's lags (unit static gain each) act on the input beside the model.
+                let creep_dc = ext.creep.as_ref().map_or(0.0, |c| {
+                    let l = c.tau_s.len();
+                    c.c.get(i)
+                        .map_or(0.0, |row| row.iter().skip(i * l).take(l).sum())
+                });
+                let dc = g1[(i, i)].re * chord + creep_dc;
                 if dc.is_finite() && dc.abs() * half > 1e-12 {
                     cfg.half_span_um / (dc * half)
                 } else {
@@ -462,6 +469,20 @@ mod tests {
         };
         let mut plant = IdentifiedPlant::load(&cfg, 1).unwrap();
         std::fs::remove_file(&path).ok();
+        // The scale counts creep's static gain beside G(1): the 10 V range moves the axis
+        // by 2 um at rest.
+        let g1 = model
+            .linear()
+            .response(crate::ident::ss::model::C64::new(1.0, 0.0))[(0, 0)]
+            .re
+            + 0.05
+            + 0.02;
+        assert!(
+            (plant.um_per_unit[0] - 1.0 / (g1 * 5.0)).abs() < 1e-12,
+            "{} against {}",
+            plant.um_per_unit[0],
+            1.0 / (g1 * 5.0)
+        );
         let u: Vec<f64> = (0..300)
             .map(|k| 5.0 + 4.0 * (k as f64 * 0.07).sin())
             .collect();
