@@ -4,6 +4,7 @@
 //! model ([`model`]), hysteresis fronts per actuator ([`hammerstein`]).
 
 pub mod extended;
+pub mod fitting;
 pub mod frf;
 pub mod hammerstein;
 pub mod lfr;

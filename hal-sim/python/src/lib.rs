@@ -12,6 +12,7 @@ use piezo_ident::identify::{self, fit_linear_part, FitInput};
 use piezo_ident::optim::Optimizer;
 use piezo_ident::record::{Layout, Quantity, Record};
 use piezo_ident::saved::{score_last_period, Loaded};
+use piezo_ident::ss::fitting::{self, FitArgs, FitOptions as SsFitOptions};
 use piezo_ident::ss::frf::detect_period;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -153,7 +154,7 @@ fn fit<'py>(
         let (train_name, whole, valid, linear_train) = inputs;
         anyhow::ensure!(
             !piezo_ident::saved::handles(&model),
-            "model `{model}`: the state-space models (ss, hammerstein-ss, scheduled-ss) are fitted by `piezo fit`; `fit.json` from it loads in `predict`"
+            "model `{model}`: the state-space models (ss, hammerstein-ss, scheduled-ss, lfr) are fitted by fit_ss (piezo.fit routes them there)"
         );
         let def = models::find(&model)?;
         anyhow::ensure!(linear <= 2, "--linear {linear}: at most 2 sections");
@@ -225,6 +226,55 @@ fn fit<'py>(
         }
     }
     Ok(d)
+}
+
+/// `piezo fit --model ss | hammerstein-ss | scheduled-ss | lfr` on records: one
+/// multivariable model for all `train` records; returns the `fit.json` text.
+#[pyfunction]
+#[pyo3(signature = (train, model, order=None, hysteresis="cbw".to_string(), lm_iterations=60, joint_iterations=30, schedule_tau_s=0.15, lfr_basis=vec!["soft-cubic".to_string()], lfr_linear=None, lfr_channels="outputs:2".to_string(), lfr_iterations=30, input_delay=0, progress=false))]
+#[allow(clippy::too_many_arguments)]
+fn fit_ss(
+    py: Python<'_>,
+    train: Vec<RecordIn<'_>>,
+    model: String,
+    order: Option<String>,
+    hysteresis: String,
+    lm_iterations: usize,
+    joint_iterations: usize,
+    schedule_tau_s: f64,
+    lfr_basis: Vec<String>,
+    lfr_linear: Option<String>,
+    lfr_channels: String,
+    lfr_iterations: usize,
+    input_delay: usize,
+    progress: bool,
+) -> PyResult<String> {
+    let (names, recs): (Vec<String>, Vec<Record>) = train
+        .iter()
+        .map(|r| record(r, false))
+        .collect::<anyhow::Result<Vec<_>>>()
+        .map_err(|e| raise(py, e))?
+        .into_iter()
+        .unzip();
+    let run = move || -> anyhow::Result<String> {
+        let opts = SsFitOptions::parse(&FitArgs {
+            model: &model,
+            order: order.as_deref(),
+            hysteresis: &hysteresis,
+            lm_iterations,
+            joint_iterations,
+            schedule_tau_s,
+            lfr_basis: &lfr_basis,
+            lfr_linear: lfr_linear.as_deref(),
+            lfr_channels: &lfr_channels,
+            lfr_iterations,
+            input_delay,
+            progress,
+        })?;
+        let f = fitting::fit(recs, &names, &opts)?;
+        Ok(serde_json::to_string_pretty(&f.saved)?)
+    };
+    py.detach(run).map_err(|e| raise(py, e))
 }
 
 /// `piezo predict`: simulates the saved model (the text of a `fit.json`, or without it the
@@ -403,6 +453,7 @@ fn native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_record, m)?)?;
     m.add_function(wrap_pyfunction!(models_list, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_ss, m)?)?;
     m.add_function(wrap_pyfunction!(predict, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose_base, m)?)?;

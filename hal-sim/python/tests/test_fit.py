@@ -110,5 +110,5 @@ def test_bad_options_are_value_errors(backlash):
         piezo.fit(backlash, "nope")
     with pytest.raises(ValueError, match="--split must be within 0.1..0.9, got 0.95"):
         piezo.fit(backlash, "cbw", split=0.95)
-    with pytest.raises(ValueError, match="fitted by `piezo fit`"):
-        piezo.fit(backlash, "ss")
+    with pytest.raises(ValueError, match="valid=, split= and linear_train= apply to"):
+        piezo.fit(backlash, "ss", split=0.5)

@@ -14,6 +14,7 @@ the serial client of the firmware (`from piezo.client import Piezo`).
 from . import errors
 from .errors import FileError, InputError, PiezoIdentError
 from .ident import (
+    STATE_SPACE,
     BaseDiagnosis,
     Diagnosis,
     FitResult,
@@ -28,6 +29,6 @@ from .ident import (
 )
 
 __all__ = [
-    "BaseDiagnosis", "Diagnosis", "FileError", "FitResult", "InputError", "PiezoIdentError", "Prediction",
+    "STATE_SPACE", "BaseDiagnosis", "Diagnosis", "FileError", "FitResult", "InputError", "PiezoIdentError", "Prediction",
     "Record", "as_record", "diagnose", "errors", "fit", "models", "predict", "read_record",
 ]

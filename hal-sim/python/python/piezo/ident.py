@@ -190,18 +190,44 @@ class FitResult:
         return predict(self, input, **kw)
 
 
-def fit(train: RecordLike, model: str = "cbw", *, valid: Optional[RecordLike] = None,
+STATE_SPACE = ("ss", "hammerstein-ss", "scheduled-ss", "lfr")
+
+
+def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
         split: Optional[float] = None, valid_periodic: int = 0, linear: int = 0,
         linear_train: Optional[RecordLike] = None, optimizer: str = "de",
         generations: int = 300, population: int = 0, seed: int = 1,
         lm_iterations: int = 60, upsample: int = 20, progress: bool = False,
-        out=None, columns: Optional[dict] = None) -> FitResult:
+        out=None, columns: Optional[dict] = None, order=None, hysteresis: str = "cbw",
+        joint_iterations: int = 30, schedule_tau_s: float = 0.15,
+        lfr_basis=("soft-cubic",), lfr_linear: Optional[str] = None,
+        lfr_channels: str = "outputs:2", lfr_iterations: int = 30,
+        input_delay: int = 0) -> FitResult:
     """`piezo fit --model MODEL --train TRAIN [--valid VALID | --split F] ...`: identifies
     `model` (`models()` lists them) on `train`, scores it there and on the validation
     samples. The keywords are the CLI's options; `out` writes `fit.json` into that folder.
-    The state-space models (`ss`, ...) are fitted by the CLI only."""
+
+    The state-space models (`ss`, `hammerstein-ss`, `scheduled-ss`, `lfr`: `STATE_SPACE`)
+    fit one multivariable model to `train`, a record or a list of them (periodic records
+    for `lfr` and `scheduled-ss`), with the CLI's `order` (a number or `"auto"`; default
+    28 for `lfr`, else auto), `hysteresis`, `lm_iterations`, `joint_iterations`,
+    `schedule_tau_s`, `lfr_basis`, `lfr_linear`, `lfr_channels`, `lfr_iterations` and
+    `input_delay`; the answer's `report` is the `fit.json` (`report["report"]` its training
+    errors) and it has no simulated records: score it with `predict`."""
     lib = _lib()
     rec = lambda r: as_record(r, columns=columns)._native()  # noqa: E731
+    if model in STATE_SPACE:
+        if valid is not None or split is not None or linear_train is not None:
+            raise InputError(f"model `{model}`: valid=, split= and linear_train= apply to "
+                             "the per-axis models; score a state-space fit with predict()")
+        text = lib.fit_ss([rec(r) for r in _records(train)], model,
+                          None if order is None else str(order), hysteresis, lm_iterations,
+                          joint_iterations, schedule_tau_s, list(lfr_basis), lfr_linear,
+                          lfr_channels, lfr_iterations, input_delay, progress)
+        r = FitResult(text, json.loads(text), np.empty((0, 0)))
+        if out is not None:
+            r.save(out)
+        return r
     d = lib.fit(rec(train), model, None if valid is None else rec(valid), split,
                 valid_periodic, linear, None if linear_train is None else rec(linear_train),
                 optimizer, generations, population, seed, lm_iterations, upsample, progress)
