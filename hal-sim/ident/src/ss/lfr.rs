@@ -1123,16 +1123,10 @@ impl Lm<'_> {
             // um after 23 iterations with a damping of 7e-10).
             let mut nu = 2.0;
             for _ in 0..LM_TRIES {
-                let mut damped = h.clone();
-                for i in 0..damped.nrows() {
-                    let d = h[(i, i)];
-                    damped[(i, i)] = d + lambda * d.max(1e-12 * (1.0 + d));
-                }
-                let Some(ch) = damped.cholesky() else {
+                let Some(dz) = super::pem::damped_step(&h, &g, lambda) else {
                     lambda *= 10.0;
                     continue;
                 };
-                let dz = ch.solve(&g);
                 let zt: Vec<f64> = z0.iter().zip(dz.iter()).map(|(z, d)| z + d).collect();
                 let mut mt = unpack(&mdl, self.params, &zt);
                 match project(&mut mt, self.data) {

@@ -303,6 +303,18 @@ pub struct Refined {
     pub iterations: usize,
 }
 
+/// The Levenberg-Marquardt step `(H + lambda diag(H))^-1 g` (each diagonal term at least
+/// `1e-12 (1 + H_ii)` before scaling); `None` when the damped matrix is not positive
+/// definite.
+pub(crate) fn damped_step(h: &DMatrix<f64>, g: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
+    let mut damped = h.clone();
+    for i in 0..damped.nrows() {
+        let d = h[(i, i)];
+        damped[(i, i)] = d + lambda * d.max(1e-12 * (1.0 + d));
+    }
+    Some(damped.cholesky()?.solve(g))
+}
+
 /// Levenberg-Marquardt on `(theta, model)`; `theta` is kept in `[lo, hi]`.
 pub fn refine(
     model: &Modal,
@@ -333,16 +345,10 @@ pub fn refine(
         let z0: Vec<f64> = th.iter().copied().chain(pack(&mdl)).collect();
         let mut improved = None;
         for _ in 0..12 {
-            let mut damped = h.clone();
-            for i in 0..damped.nrows() {
-                let d = h[(i, i)];
-                damped[(i, i)] = d + lambda * d.max(1e-12 * (1.0 + d));
-            }
-            let Some(ch) = damped.cholesky() else {
+            let Some(dz) = damped_step(&h, &g, lambda) else {
                 lambda *= 10.0;
                 continue;
             };
-            let dz = ch.solve(&g);
             let zt: Vec<f64> = z0.iter().zip(dz.iter()).map(|(z, d)| z - d).collect();
             let tht: Vec<f64> = (0..nt).map(|i| zt[i].clamp(lo[i], hi[i])).collect();
             let mt = unpack(&mdl, &zt[nt..]);
