@@ -125,10 +125,16 @@ pub fn fit(recs: Vec<Record>, names: &[String], opts: &FitOptions) -> Result<Fit
     let t0 = std::time::Instant::now();
     let progress = opts.ss.progress;
     let d = opts.input_delay;
+    let name = |i: usize| {
+        names
+            .get(i)
+            .cloned()
+            .unwrap_or_else(|| format!("training record {}", i + 1))
+    };
     let recs = recs
         .into_iter()
-        .zip(names)
-        .map(|(r, name)| delayed(r, d).with_context(|| name.clone()))
+        .enumerate()
+        .map(|(i, r)| delayed(r, d).with_context(|| name(i)))
         .collect::<Result<Vec<_>>>()?;
     if d > 0 && progress {
         eprintln!("the inputs reach the model {d} sample(s) late (--input-delay {d})");
