@@ -52,13 +52,12 @@ pub fn run(args: &Args) -> Result<()> {
         .map(|p| p.display().to_string())
         .collect();
     let fitting::Fitted {
-        saved,
+        mut saved,
         fit,
         lfr: lfr_fit,
         lfr_scale,
         lfr_radius,
         seconds,
-        ..
     } = fitting::fit(recs, &names, &opts)?;
     if fit.modes_to_peak > crate::ident::ss::MAX_CANCELLATION {
         eprintln!(
@@ -66,9 +65,7 @@ pub fn run(args: &Args) -> Result<()> {
             fit.order, fit.modes_to_peak
         );
     }
-    let mut saved = saved;
     saved.report["train"] = serde_json::json!(names);
-    let mut report = std::mem::take(&mut saved.report);
     let loaded = Loaded::Ss(Box::new(saved.clone()));
     let mut valid = Vec::new();
     for v in &args.records.valid {
@@ -86,8 +83,8 @@ pub fn run(args: &Args) -> Result<()> {
     // One record: its object (as before several were allowed); several: the list.
     match valid.len() {
         0 => {}
-        1 => report["valid"] = valid.remove(0),
-        _ => report["valid"] = serde_json::Value::Array(valid),
+        1 => saved.report["valid"] = valid.remove(0),
+        _ => saved.report["valid"] = serde_json::Value::Array(valid),
     }
     println!(
         "{} order {} fitted on {} records in {seconds:.1} s: training RMS output error linear {:.4e}{} {}",
@@ -147,7 +144,6 @@ pub fn run(args: &Args) -> Result<()> {
     for (f, p) in &fit.model.fronts.iter().enumerate().collect::<Vec<_>>() {
         println!("  u{} hysteresis {}: {:?}", f + 1, p.def.name, p.params);
     }
-    let saved = crate::ident::ss::saved::SsJson { report, ..saved };
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let path = dir.join("fit.json");

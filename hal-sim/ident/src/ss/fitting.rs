@@ -114,8 +114,6 @@ pub struct Fitted {
     /// Where the LFR stays bounded on its training inputs scaled up, from rest.
     pub lfr_scale: Option<InputScale>,
     pub lfr_radius: Option<f64>,
-    /// The BLA's noise and distortion over the training records (periodic records only).
-    pub levels: Option<frf::Levels>,
     pub seconds: f64,
 }
 
@@ -229,7 +227,6 @@ pub fn fit(recs: Vec<Record>, names: &[String], opts: &FitOptions) -> Result<Fit
         lfr: lfr_fit,
         lfr_scale,
         lfr_radius,
-        levels,
         seconds,
     })
 }
