@@ -252,6 +252,7 @@ impl Real for Q16 {
     const EPSILON: Self = Self(1);
     /// The largest *finite* value (`i32::MAX` itself is the saturated, "infinite" one).
     const MAX: Self = Self(i32::MAX - 1);
+    const OVERFLOW_PROPAGATES: bool = false;
 
     #[inline]
     fn from_f64(x: f64) -> Self {

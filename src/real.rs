@@ -36,6 +36,10 @@ pub trait Real:
     const EPSILON: Self;
     /// Largest finite value.
     const MAX: Self;
+    /// An overflow stays non-finite through every later operation (IEEE: an infinity, then
+    /// NaN), so a finite result proves finite operands. False for saturating fixed point,
+    /// where a saturated operand can still give a finite result.
+    const OVERFLOW_PROPAGATES: bool = true;
 
     fn from_f64(x: f64) -> Self;
     fn to_f64(self) -> f64;
@@ -98,6 +102,17 @@ pub trait Real:
             Self::ZERO
         }
     }
+    /// `self` negated when `sign_of` is negative: `self * sgn(sign_of)` for a nonzero,
+    /// non-NaN `sign_of` (the callers' case). IEEE types flip the sign bit (integer
+    /// instructions, no compare; `-0.0` counts as negative there).
+    #[inline(always)]
+    fn mul_sign(self, sign_of: Self) -> Self {
+        if sign_of < Self::ZERO {
+            -self
+        } else {
+            self
+        }
+    }
     /// Smaller of two; returns `other` when `self` is NaN.
     #[inline(always)]
     fn min(self, other: Self) -> Self {
@@ -156,6 +171,12 @@ macro_rules! real_impl {
             #[inline(always)]
             fn from_f64(x: f64) -> Self {
                 x as $t
+            }
+            #[inline(always)]
+            fn mul_sign(self, sign_of: Self) -> Self {
+                // `sign_of`'s sign bit XORed into `self`'s.
+                let sign = (-0.0 as $t).to_bits();
+                <$t>::from_bits(self.to_bits() ^ (sign_of.to_bits() & sign))
             }
             #[inline(always)]
             fn to_f64(self) -> f64 {
@@ -456,6 +477,32 @@ mod tests {
         assert_eq!(f32::NAN.clamp_to(-1.0, 1.0), -1.0);
         assert_eq!(f64::INFINITY.clamp_to(-1.0, 1.0), 1.0);
         assert_eq!(0.5f64.clamp_to(-1.0, 1.0), 0.5);
+    }
+
+    /// The sign flip of the IEEE types is the select the fixed point type runs.
+    #[test]
+    fn mul_sign_is_the_product_with_the_sign() {
+        use crate::fixed::Q16;
+        let xs = [-2.5, -1e-30, 0.0, 0.75, 3e20];
+        let signs = [-7.0, -1e-40, 1e-40, 0.5, f64::INFINITY, f64::NEG_INFINITY];
+        for &x in &xs {
+            for &s in &signs {
+                let want = if s < 0.0 { -x } else { x };
+                assert_eq!(x.mul_sign(s).to_bits(), want.to_bits(), "{x} {s}");
+                let (xf, sf) = (x as f32, s as f32);
+                let want = if sf < 0.0 || (sf == 0.0 && s < 0.0) {
+                    -xf
+                } else {
+                    xf
+                };
+                assert_eq!(xf.mul_sign(sf).to_bits(), want.to_bits(), "{x} {s}");
+                let (xq, sq) = (Q16::from_f64(x.clamp(-3e4, 3e4)), Q16::from_f64(s));
+                let want = if sq < Q16::ZERO { -xq } else { xq };
+                assert_eq!(xq.mul_sign(sq), want, "{x} {s}");
+            }
+        }
+        // -0.0 counts as negative where the sign is a bit (callers never pass a zero).
+        assert_eq!(2.0f32.mul_sign(-0.0), -2.0);
     }
 
     #[test]

@@ -110,9 +110,9 @@ fn cbw_n1_piece_unchecked<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
     if !(up || du < T::ZERO) {
         return Some(h); // no move (NaN du is refused by the callers)
     }
-    // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as selects.
-    let h_up = if h == T::ZERO { up } else { h > T::ZERO };
-    let k = if up { m.beta() } else { -m.beta() } + if h_up { m.gamma() } else { -m.gamma() };
+    // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as sign flips.
+    let h_side = if h == T::ZERO { du } else { h };
+    let k = m.beta().mul_sign(du) + m.gamma().mul_sign(h_side);
     let (phi, _) = (k * du).phi_expm1_neg();
     let h1 = h + (m.alpha() - k * h) * du * phi;
     if h * h1 < T::ZERO {

@@ -192,6 +192,7 @@ impl<T: Real> Robust<T> {
 
     #[inline]
     pub fn update(&mut self, io: &LoopSignals<T>) -> T {
+        let io = self.guard.clean(io);
         self.update_impl::<false>(io)
     }
 
@@ -212,20 +213,22 @@ impl<T: Real> Robust<T> {
     /// [`Robust::update`] for a primed law (not [`Robust::is_fresh`]) with
     /// [`Robust::fusable`] and inputs whose measurement, feedforward and applied voltage are
     /// finite and inside the input guard's bound (the pipeline checks the configuration
-    /// once, the rest every sample): the same arithmetic without the checks that cannot
+    /// once, the rest every sample), and the setpoint too when `setpoint_within` (the
+    /// reference generator knows it): the same arithmetic without the checks that cannot
     /// fire then.
     #[inline(always)]
-    pub(crate) fn update_fused(&mut self, io: &LoopSignals<T>) -> T {
+    pub(crate) fn update_fused(&mut self, io: &LoopSignals<T>, setpoint_within: bool) -> T {
+        let io = if setpoint_within {
+            self.guard.clean_known(io)
+        } else {
+            self.guard.clean_bounded(io)
+        };
         self.update_impl::<true>(io)
     }
 
+    /// The law on inputs the guard has cleaned.
     #[inline(always)]
-    fn update_impl<const FUSED: bool>(&mut self, io: &LoopSignals<T>) -> T {
-        let io = if FUSED {
-            self.guard.clean_bounded(io)
-        } else {
-            self.guard.clean(io)
-        };
+    fn update_impl<const FUSED: bool>(&mut self, io: LoopSignals<T>) -> T {
         // The fused caller runs only a primed law (`is_fresh` is its condition).
         if !FUSED && self.state.fresh {
             self.prime(&io);

@@ -91,12 +91,17 @@ fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T,
     let (phi, em) = (k * du).phi_expm1_neg(); // em = e^-(k du) - 1
     let dh = c * du * phi;
     let res = d * du - dh - r;
-    if !(res.abs() > tol) {
-        return if du.is_finite() && dh.is_finite() {
-            Some((du, dh, 1, phi))
-        } else {
-            None
-        };
+    // In IEEE arithmetic a residual below the tolerance is finite, and so are `d du`, `dh`
+    // (a non-finite one would make it infinite or NaN) and `du` (`d > 0`): no finiteness
+    // tests per sample. NaN goes on to the Newton steps, which return `None` for it. Fixed
+    // point saturates instead, so it keeps the tests.
+    let accept = if T::OVERFLOW_PROPAGATES {
+        res.abs() < tol
+    } else {
+        res.abs() <= tol && du.is_finite() && dh.is_finite()
+    };
+    if accept {
+        return Some((du, dh, 1, phi));
     }
     cbw_piece_newton(d, c, k, r, tol, du, res, em)
 }
@@ -185,8 +190,8 @@ fn invert_cbw_n1<T: Real>(
     let (d, alpha, beta, gamma) = (m.d(), m.alpha(), m.beta(), m.gamma());
     let h0 = state.h;
     let r = y_ref - (d * state.u - h0);
-    // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) as selects, not `sgn`
-    // products: this runs every sample.
+    // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) without `sgn` products:
+    // this runs every sample.
     let up = r > T::ZERO;
     if !(up || r < T::ZERO) {
         // Already there (or NaN: the caller holds the output).
@@ -202,14 +207,14 @@ fn invert_cbw_n1<T: Real>(
             None
         };
     }
-    let s = if up { T::ONE } else { -T::ONE };
-    let beta_s = if up { beta } else { -beta };
-    let h_up = if h0 == T::ZERO { up } else { h0 > T::ZERO };
-    let k = beta_s + if h_up { gamma } else { -gamma };
+    // k = beta s + gamma sgn(h0) (s at h0 = 0), as sign flips (r is neither 0 nor NaN).
+    let h_side = if h0 == T::ZERO { r } else { h0 };
+    let k = beta.mul_sign(r) + gamma.mul_sign(h_side);
     let (mut du, mut dh, mut it, mut phi) = cbw_piece(d, alpha - k * h0, k, r, tol, hint)?;
     if h0 * (h0 + dh) < T::ZERO {
         // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
         // moving in direction s, where sgn(h) = s.
+        let s = if up { T::ONE } else { -T::ONE };
         let du0 = if k == T::ZERO {
             -h0 / alpha
         } else {
@@ -351,15 +356,15 @@ impl<T: Real> Ims<T, Cbw<T>> {
     }
 
     /// [`Ims::compensate`] for [`Ims::is_plain_cbw_n1`] (same arithmetic, the checks of the
-    /// other cases left out).
+    /// other cases left out). `y_ref_finite`: the caller knows the reference is finite.
     #[inline(always)]
-    pub(crate) fn compensate_plain_cbw_n1(&mut self, y_ref_um: T) -> T {
-        if !y_ref_um.is_finite() {
+    pub(crate) fn compensate_plain_cbw_n1(&mut self, y_ref_um: T, y_ref_finite: bool) -> T {
+        if !(y_ref_finite || y_ref_um.is_finite()) {
             return self.u;
         }
         let tol = self.tol(y_ref_um);
         if let Some(inv) = invert_cbw_n1(&self.model, &self.state, y_ref_um, tol, self.step_hint) {
-            if let Some(u) = self.take_inverted(inv) {
+            if let Some(u) = self.take_inverted::<true>(inv) {
                 return u;
             }
         }
@@ -553,7 +558,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
                         self.model
                             .invert_step(&self.state, y_ref_um, tol, self.step_hint)
                     {
-                        if let Some(u) = self.take_inverted(inv) {
+                        if let Some(u) = self.take_inverted::<false>(inv) {
                             return u;
                         }
                     }
@@ -577,9 +582,10 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     }
 
     /// Takes a direct inversion if it lies inside the range and slew limits (the solve's own
-    /// step is then the model's); `None` leaves the state untouched.
+    /// step is then the model's); `None` leaves the state untouched. `NO_CREEP`: the caller
+    /// knows there is no creep compensation.
     #[inline(always)]
-    fn take_inverted(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
+    fn take_inverted<const NO_CREEP: bool>(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
         // Without a slew limit the range alone (`u -+ T::MAX` lies beyond it).
         let (lo, hi) = if self.max_step_volts == T::MAX {
             (self.volts_min, self.volts_max)
@@ -593,7 +599,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             self.evals = inv.iterations;
             self.step_hint = inv.hint;
             self.state = inv.state;
-            Some(self.commit(inv.u, inv.y))
+            Some(self.commit::<NO_CREEP>(inv.u, inv.y))
         } else {
             None
         }
@@ -630,14 +636,17 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             .clamp_to(self.u - self.max_step_volts, self.u + self.max_step_volts);
         let y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
         self.step_hint = T::ONE;
-        self.commit(u, y)
+        self.commit::<false>(u, y)
     }
 
     /// Takes `u` with model output `y` as this sample's voltage.
     #[inline]
-    fn commit(&mut self, u: T, y: T) -> T {
+    fn commit<const NO_CREEP: bool>(&mut self, u: T, y: T) -> T {
         self.y = y;
         self.u = u;
+        if NO_CREEP {
+            return u;
+        }
         if let Some(c) = &mut self.creep {
             c.commit(self.y);
         }

@@ -8,7 +8,8 @@
 //! cannot fire there. Which guards those are is decided once per configuration
 //! ([`Pipeline::fusable`]): a valid ADC code scales into the input guard's bound, the
 //! applied voltage (a code of the output range) and the IMS output (inside its voltage
-//! range) too, so the law's input guard only has to hold the setpoint. The guards that
+//! range) too, so the law's input guard only has to hold the setpoint, and not even that
+//! for a sine whose generator knows its setpoints lie inside the guard. The guards that
 //! matter stay: an ADC code outside the sensor window, a fault, a law that has not primed
 //! its observer yet or a non-finite command leave the sample (or its end) to the generic
 //! path's safe-state handling, and the final range and slew limits are the same code.
@@ -117,20 +118,23 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         };
         st.counters.samples = st.counters.samples.saturating_add(1);
         *y_tr = y;
-        let sp = gen.next_setpoint();
+        let (sp, sp_within) = gen.next_setpoint_guarded();
         *sp_tr = sp;
-        let u_ff = ims.compensate_plain_cbw_n1(sp.y_um);
+        let u_ff = ims.compensate_plain_cbw_n1(sp.y_um, sp_within);
         *u_ff_tr = u_ff;
         // The generic step's test for a non-finite command is left out: the robust law
         // returns a finite command or, if its own would not be, the applied voltage (finite
         // here), so the law's test is the one that matters. Whatever `u` is, the limits
         // below keep the code inside the range and the slew limit (NaN -> lowest code).
-        let u = law.update_fused(&LoopSignals {
-            setpoint: sp,
-            y_um: y,
-            u_ff,
-            u_applied: *u_applied,
-        });
+        let u = law.update_fused(
+            &LoopSignals {
+                setpoint: sp,
+                y_um: y,
+                u_ff,
+                u_applied: *u_applied,
+            },
+            sp_within,
+        );
         *u_cmd_tr = u;
         // The last code is always inside the output range (`new`, `limit` and
         // `dac_write_failed` put it there).

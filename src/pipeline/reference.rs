@@ -5,6 +5,7 @@
 
 use super::excitation::{self, sin_cos_turns, Chirp};
 use super::ConfigError;
+use crate::feedback::guard::setpoint_within_bounds;
 use crate::real::Real;
 use crate::signals::Setpoint;
 
@@ -423,6 +424,9 @@ struct Phasor<T> {
     left: u16,
     /// Rotations between exact evaluations (1: every sample exact).
     every: u16,
+    /// Every setpoint it gives passes the laws' input guard unchanged (decided once, from
+    /// the amplitudes, with a factor 2 for the rotation's rounding).
+    within_guard: bool,
 }
 
 /// A wave with its phase accumulator: advances one sample per call.
@@ -462,6 +466,19 @@ impl<T: Real> WaveGen<T> {
                 let delta = core::f64::consts::TAU * step as f64 / TURN;
                 let w = T::TWO * T::PI * freq_hz;
                 let (s, c) = sin_cos_turns(T::from_turns(phase));
+                let (amp_w, amp_w2) = (amplitude_um * w, -(amplitude_um * w * w));
+                let mag = |x: T| {
+                    if x.is_finite() {
+                        x.to_f64().abs()
+                    } else {
+                        f64::INFINITY
+                    }
+                };
+                let within_guard = setpoint_within_bounds::<T>(
+                    mag(offset_um) + 2.0 * mag(amplitude_um),
+                    2.0 * mag(amp_w),
+                    2.0 * mag(amp_w2),
+                );
                 Some(Phasor {
                     s,
                     c,
@@ -469,8 +486,9 @@ impl<T: Real> WaveGen<T> {
                     sd: T::from_f64(libm::sin(delta)),
                     offset_um,
                     amp: amplitude_um,
-                    amp_w: amplitude_um * w,
-                    amp_w2: -(amplitude_um * w * w),
+                    amp_w,
+                    amp_w2,
+                    within_guard,
                     left: 0,
                     every: if T::EPSILON < T::from_f64(1e-6) {
                         SINE_RESYNC
@@ -548,9 +566,17 @@ impl<T: Real> WaveGen<T> {
     /// The current setpoint; then advance one sample.
     #[inline]
     pub fn next_setpoint(&mut self) -> Setpoint<T> {
+        self.next_setpoint_guarded().0
+    }
+
+    /// [`WaveGen::next_setpoint`], and whether it passes the laws' input guard unchanged
+    /// (known for a sine from its amplitudes; `false`: not known).
+    #[inline(always)]
+    pub(crate) fn next_setpoint_guarded(&mut self) -> (Setpoint<T>, bool) {
         self.phase = self.phase.wrapping_add(self.step);
         match self.phasor.as_mut() {
             Some(p) => {
+                let within = p.within_guard;
                 let sp = Setpoint {
                     y_um: p.offset_um + p.amp * p.s,
                     dy: p.amp_w * p.c,
@@ -564,9 +590,9 @@ impl<T: Real> WaveGen<T> {
                     p.s = s * p.cd + c * p.sd;
                     p.c = c * p.cd - s * p.sd;
                 }
-                sp
+                (sp, within)
             }
-            None => self.next_from_phase(),
+            None => (self.next_from_phase(), false),
         }
     }
 }
@@ -606,6 +632,61 @@ pub fn lissajous<T: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::feedback::guard::InputGuard;
+    use crate::signals::LoopSignals;
+
+    /// A sine says its setpoints pass the laws' input guard unchanged only when they do
+    /// (the fused step then leaves the guard out); beyond a bound, or not a sine, it does not
+    /// say so.
+    #[test]
+    fn a_sine_knows_whether_the_input_guard_passes_it() {
+        fn within<T: Real>(wave: Wave<T>, fs: f64, samples: usize) -> bool {
+            let mut g = WaveGen::new(wave, T::from_f64(fs)).unwrap();
+            let mut guard = InputGuard::<T>::default();
+            let mut all = true;
+            for _ in 0..samples {
+                let (sp, within) = g.next_setpoint_guarded();
+                let io = LoopSignals {
+                    setpoint: sp,
+                    ..Default::default()
+                };
+                let c = guard.clean(&io);
+                if within {
+                    assert_eq!(
+                        c.setpoint, sp,
+                        "the guard changed a setpoint said to pass it"
+                    );
+                }
+                all &= within;
+            }
+            all
+        }
+        let sine = |amp: f64, hz: f64| Wave::sine(10.0f32, amp as f32, hz as f32);
+        // The firmware's bench sine (its acceleration 2e6 um/s^2), and a fast one.
+        assert!(within(sine(5.0, 100.0), 100e3, 5000));
+        assert!(within(sine(40.0, 1000.0), 100e3, 5000));
+        // Twice the acceleration beyond its bound (40 um at 2 kHz: 6.3e9 um/s^2), a velocity
+        // beyond its bound, an amplitude beyond every bound: not known.
+        assert!(!within(sine(40.0, 2000.0), 100e3, 100));
+        assert!(!within(sine(2e4, 10.0), 100e3, 100));
+        assert!(!within(sine(1e30, 1.0), 100e3, 100));
+        // Not a sine: not known.
+        let tri = Wave::Triangle {
+            offset_um: 0.0f32,
+            amplitude_um: 1.0,
+            freq_hz: 10.0,
+            phase_turns: 0.0,
+        };
+        assert!(!within(tri, 100e3, 100));
+        // Fixed point saturates near 32768: a 5 um, 100 Hz sine's acceleration is beyond it,
+        // a slow one is inside.
+        use crate::fixed::Q16;
+        let q = |amp: f64, hz: f64| {
+            Wave::sine(Q16::from_f64(10.0), Q16::from_f64(amp), Q16::from_f64(hz))
+        };
+        assert!(!within(q(5.0, 100.0), 16384.0, 100));
+        assert!(within(q(1.0, 5.0), 16384.0, 2000));
+    }
 
     /// Central differences of the generated sequence against the exact derivatives.
     fn check_derivatives(wave: Wave<f64>, fs: f64) {
