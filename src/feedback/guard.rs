@@ -58,12 +58,19 @@ fn hold_setpoint<T: Real>(sp: &Setpoint<T>, prev: &Setpoint<T>) -> Setpoint<T> {
     }
 }
 
+/// `x` passes [`hold`]'s bound `bound` unchanged, decided ahead of time: strictly inside it
+/// as `T` rounds it, with a margin for the rounding of whatever computed `x`. False for NaN
+/// and infinities.
+pub(crate) fn inside_bound<T: Real>(x: f64, bound: f64) -> bool {
+    x.abs() < T::from_f64(bound).to_f64() * 0.999
+}
+
 /// A setpoint whose magnitudes are at most these (um, um/s, um/s^2) passes
-/// [`InputGuard::clean`] unchanged: strictly inside the bounds as `T` rounds them, with a
-/// margin. False for NaN and infinities.
+/// [`InputGuard::clean`] unchanged ([`inside_bound`]).
 pub(crate) fn setpoint_within_bounds<T: Real>(y_um: f64, dy: f64, ddy: f64) -> bool {
-    let inside = |x: f64, bound: f64| x.abs() < T::from_f64(bound).to_f64() * 0.999;
-    inside(y_um, INPUT_BOUND) && inside(dy, INPUT_BOUND) && inside(ddy, ACCEL_BOUND)
+    inside_bound::<T>(y_um, INPUT_BOUND)
+        && inside_bound::<T>(dy, INPUT_BOUND)
+        && inside_bound::<T>(ddy, ACCEL_BOUND)
 }
 
 impl<T: Real> InputGuard<T> {

@@ -15,7 +15,7 @@
 //! path's safe-state handling, and the final range and slew limits are the same code.
 
 use super::Pipeline;
-use crate::feedback::guard::INPUT_BOUND;
+use crate::feedback::guard::{inside_bound, INPUT_BOUND};
 use crate::feedback::Feedback;
 use crate::feedforward::{Feedforward, MultiFeedforward};
 use crate::real::Real;
@@ -45,10 +45,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         let Some(Feedforward::ImsCbw(ims)) = ffs.first() else {
             return false;
         };
-        // Strictly inside the guard's bound (as the number type rounds it), with a margin
-        // for the rounding of the scaling itself.
-        let bound = T::from_f64(INPUT_BOUND).to_f64() * 0.999;
-        let inside = |x: f64| x.abs() < bound;
+        let inside = |x: f64| inside_bound::<T>(x, INPUT_BOUND);
         let sensor = |code: i32| {
             axis.sensor.offset_um.to_f64() + axis.sensor.um_per_code.to_f64() * code as f64
         };
