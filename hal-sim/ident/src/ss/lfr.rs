@@ -642,12 +642,16 @@ const TRI_BLOCK: usize = if cfg!(test) { 4 } else { 64 };
 /// derivative by `theta` (forward sensitivities), `e` the output error; `J^T J` from every
 /// `stride`-th scored sample (scaled), `J^T e` from all.
 ///
-/// The sensitivities of all parameters advance together as matrices (`S = dx/dtheta`, `n x
-/// np`): `dz = F S`, `dy = C S` and `S+ = A S + E (dN/dz dz)` are matrix products (BLAS-like
-/// kernels), then each parameter adds its own term. Per sample that is `O((nz + p + nw) n
-/// np)` either way; as products an iteration with `outputs:3` on three mirror records took
-/// 4.9 s instead of 8.9 s column by column, with the same training errors to the printed
-/// digits.
+/// The sensitivities of all parameters advance together as matrices, stored transposed
+/// (`St = (dx/dtheta)^T`, `np x n`, one column of all parameters per state): `dz = F S`,
+/// `dy = C S` and `E (dN/dz dz)` are matrix products (BLAS-like kernels), and `A S` (the
+/// modal blocks) and `dN/dz dz` are operations on whole columns, so every step runs over
+/// the parameters in vector lanes; then each parameter adds its own term. Per sample that
+/// is `O((nz + p + nw) n np)`. As products (against column by column) an iteration with
+/// `outputs:3` on three mirror records took 4.9 s instead of 8.9 s; transposed, an
+/// `outputs:2` iteration on three records takes 1.57 s instead of 2.56 s. In `f32` it took
+/// 1.06 s, but fits from a poor linear start then stalled higher (docs/src/lfr.md), so the
+/// sensitivities stay in `f64`.
 fn normal_record(
     mdl: &Lfr,
     params: &[Param],
@@ -672,20 +676,22 @@ fn normal_record(
     let e_cols: Vec<&[f64]> = (0..nw)
         .map(|q| &mdl.e.as_slice()[q * n..(q + 1) * n])
         .collect();
-    let mut s = DMatrix::<f64>::zeros(n, np);
-    let mut sn = DMatrix::<f64>::zeros(n, np);
-    // [F; C] S: dz/dtheta (rows 0..nz) and dy/dtheta (rows nz..), one product (nalgebra
-    // hands products to matrixmultiply's kernels above five rows; C alone has p).
-    // dw/dtheta (nw x np): a holding play keeps its row from the last sample.
-    let fc = DMatrix::<f64>::from_fn(nz + p, n, |r, l| {
+    let mut st = DMatrix::<f64>::zeros(np, n);
+    let mut snt = DMatrix::<f64>::zeros(np, n);
+    // E^T and [F; C]^T: one product each per sample (nalgebra hands them to
+    // matrixmultiply's kernels).
+    let et = mdl.e.transpose();
+    let fct = DMatrix::<f64>::from_fn(n, nz + p, |l, r| {
         if r < nz {
             mdl.f[(r, l)]
         } else {
             mdl.linear.c[(r - nz, l)]
         }
     });
-    let mut dzy = DMatrix::<f64>::zeros(nz + p, np);
-    let mut sw = DMatrix::<f64>::zeros(nw, np);
+    // (dz/dtheta)^T (columns 0..nz) and (dy/dtheta)^T (columns nz..); (dw/dtheta)^T, where
+    // a holding play keeps its column from the last sample.
+    let mut dzyt = DMatrix::<f64>::zeros(np, nz + p);
+    let mut swt = DMatrix::<f64>::zeros(np, nw);
     let mut x = vec![0.0; n];
     let mut xn = vec![0.0; n];
     let mut uk = vec![0.0; m];
@@ -694,20 +700,21 @@ fn normal_record(
     let mut dw = vec![0.0; nw];
     let mut moved = vec![true; nw];
     let mut mem = vec![0.0; nw];
-    let mut err = DVector::<f64>::zeros(p);
+    let mut err = vec![0.0; p];
+    // J^T of a batch of scored samples: `p` columns per sample.
     let batch = 128;
-    let mut jbuf = DMatrix::<f64>::zeros(batch * p, np);
-    let mut rows_in = 0;
+    let mut jbt = DMatrix::<f64>::zeros(np, batch * p);
+    let mut cols_in = 0;
     let mut h = DMatrix::<f64>::zeros(np, np);
-    let mut g = DVector::<f64>::zeros(np);
+    let mut g = vec![0.0; np];
     let mut scored_count = 0usize;
     let len = rec.u[0].len();
     // J^T J is symmetric: its upper triangle in column blocks (half the products of the
     // full one), mirrored once at the end.
-    let flush = |h: &mut DMatrix<f64>, jbuf: &DMatrix<f64>, rows: usize| {
-        if rows > 0 {
-            let j = jbuf.rows(0, rows);
-            let jt = j.transpose();
+    let flush = |h: &mut DMatrix<f64>, jbt: &DMatrix<f64>, cols: usize| {
+        if cols > 0 {
+            let jt = jbt.columns(0, cols);
+            let j = jt.transpose();
             let mut c0 = 0;
             while c0 < np {
                 let w = TRI_BLOCK.min(np - c0);
@@ -734,45 +741,60 @@ fn normal_record(
         }
         let scored = rec.scored(k);
         // dz = F dx, plus the F and G parameters' own terms; dy = C dx.
-        dzy.gemm(1.0, &fc, &s, 0.0);
+        dzyt.gemm(1.0, &st, &fct, 0.0);
         for (c, par) in params.iter().enumerate() {
             match *par {
-                Param::F(i, l) => dzy[(i, c)] += x[l],
-                Param::G(i, j) => dzy[(i, c)] += uk[j],
+                Param::F(i, l) => dzyt[(c, i)] += x[l],
+                Param::G(i, j) => dzyt[(c, i)] += uk[j],
                 _ => {}
             }
         }
-        // dw = N'(z) dz where the operator moves.
+        // dw = N'(z) dz where the operator moves (columns as slices: the loops vectorise).
         for q in 0..nw {
             if moved[q] {
-                let i = q % nz;
-                for c in 0..np {
-                    sw[(q, c)] = dw[q] * dzy[(i, c)];
+                let d = dw[q];
+                let src = &dzyt.as_slice()[(q % nz) * np..][..np];
+                for (o, &v) in swt.as_mut_slice()[q * np..][..np].iter_mut().zip(src) {
+                    *o = d * v;
                 }
             }
         }
-        // S+ = A S + E dw, plus the poles', B's and E's own terms.
-        for c in 0..np {
-            a_times(
-                &mdl.linear.blocks,
-                s.column(c).as_slice(),
-                sn.column_mut(c).as_mut_slice(),
-            );
+        // S+ = A S + E dw (the modal blocks on whole columns), plus the poles', B's and E's
+        // own terms.
+        let mut i = 0;
+        let (sa, sna) = (st.as_slice(), snt.as_mut_slice());
+        for blk in &mdl.linear.blocks {
+            match *blk {
+                Block::Real(l) => {
+                    for (o, &v) in sna[i * np..][..np].iter_mut().zip(&sa[i * np..][..np]) {
+                        *o = l * v;
+                    }
+                }
+                Block::Pair(sg, om) => {
+                    let (o0, o1) = sna[i * np..][..2 * np].split_at_mut(np);
+                    let (s0, s1) = sa[i * np..][..2 * np].split_at(np);
+                    for (((a0, a1), &v0), &v1) in o0.iter_mut().zip(o1).zip(s0).zip(s1) {
+                        *a0 = sg * v0 + om * v1;
+                        *a1 = sg * v1 - om * v0;
+                    }
+                }
+            }
+            i += blk.states();
         }
-        sn.gemm(1.0, &mdl.e, &sw, 1.0);
+        snt.gemm(1.0, &swt, &et, 1.0);
         for (c, par) in params.iter().enumerate() {
             match *par {
-                Param::Real(i) => sn[(i, c)] += x[i],
+                Param::Real(i) => snt[(c, i)] += x[i],
                 Param::Sigma(i) => {
-                    sn[(i, c)] += x[i];
-                    sn[(i + 1, c)] += x[i + 1];
+                    snt[(c, i)] += x[i];
+                    snt[(c, i + 1)] += x[i + 1];
                 }
                 Param::Omega(i) => {
-                    sn[(i, c)] += x[i + 1];
-                    sn[(i + 1, c)] -= x[i];
+                    snt[(c, i)] += x[i + 1];
+                    snt[(c, i + 1)] -= x[i];
                 }
-                Param::B(r, j) => sn[(r, c)] += uk[j],
-                Param::E(r, q) => sn[(r, c)] += w[q],
+                Param::B(r, j) => snt[(c, r)] += uk[j],
+                Param::E(r, q) => snt[(c, r)] += w[q],
                 _ => {}
             }
         }
@@ -782,14 +804,18 @@ fn normal_record(
                     dot(&c_rows[o], &x) + (0..m).map(|j| mdl.linear.d[(o, j)] * uk[j]).sum::<f64>();
                 err[o] = rec.y[o][k] - yhat;
             }
-            let ys = dzy.rows(nz, p);
-            g.gemv_tr(1.0, &ys, &err, 1.0);
+            // J^T e over every scored sample.
+            for (o, &e) in err.iter().enumerate() {
+                for (gc, &v) in g.iter_mut().zip(&dzyt.as_slice()[(nz + o) * np..][..np]) {
+                    *gc += v * e;
+                }
+            }
             if scored_count.is_multiple_of(stride) {
-                jbuf.rows_mut(rows_in, p).copy_from(&ys);
-                rows_in += p;
-                if rows_in == batch * p {
-                    flush(&mut h, &jbuf, rows_in);
-                    rows_in = 0;
+                jbt.columns_mut(cols_in, p).copy_from(&dzyt.columns(nz, p));
+                cols_in += p;
+                if cols_in == batch * p {
+                    flush(&mut h, &jbt, cols_in);
+                    cols_in = 0;
                 }
             }
             scored_count += 1;
@@ -807,21 +833,21 @@ fn normal_record(
             }
         }
         std::mem::swap(&mut x, &mut xn);
-        std::mem::swap(&mut s, &mut sn);
+        std::mem::swap(&mut st, &mut snt);
         if k % 1024 == 0 || k + 1 == len {
             anyhow::ensure!(
-                x.iter().chain(s.iter()).all(|v| v.is_finite()),
+                x.iter().all(|v| v.is_finite()) && st.iter().all(|v| v.is_finite()),
                 "the LFR sensitivities diverged at sample {k}"
             );
         }
     }
-    flush(&mut h, &jbuf, rows_in);
+    flush(&mut h, &jbt, cols_in);
     for c in 0..np {
         for r in c + 1..np {
             h[(r, c)] = h[(c, r)];
         }
     }
-    Ok((h, g))
+    Ok((h, DVector::from_vec(g)))
 }
 
 /// What the nonlinearity's channels `z` are.
