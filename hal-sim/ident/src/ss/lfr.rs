@@ -350,13 +350,31 @@ impl Lfr {
 /// `out = A x` for the block-diagonal `A`.
 #[inline]
 fn a_times(blocks: &[Block], x: &[f64], out: &mut [f64]) {
+    a_times_columns(blocks, x, out, 1);
+}
+
+/// `out = A X` for the block-diagonal `A`, `X` stored as one column of `width` values per
+/// state (`X^T` column-major): each block acts on whole columns, which vectorises.
+#[inline]
+fn a_times_columns(blocks: &[Block], x: &[f64], out: &mut [f64], width: usize) {
     let mut i = 0;
     for blk in blocks {
         match *blk {
-            Block::Real(l) => out[i] = l * x[i],
+            Block::Real(l) => {
+                for (o, &v) in out[i * width..][..width]
+                    .iter_mut()
+                    .zip(&x[i * width..][..width])
+                {
+                    *o = l * v;
+                }
+            }
             Block::Pair(s, w) => {
-                out[i] = s * x[i] + w * x[i + 1];
-                out[i + 1] = -w * x[i] + s * x[i + 1];
+                let (o0, o1) = out[i * width..][..2 * width].split_at_mut(width);
+                let (x0, x1) = x[i * width..][..2 * width].split_at(width);
+                for (((a0, a1), &v0), &v1) in o0.iter_mut().zip(o1).zip(x0).zip(x1) {
+                    *a0 = s * v0 + w * v1;
+                    *a1 = s * v1 - w * v0;
+                }
             }
         }
         i += blk.states();
@@ -761,26 +779,7 @@ fn normal_record(
         }
         // S+ = A S + E dw (the modal blocks on whole columns), plus the poles', B's and E's
         // own terms.
-        let mut i = 0;
-        let (sa, sna) = (st.as_slice(), snt.as_mut_slice());
-        for blk in &mdl.linear.blocks {
-            match *blk {
-                Block::Real(l) => {
-                    for (o, &v) in sna[i * np..][..np].iter_mut().zip(&sa[i * np..][..np]) {
-                        *o = l * v;
-                    }
-                }
-                Block::Pair(sg, om) => {
-                    let (o0, o1) = sna[i * np..][..2 * np].split_at_mut(np);
-                    let (s0, s1) = sa[i * np..][..2 * np].split_at(np);
-                    for (((a0, a1), &v0), &v1) in o0.iter_mut().zip(o1).zip(s0).zip(s1) {
-                        *a0 = sg * v0 + om * v1;
-                        *a1 = sg * v1 - om * v0;
-                    }
-                }
-            }
-            i += blk.states();
-        }
+        a_times_columns(&mdl.linear.blocks, st.as_slice(), snt.as_mut_slice(), np);
         snt.gemm(1.0, &swt, &et, 1.0);
         for (c, par) in params.iter().enumerate() {
             match *par {
