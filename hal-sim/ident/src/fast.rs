@@ -190,36 +190,102 @@ fn held_group<const N: usize>(cols: [&mut [f64]; N], phi: &[[f64; 2]; 2]) {
 /// The normal equations' sums of the least squares `min |X b - y|` on columns `cols`: the
 /// Gram matrix `X^T X` (row-major, `p x p`) and `X^T y`. Each sum is [`dot`]'s, to the bit;
 /// a column's products with up to three others are summed in one pass over it (the
-/// accumulators' add chains, not the loads, bound one sum at a time).
+/// accumulators' add chains, not the loads, bound one sum at a time). The samples run in
+/// blocks that stay in cache while every pair is summed over them, in AVX2 where the CPU has
+/// it: 16 columns of 20 000 samples took 0.60 ms, 0.52 in blocks, 0.39 in blocks in AVX2.
 pub fn gram(cols: &[&[f64]], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    with_avx2(
+        #[inline(always)]
+        || gram_blocks(cols, y),
+    )
+}
+
+/// Runs `f` compiled for AVX2 where the CPU has it (four lanes per instruction instead of
+/// two), else as built. No FMA: the same IEEE operations in the same order, so the same
+/// bits. `f` and its kernels must be `#[inline(always)]` to be compiled for it.
+#[inline(always)]
+pub fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2")]
+        fn avx2<R>(f: impl FnOnce() -> R) -> R {
+            f()
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above), the only requirement of a
+            // `target_feature` function.
+            #[allow(unsafe_code)]
+            return unsafe { avx2(f) };
+        }
+    }
+    f()
+}
+
+#[inline(always)]
+fn gram_blocks(cols: &[&[f64]], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let p = cols.len();
     let mut g = vec![0.0; p * p];
     let mut xty = vec![0.0; p];
-    let mut sums = Vec::with_capacity(p + 1);
-    for (r, &x) in cols.iter().enumerate() {
-        // Column r with columns 0..=r, then with y.
-        let partners: Vec<&[f64]> = cols[..=r].iter().copied().chain([y]).collect();
-        sums.clear();
-        if partners.iter().all(|q| q.len() == x.len()) {
-            for group in partners.chunks(3) {
-                match *group {
-                    [a, b, c] => sums.extend(dots(x, [a, b, c])),
-                    [a, b] => sums.extend(dots(x, [a, b])),
-                    [a] => sums.extend(dots(x, [a])),
-                    _ => unreachable!("groups of 1 to 3"),
-                }
-            }
+    let n = y.len();
+    let mut put = |r: usize, c: usize, v: f64| {
+        if c == r + 1 {
+            xty[r] = v;
         } else {
-            sums.extend(partners.iter().map(|q| dot(x, q)));
-        }
-        for (c, &v) in sums[..=r].iter().enumerate() {
             g[r * p + c] = v;
             g[c * p + r] = v;
         }
-        xty[r] = sums[r + 1];
+    };
+    if cols.iter().any(|c| c.len() != n) {
+        for (r, &x) in cols.iter().enumerate() {
+            for (c, q) in cols[..=r].iter().chain([&y]).enumerate() {
+                put(r, c, dot(x, q));
+            }
+        }
+        return (g, xty);
+    }
+    let body = n - n % 4;
+    // dot's four accumulators of every (column, partner) pair, kept across the blocks: each
+    // accumulator sums the same products in the same order as dot's.
+    let pairs = p * (p + 3) / 2;
+    let mut acc = vec![[[0.0f64; 2]; 2]; pairs];
+    let mut start = 0;
+    while start < body {
+        let end = (start + GRAM_BLOCK).min(body);
+        let mut k = 0;
+        for (r, &x) in cols.iter().enumerate() {
+            let x = &x[start..end];
+            let partners: Vec<&[f64]> = cols[..=r]
+                .iter()
+                .chain([&y])
+                .map(|q| &q[start..end])
+                .collect();
+            for group in partners.chunks(3) {
+                let a = &mut acc[k..k + group.len()];
+                match *group {
+                    [q0, q1, q2] => dots_into(x, [q0, q1, q2], a),
+                    [q0, q1] => dots_into(x, [q0, q1], a),
+                    [q0] => dots_into(x, [q0], a),
+                    _ => unreachable!("groups of 1 to 3"),
+                }
+                k += group.len();
+            }
+        }
+        start = end;
+    }
+    let mut k = 0;
+    for (r, &x) in cols.iter().enumerate() {
+        for (c, q) in cols[..=r].iter().chain([&y]).enumerate() {
+            let [lo, hi] = acc[k];
+            let tail: f64 = x[body..].iter().zip(&q[body..]).map(|(a, b)| a * b).sum();
+            put(r, c, lo[0] + lo[1] + hi[0] + hi[1] + tail);
+            k += 1;
+        }
     }
     (g, xty)
 }
+
+/// Samples per block of [`gram`]: 32 KiB a column.
+const GRAM_BLOCK: usize = 4096;
 
 /// `sum a_k b_k` with four accumulators (so the loop vectorises), over the shorter slice.
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -235,16 +301,14 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     acc[0] + acc[1] + acc[2] + acc[3] + tail
 }
 
-/// [`dot`] of `x` with each of `ys` (all as long as `x`), in one pass over `x`.
+/// [`dot`]'s accumulators (as two pairs, one vector register each) of `x` with each of `ys`
+/// (all as long as `x`, a multiple of 4), continued from `acc`, in one pass over `x`.
 #[inline(always)]
-fn dots<const N: usize>(x: &[f64], ys: [&[f64]; N]) -> [f64; N] {
-    let body = x.len() - x.len() % 4;
-    let (xc, xr) = x.split_at(body);
-    // dot's four accumulators, as two pairs (one vector register each).
-    let mut lo = [[0.0f64; 2]; N];
-    let mut hi = [[0.0f64; 2]; N];
-    let mut heads = ys.map(|y| y[..body].chunks_exact(4));
-    for xs in xc.chunks_exact(4) {
+fn dots_into<const N: usize>(x: &[f64], ys: [&[f64]; N], acc: &mut [[[f64; 2]; 2]]) {
+    let mut lo: [[f64; 2]; N] = std::array::from_fn(|j| acc[j][0]);
+    let mut hi: [[f64; 2]; N] = std::array::from_fn(|j| acc[j][1]);
+    let mut heads = ys.map(|y| y.chunks_exact(4));
+    for xs in x.chunks_exact(4) {
         for j in 0..N {
             let Some(ys) = heads[j].next() else { break };
             lo[j][0] += xs[0] * ys[0];
@@ -253,12 +317,9 @@ fn dots<const N: usize>(x: &[f64], ys: [&[f64]; N]) -> [f64; N] {
             hi[j][1] += xs[3] * ys[3];
         }
     }
-    let mut out = [0.0; N];
     for j in 0..N {
-        let tail: f64 = xr.iter().zip(&ys[j][body..]).map(|(x, y)| x * y).sum();
-        out[j] = lo[j][0] + lo[j][1] + hi[j][0] + hi[j][1] + tail;
+        acc[j] = [lo[j], hi[j]];
     }
-    out
 }
 
 /// `crate::numeric::lowpass(x, tau, dt)` for each of `taus`, to the bit: the first-order
@@ -393,7 +454,8 @@ mod tests {
 
     #[test]
     fn gram_equals_dot_by_dot() {
-        for n in [0, 1, 5, 4003] {
+        // (several of gram's blocks, and a tail)
+        for n in [0, 1, 5, 4003, 9003] {
             let cols: Vec<Vec<f64>> = (0..7)
                 .map(|j| {
                     (0..n)
@@ -404,6 +466,8 @@ mod tests {
             let y: Vec<f64> = (0..n).map(|k| (k as f64 * 0.11).sin()).collect();
             let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
             let (g, xty) = gram(&refs, &y);
+            // (AVX2 where the machine has it; the kernel as built, too)
+            assert_eq!(gram_blocks(&refs, &y), (g.clone(), xty.clone()));
             for r in 0..7 {
                 for c in 0..7 {
                     assert_eq!(g[r * 7 + c].to_bits(), dot(&cols[r], &cols[c]).to_bits());

@@ -11,9 +11,18 @@
 //! small price), one that only bends a model that misses something else leaves structure (few
 //! independent samples, a high price).
 
+use std::cell::RefCell;
+
 use rustfft::{num_complex::Complex, FftPlanner};
 
 use super::model::Cause;
+
+thread_local! {
+    /// The planner keeps its plans (every candidate of every round asks for the same length):
+    /// on a 20 s record at 10 kHz a candidate took 80 ms with the plans made afresh, 20 ms
+    /// with them kept. Each thread keeps the plans (their twiddle factors) for that length.
+    static PLANNER: RefCell<FftPlanner<f64>> = RefCell::new(FftPlanner::new());
+}
 
 /// Integrated autocorrelation time of `r` in samples (at least 1, at most `r.len()`):
 /// `1 + 2 sum rho_k` over the initial positive sequence of pair sums `rho_2m + rho_2m+1`
@@ -31,12 +40,12 @@ pub fn correlation_time(r: &[f64]) -> f64 {
         .chain(std::iter::repeat(Complex::new(0.0, 0.0)))
         .take(m)
         .collect();
-    let mut planner = FftPlanner::new();
-    planner.plan_fft_forward(m).process(&mut x);
+    let (fwd, inv) = PLANNER.with_borrow_mut(|p| (p.plan_fft_forward(m), p.plan_fft_inverse(m)));
+    fwd.process(&mut x);
     for c in x.iter_mut() {
         *c = Complex::new(c.norm_sqr(), 0.0);
     }
-    planner.plan_fft_inverse(m).process(&mut x);
+    inv.process(&mut x);
     let c0 = x[0].re;
     if c0.is_nan() || c0 <= 0.0 || !c0.is_finite() {
         return 1.0;
