@@ -204,7 +204,7 @@ pub fn gram(cols: &[&[f64]], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
 /// two), else as built. No FMA: the same IEEE operations in the same order, so the same
 /// bits. `f` and its kernels must be `#[inline(always)]` to be compiled for it.
 #[inline(always)]
-pub fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
+fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx2")]
@@ -248,17 +248,15 @@ fn gram_blocks(cols: &[&[f64]], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
     // accumulator sums the same products in the same order as dot's.
     let pairs = p * (p + 3) / 2;
     let mut acc = vec![[[0.0f64; 2]; 2]; pairs];
+    let mut partners: Vec<&[f64]> = Vec::with_capacity(p + 1);
     let mut start = 0;
     while start < body {
         let end = (start + GRAM_BLOCK).min(body);
         let mut k = 0;
         for (r, &x) in cols.iter().enumerate() {
             let x = &x[start..end];
-            let partners: Vec<&[f64]> = cols[..=r]
-                .iter()
-                .chain([&y])
-                .map(|q| &q[start..end])
-                .collect();
+            partners.clear();
+            partners.extend(cols[..=r].iter().chain([&y]).map(|q| &q[start..end]));
             for group in partners.chunks(3) {
                 let a = &mut acc[k..k + group.len()];
                 match *group {
