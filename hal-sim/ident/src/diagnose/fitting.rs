@@ -289,10 +289,12 @@ fn fit_output(
     effort: Effort,
 ) -> (OutputModel, f64) {
     let (coarse, medium) = (&tiers.coarse, &tiers.medium);
-    // A model that already has the amplitude dependence is searched along the course of
-    // the amplitude of its fit on each tier: a linear time-varying filter, no fixed point
-    // and no serial square root per sample (the final fit runs the full fixed point).
-    let kept = (effort == Effort::Normal && causes.has(Cause::AmplitudeDynamics)).then(|| {
+    // A model with the amplitude dependence is searched along a fixed course of the
+    // amplitude on each tier, that of its first start: a linear time-varying filter, no
+    // fixed point and no serial square root per sample (the final fit runs the full fixed
+    // point). For a model that has it, its fit's; for the upgrade, the plain dynamics' (its
+    // first start has no shift), so the search no longer runs the fixed point per evaluation.
+    let kept = causes.has(Cause::AmplitudeDynamics).then(|| {
         let s = &starts[0];
         let course =
             |data: &[Signals]| fit_linear_with(data, i, causes, s, scales, taus, Iterate::Full).2;
