@@ -231,7 +231,7 @@ impl<T: Real> Robust<T> {
     fn update_impl<const FUSED: bool>(&mut self, io: LoopSignals<T>) -> T {
         // The fused caller runs only a primed law (`is_fresh` is its condition).
         if !FUSED && self.state.fresh {
-            self.prime(&io);
+            self.prime(io);
             return io.u_applied;
         }
         let u0 = io.u_applied;
@@ -271,16 +271,17 @@ impl<T: Real> Robust<T> {
         if u.is_finite() {
             u
         } else {
-            self.prime(&io);
+            self.prime(io);
             u0
         }
     }
 
-    fn prime(&mut self, io: &LoopSignals<T>) {
+    // By value: a reference would keep the caller's inputs in memory on the hot path.
+    fn prime(&mut self, io: LoopSignals<T>) {
         let obs = self.hgo.init(io.y_um, io.u_applied);
         self.state = RobustState {
             obs,
-            v_d_prev: self.v_d::<false>(io, obs.x),
+            v_d_prev: self.v_d::<false>(&io, obs.x),
             u_ff_prev: io.u_ff,
             fresh: false,
         };
