@@ -397,6 +397,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     creep: Option<CreepInverse<T>>,
     /// Largest voltage change per sample (the pipeline's slew limit), `T::MAX`: none.
     max_step_volts: T,
+    /// `max_step_volts != T::MAX`, kept so the per-sample test is a flag, not a float compare.
+    slew_limited: bool,
     /// Output offset of the model (`y = offset_um + model(u)`, see [`Ims::with_offset`]).
     offset_um: T,
     /// Secant slope of the last solved step (first trial of the next solve).
@@ -456,6 +458,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             quad: T::ZERO,
             creep: None,
             max_step_volts: T::MAX,
+            slew_limited: false,
             offset_um: T::ZERO,
             slope_hint,
             step_hint: T::ONE,
@@ -510,6 +513,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             "IMS: slew limit finite and > 0",
         )?;
         self.max_step_volts = volts_per_s * self.dt_s;
+        self.slew_limited = self.max_step_volts != T::MAX;
         Ok(self)
     }
 
@@ -587,7 +591,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     #[inline(always)]
     fn take_inverted<const NO_CREEP: bool>(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
         // Without a slew limit the range alone (`u -+ T::MAX` lies beyond it).
-        let (lo, hi) = if self.max_step_volts == T::MAX {
+        let (lo, hi) = if !self.slew_limited {
             (self.volts_min, self.volts_max)
         } else {
             (
