@@ -324,7 +324,9 @@ impl<T: Real> Hgo<T> {
         }
         let h = h_pred + corr;
         let b = self.h_bound;
-        s.h = h.clamp_to(-b, b);
+        // Strictly inside the bound (the usual case) on one compare, the same value as the
+        // clamp's (fixed point: |MIN| saturates to MAX, never below `b`).
+        s.h = if h.abs() < b { h } else { h.clamp_to(-b, b) };
         s.d += h - s.h;
         s.u = u;
         // One test for the three: a sum of finite values is finite (or overflowed, which
