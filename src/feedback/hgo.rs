@@ -106,8 +106,8 @@ pub(crate) fn cbw_n1_slope<T: Real>(m: &Cbw<T>, h: T, s: T) -> T {
 /// [`cbw_n1_piece`] for a model known to have `n = 1`.
 #[inline(always)]
 fn cbw_n1_piece_unchecked<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
-    let up = du > T::ZERO;
-    if !(up || du < T::ZERO) {
+    // du neither 0 nor NaN, on one compare (fixed point: |MIN| saturates to MAX > 0).
+    if !(du.abs() > T::ZERO) {
         return Some(h); // no move (NaN du is refused by the callers)
     }
     // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as sign flips.

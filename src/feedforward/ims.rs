@@ -192,8 +192,8 @@ fn invert_cbw_n1<T: Real>(
     let r = y_ref - (d * state.u - h0);
     // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) without `sgn` products:
     // this runs every sample.
-    let up = r > T::ZERO;
-    if !(up || r < T::ZERO) {
+    // r neither 0 nor NaN, on one compare (fixed point: |MIN| saturates to MAX > 0).
+    if !(r.abs() > T::ZERO) {
         // Already there (or NaN: the caller holds the output).
         return if r == T::ZERO {
             Some(Inverted {
@@ -214,7 +214,7 @@ fn invert_cbw_n1<T: Real>(
     if h0 * (h0 + dh) < T::ZERO {
         // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
         // moving in direction s, where sgn(h) = s.
-        let s = if up { T::ONE } else { -T::ONE };
+        let s = if r > T::ZERO { T::ONE } else { -T::ONE };
         let du0 = if k == T::ZERO {
             -h0 / alpha
         } else {
