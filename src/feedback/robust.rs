@@ -76,7 +76,9 @@ pub fn finite_time_decay<T: Real>(e: T, k: T, alpha: T, dt: T) -> T {
 pub struct Robust<T> {
     hgo: Hgo<T>,
     cfg: RobustConfig<T>,
-    c2: T,
+    /// `1 - c` of the decay `c = 1 - exp(-lambda2 dt)` above, computed once: what is left of
+    /// `e_h` after a sample.
+    left2: T,
     /// `exp(-lambda1 dt)`.
     p1: T,
     den_lo: T,
@@ -126,7 +128,7 @@ impl<T: Real> Robust<T> {
         Ok(Self {
             hgo,
             cfg,
-            c2,
+            left2: T::ONE - c2,
             p1: (-cfg.lambda1 * hgo.dt_s()).exp(),
             den_lo: m.d() / T::from_f64(20.0),
             den_hi: T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs(),
@@ -182,8 +184,8 @@ impl<T: Real> Robust<T> {
     #[inline(always)]
     fn h_error_left<const EXP: bool>(&self, e: T) -> T {
         match self.cfg.convergence {
-            _ if EXP => (T::ONE - self.c2) * e,
-            Convergence::Exponential => (T::ONE - self.c2) * e,
+            _ if EXP => self.left2 * e,
+            Convergence::Exponential => self.left2 * e,
             Convergence::FiniteTime { alpha2, .. } => {
                 finite_time_decay(e, self.cfg.lambda2, alpha2, self.hgo.dt_s())
             }
