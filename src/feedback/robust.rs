@@ -1,7 +1,7 @@
 //! Robust output-feedback law with virtual hysteresis control, 000 eq. (7)-(8), on the HGO.
 
 use super::guard::InputGuard;
-use super::hgo::{cbw_n1_slope, Hgo, HgoState, ObserverModel};
+use super::hgo::{cbw_n1_slope, Hgo, HgoState};
 use crate::hysteresis::{ensure, ensure_finite, ParamError};
 use crate::real::Real;
 use crate::signals::{LoopSignals, Setpoint};
@@ -264,13 +264,11 @@ impl<T: Real> Robust<T> {
         u0: T,
         io: impl FnOnce(&Self) -> LoopSignals<T>,
     ) -> T {
-        let cbw = match self.hgo.model() {
-            ObserverModel::Cbw(m) if FUSED => Some(m),
-            _ => None,
-        };
-        match cbw {
-            Some(m) => self.hgo.step_cbw_n1(m, &mut self.state.obs, y_um, u0),
-            None => self.hgo.step(&mut self.state.obs, y_um, u0),
+        // FUSED: the model is CBW with n = 1 (`fusable`), no match per sample.
+        if FUSED {
+            self.hgo.step_cbw_n1(&mut self.state.obs, y_um, u0);
+        } else {
+            self.hgo.step(&mut self.state.obs, y_um, u0);
         }
         let d_p = self.hgo.d_p();
         let h_hat = self.state.obs.h_hat();
@@ -291,9 +289,10 @@ impl<T: Real> Robust<T> {
         s.v_d_prev = v_d;
         s.u_ff_prev = u_ff;
         // The model's slope at the hysteresis part of the estimate (inside the loop bound).
-        let slope = match cbw {
-            Some(m) => cbw_n1_slope(m, s.obs.h, dv.sgn()),
-            None => self.hgo.model().slope(s.obs.h, dv.sgn()),
+        let slope = if FUSED {
+            cbw_n1_slope(self.hgo.cbw_n1(), s.obs.h, dv.sgn())
+        } else {
+            self.hgo.model().slope(s.obs.h, dv.sgn())
         };
         let den = (d_p - slope).clamp_to(self.den_lo, self.den_hi);
         let u = u0 + du_ff + dv / den;
