@@ -122,6 +122,20 @@ pub(crate) fn cbw_n1_slope<T: Real>(m: &CbwN1<T>, h: T, s: T) -> T {
     m.alpha - m.gamma * h.abs() - m.beta * s * h
 }
 
+/// [`cbw_n1_slope`] with `s = sgn(dv)`: `beta * s` picked instead of multiplied (`beta * 1`
+/// and `beta * -1` are `beta` and `-beta` exactly, in fixed point too).
+#[inline(always)]
+pub(crate) fn cbw_n1_slope_toward<T: Real>(m: &CbwN1<T>, h: T, dv: T) -> T {
+    let bs = if dv > T::ZERO {
+        m.beta
+    } else if dv < T::ZERO {
+        -m.beta
+    } else {
+        m.beta * T::ZERO
+    };
+    m.alpha - m.gamma * h.abs() - bs * h
+}
+
 /// [`cbw_n1_piece`] for a model known to have `n = 1`.
 #[inline(always)]
 fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
