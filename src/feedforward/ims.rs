@@ -88,7 +88,7 @@ fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T,
     let slope = if slope > T::ZERO { slope } else { d - c };
     let du = r / slope;
     // The first point inline (the per-sample case), the Newton steps out of line.
-    let (phi, _) = (k * du).phi_expm1_neg();
+    let (phi, em) = (k * du).phi_expm1_neg(); // em = e^-(k du) - 1
     let dh = c * du * phi;
     let res = d * du - dh - r;
     // In IEEE arithmetic a residual below the tolerance is finite, and so are `d du`, `dh`
@@ -103,12 +103,14 @@ fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T,
     if accept {
         return Some((du, dh, 1, phi));
     }
-    cbw_piece_newton(d, c, k, r, tol, du, res)
+    cbw_piece_newton(d, c, k, r, tol, du, res, em)
 }
 
-/// The Newton steps of [`cbw_piece`] after its first point `du` (residual `res`).
+/// The Newton steps of [`cbw_piece`] after its first point `du` (residual `res`,
+/// `em = e^-(k du) - 1`).
 #[inline(never)]
 #[cold]
+#[allow(clippy::too_many_arguments)]
 fn cbw_piece_newton<T: Real>(
     d: T,
     c: T,
@@ -117,10 +119,8 @@ fn cbw_piece_newton<T: Real>(
     tol: T,
     du: T,
     res: T,
+    em: T,
 ) -> Option<(T, T, usize, T)> {
-    // `e^-(k du) - 1` at the first point again (the same value): not computed on the hot
-    // path, where the first point is accepted.
-    let (_, em) = (k * du).phi_expm1_neg();
     let mut du = du - res / (d - c * (T::ONE + em));
     // An exclusive range: `1..=MAX` costs a flag test per iteration on thumbv7.
     for i in 2..CBW_NEWTON_MAX + 1 {
