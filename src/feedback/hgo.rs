@@ -139,8 +139,7 @@ pub(crate) fn cbw_n1_slope_toward<T: Real>(m: &CbwN1<T>, h: T, dv: T) -> T {
 /// [`cbw_n1_piece`] for a model known to have `n = 1`.
 #[inline(always)]
 fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
-    // du neither 0 nor NaN, on one compare (fixed point: |MIN| saturates to MAX > 0).
-    if !(du.abs() > T::ZERO) {
+    if !du.is_nonzero() {
         return Some(h); // no move (NaN du is refused by the callers)
     }
     // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as sign flips.
@@ -370,9 +369,7 @@ impl<T: Real> Hgo<T> {
         }
         let h = h_pred + corr;
         let b = self.h_bound;
-        // Strictly inside the bound (the usual case) on one compare, the same value as the
-        // clamp's (fixed point: |MIN| saturates to MAX, never below `b`).
-        s.h = if h.abs() < b { h } else { h.clamp_to(-b, b) };
+        s.h = h.clamp_sym(b);
         s.d += h - s.h;
         s.u = u;
         // One test for the three: a sum of finite values is finite (or overflowed, which

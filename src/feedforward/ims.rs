@@ -192,8 +192,7 @@ fn invert_cbw_n1<T: Real>(
     let r = y_ref - (d * state.u - h0);
     // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) without `sgn` products:
     // this runs every sample.
-    // r neither 0 nor NaN, on one compare (fixed point: |MIN| saturates to MAX > 0).
-    if !(r.abs() > T::ZERO) {
+    if !r.is_nonzero() {
         // Already there (or NaN: the caller holds the output).
         return if r == T::ZERO {
             Some(Inverted {
