@@ -169,9 +169,6 @@ pub struct Hgo<T> {
     /// `model.h_bound()` (a `powf` for CBW: computed once) and `model.d()`.
     h_bound: T,
     d_p: T,
-    /// The model's parameters when it is CBW with `n = 1` (else zeros, unused): the fused
-    /// law's step reads them without matching the model per sample.
-    cbw_n1: CbwN1<T>,
 }
 
 /// Estimates `x_hat` (um), `h_hat` (um) and the input they correspond to (V).
@@ -245,10 +242,6 @@ impl<T: Real> Hgo<T> {
             l2,
             h_bound: model.h_bound(),
             d_p: model.d(),
-            cbw_n1: match model {
-                ObserverModel::Cbw(m) if m.n() == T::ONE => CbwN1::of(&m),
-                _ => CbwN1::default(),
-            },
         })
     }
 
@@ -327,9 +320,12 @@ impl<T: Real> Hgo<T> {
         self.correct(s, y, u, h_pred);
     }
 
-    /// The model's parameters for [`cbw_n1_slope`] when [`Hgo::is_cbw_n1`].
-    pub(crate) fn cbw_n1(&self) -> &CbwN1<T> {
-        &self.cbw_n1
+    /// The model's parameters when [`Hgo::is_cbw_n1`] (else zeros).
+    pub(crate) fn cbw_n1(&self) -> CbwN1<T> {
+        match self.model {
+            ObserverModel::Cbw(m) if m.n() == T::ONE => CbwN1::of(&m),
+            _ => CbwN1::default(),
+        }
     }
 
     /// The model is CBW with `n = 1`, the case [`Hgo::step_cbw_n1`] runs.
@@ -338,11 +334,12 @@ impl<T: Real> Hgo<T> {
     }
 
     /// [`Hgo::step`] for an observer whose model is CBW with `n = 1` (the pipeline's fused
-    /// step checks [`Hgo::is_cbw_n1`] once per configuration); the same arithmetic.
+    /// step checks [`Hgo::is_cbw_n1`] once per configuration), `m` its parameters
+    /// ([`Hgo::cbw_n1`]); the same arithmetic.
     #[inline(always)]
-    pub(crate) fn step_cbw_n1(&self, s: &mut HgoState<T>, y: T, u: T) {
+    pub(crate) fn step_cbw_n1(&self, m: &CbwN1<T>, s: &mut HgoState<T>, y: T, u: T) {
         let du = u - s.u;
-        let h_pred = match cbw_n1_piece_unchecked(&self.cbw_n1, s.h, du) {
+        let h_pred = match cbw_n1_piece_unchecked(m, s.h, du) {
             Some(h1) => h1,
             // The model's own step (its one-piece try gives this `None` again).
             None => self.model.advance_h(s.h, s.u, du),

@@ -1,7 +1,7 @@
 //! Robust output-feedback law with virtual hysteresis control, 000 eq. (7)-(8), on the HGO.
 
 use super::guard::InputGuard;
-use super::hgo::{cbw_n1_slope_toward, Hgo, HgoState};
+use super::hgo::{cbw_n1_slope_toward, CbwN1, Hgo, HgoState};
 use crate::hysteresis::{ensure, ensure_finite, ParamError};
 use crate::real::Real;
 use crate::signals::{LoopSignals, Setpoint};
@@ -84,6 +84,9 @@ pub struct Robust<T> {
     den_lo: T,
     den_hi: T,
     state: RobustState<T>,
+    /// The observer model's parameters when it is CBW with `n = 1` (the fused update's
+    /// case): read without matching the model per sample.
+    cbw_n1: CbwN1<T>,
     pub(crate) guard: InputGuard<T>,
 }
 
@@ -139,6 +142,7 @@ impl<T: Real> Robust<T> {
             p1: (-cfg.lambda1 * hgo.dt_s()).exp(),
             den_lo: m.d() / T::from_f64(20.0),
             den_hi: T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs(),
+            cbw_n1: hgo.cbw_n1(),
             state: RobustState {
                 fresh: true,
                 ..Default::default()
@@ -266,7 +270,8 @@ impl<T: Real> Robust<T> {
     ) -> T {
         // FUSED: the model is CBW with n = 1 (`fusable`), no match per sample.
         if FUSED {
-            self.hgo.step_cbw_n1(&mut self.state.obs, y_um, u0);
+            self.hgo
+                .step_cbw_n1(&self.cbw_n1, &mut self.state.obs, y_um, u0);
         } else {
             self.hgo.step(&mut self.state.obs, y_um, u0);
         }
@@ -290,7 +295,7 @@ impl<T: Real> Robust<T> {
         s.u_ff_prev = u_ff;
         // The model's slope at the hysteresis part of the estimate (inside the loop bound).
         let slope = if FUSED {
-            cbw_n1_slope_toward(self.hgo.cbw_n1(), s.obs.h, dv)
+            cbw_n1_slope_toward(&self.cbw_n1, s.obs.h, dv)
         } else {
             self.hgo.model().slope(s.obs.h, dv.sgn())
         };
