@@ -341,8 +341,11 @@ impl<T: Real> Hgo<T> {
         let du = u - s.u;
         let h_pred = match cbw_n1_piece_unchecked(m, s.h, du) {
             Some(h1) => h1,
-            // The model's own step (its one-piece try gives this `None` again).
-            None => self.model.advance_h(s.h, s.u, du),
+            // The model's own two-piece step (matched here, once per half cycle).
+            None => match &self.model {
+                ObserverModel::Cbw(cbw) => cbw.advance_h(s.h, s.u, du),
+                other => other.advance_h(s.h, s.u, du),
+            },
         };
         self.correct(s, y, u, h_pred);
     }
