@@ -116,7 +116,9 @@ pub trait Real:
     /// Neither zero nor NaN.
     #[inline(always)]
     fn is_nonzero(self) -> bool {
-        self > Self::ZERO || self < Self::ZERO
+        // Not `!= 0`: NaN is neither.
+        let up = self > Self::ZERO;
+        up || self < Self::ZERO
     }
     /// [`Real::clamp_to`] into `[-b, b]`.
     #[inline(always)]
