@@ -113,6 +113,18 @@ pub trait Real:
             self
         }
     }
+    /// Neither zero nor NaN.
+    #[inline(always)]
+    fn is_nonzero(self) -> bool {
+        // Not `!= 0`: NaN is neither.
+        let up = self > Self::ZERO;
+        up || self < Self::ZERO
+    }
+    /// [`Real::clamp_to`] into `[-b, b]`.
+    #[inline(always)]
+    fn clamp_sym(self, b: Self) -> Self {
+        self.clamp_to(-b, b)
+    }
     /// Smaller of two; returns `other` when `self` is NaN.
     #[inline(always)]
     fn min(self, other: Self) -> Self {
@@ -177,6 +189,21 @@ macro_rules! real_impl {
                 // `sign_of`'s sign bit XORed into `self`'s.
                 let sign = (-0.0 as $t).to_bits();
                 <$t>::from_bits(self.to_bits() ^ (sign_of.to_bits() & sign))
+            }
+            /// One compare of `|x|` (two on fixed point's integers are cheaper than its `abs`).
+            #[inline(always)]
+            fn is_nonzero(self) -> bool {
+                self.abs() > 0.0
+            }
+            /// Strictly inside the bound (the usual case) on one compare, the clamp otherwise
+            /// (NaN: `-b`): the same value.
+            #[inline(always)]
+            fn clamp_sym(self, b: Self) -> Self {
+                if self.abs() < b {
+                    self
+                } else {
+                    self.clamp_to(-b, b)
+                }
             }
             #[inline(always)]
             fn to_f64(self) -> f64 {

@@ -99,30 +99,34 @@ impl<T: Real> InputGuard<T> {
     /// [`InputGuard::clean`] without a measurement filter, for inputs the caller knows to
     /// be finite and inside [`INPUT_BOUND`] (measurement, feedforward and applied voltage:
     /// the pipeline's fused step checks their ranges once per configuration), where `hold`
-    /// returns them unchanged: only the setpoint is held. The same result and the same
-    /// remembered values.
+    /// returns them unchanged: only the setpoint is held, and not even that when `known` to
+    /// lie inside the bounds (the reference generator proves it for a sine,
+    /// [`crate::pipeline::reference`]). This part remembers the setpoint,
+    /// [`InputGuard::remember_fused`] the rest: the same results and remembered values.
     #[inline(always)]
-    pub(crate) fn clean_bounded(&mut self, io: &LoopSignals<T>) -> LoopSignals<T> {
-        let l = &self.last;
-        let c = LoopSignals {
-            setpoint: hold_setpoint(&io.setpoint, &l.setpoint),
-            y_um: io.y_um,
-            u_ff: io.u_ff,
-            u_applied: io.u_applied,
+    pub(crate) fn clean_setpoint_fused(&mut self, sp: &Setpoint<T>, known: bool) -> Setpoint<T> {
+        let sp = if known {
+            *sp
+        } else {
+            hold_setpoint(sp, &self.last.setpoint)
         };
-        self.last = c;
+        self.last.setpoint = sp;
         self.settled = true;
-        c
+        sp
     }
 
-    /// [`InputGuard::clean_bounded`] for a setpoint also known to lie inside the bounds
-    /// (the reference generator proves it for a sine, [`crate::pipeline::reference`]): the
-    /// inputs pass unchanged and are remembered.
+    /// The other inputs of [`InputGuard::clean_setpoint_fused`]'s sample.
     #[inline(always)]
-    pub(crate) fn clean_known(&mut self, io: &LoopSignals<T>) -> LoopSignals<T> {
-        self.last = *io;
-        self.settled = true;
-        *io
+    pub(crate) fn remember_fused(&mut self, y_um: T, u_ff: T, u_applied: T) {
+        self.last.y_um = y_um;
+        self.last.u_ff = u_ff;
+        self.last.u_applied = u_applied;
+    }
+
+    /// The inputs remembered last.
+    #[inline(always)]
+    pub(crate) fn last(&self) -> LoopSignals<T> {
+        self.last
     }
 
     /// No measurement filter is set.

@@ -54,7 +54,7 @@ impl<T: Real> ObserverModel<T> {
     #[inline]
     pub fn slope(&self, h: T, s: T) -> T {
         match self {
-            ObserverModel::Cbw(m) if m.n() == T::ONE => cbw_n1_slope(m, h, s),
+            ObserverModel::Cbw(m) if m.n() == T::ONE => cbw_n1_slope(&CbwN1::of(m), h, s),
             ObserverModel::Cbw(m) => m.slope(h, s),
             ObserverModel::Gbw(m) => m.slope(h, s),
             ObserverModel::Dahl(m) => m.slope(h, s),
@@ -93,28 +93,60 @@ pub(crate) fn cbw_n1_piece<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
     if m.n() != T::ONE {
         return None;
     }
-    cbw_n1_piece_unchecked(m, h, du)
+    cbw_n1_piece_unchecked(&CbwN1::of(m), h, du)
+}
+
+/// The parameters of CBW with `n = 1` its per-sample step and slope use.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct CbwN1<T> {
+    alpha: T,
+    beta: T,
+    gamma: T,
+}
+
+impl<T: Real> CbwN1<T> {
+    #[inline(always)]
+    fn of(m: &Cbw<T>) -> Self {
+        Self {
+            alpha: m.alpha(),
+            beta: m.beta(),
+            gamma: m.gamma(),
+        }
+    }
 }
 
 /// `dh/du` of CBW for `n = 1` at `h` moving in direction `s`: `beta s sgn(h) |h| = beta s
 /// h`, exactly (no sign tests).
 #[inline(always)]
-pub(crate) fn cbw_n1_slope<T: Real>(m: &Cbw<T>, h: T, s: T) -> T {
-    m.alpha() - m.gamma() * h.abs() - m.beta() * s * h
+pub(crate) fn cbw_n1_slope<T: Real>(m: &CbwN1<T>, h: T, s: T) -> T {
+    m.alpha - m.gamma * h.abs() - m.beta * s * h
+}
+
+/// [`cbw_n1_slope`] with `s = sgn(dv)`: `beta * s` picked instead of multiplied (`beta * 1`
+/// and `beta * -1` are `beta` and `-beta` exactly, in fixed point too).
+#[inline(always)]
+pub(crate) fn cbw_n1_slope_toward<T: Real>(m: &CbwN1<T>, h: T, dv: T) -> T {
+    let bs = if dv > T::ZERO {
+        m.beta
+    } else if dv < T::ZERO {
+        -m.beta
+    } else {
+        m.beta * T::ZERO
+    };
+    m.alpha - m.gamma * h.abs() - bs * h
 }
 
 /// [`cbw_n1_piece`] for a model known to have `n = 1`.
 #[inline(always)]
-fn cbw_n1_piece_unchecked<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
-    let up = du > T::ZERO;
-    if !(up || du < T::ZERO) {
+fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
+    if !du.is_nonzero() {
         return Some(h); // no move (NaN du is refused by the callers)
     }
     // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as sign flips.
     let h_side = if h == T::ZERO { du } else { h };
-    let k = m.beta().mul_sign(du) + m.gamma().mul_sign(h_side);
+    let k = m.beta.mul_sign(du) + m.gamma.mul_sign(h_side);
     let (phi, _) = (k * du).phi_expm1_neg();
-    let h1 = h + (m.alpha() - k * h) * du * phi;
+    let h1 = h + (m.alpha - k * h) * du * phi;
     if h * h1 < T::ZERO {
         None
     } else {
@@ -288,19 +320,32 @@ impl<T: Real> Hgo<T> {
         self.correct(s, y, u, h_pred);
     }
 
+    /// The model's parameters when [`Hgo::is_cbw_n1`] (else zeros).
+    pub(crate) fn cbw_n1(&self) -> CbwN1<T> {
+        match self.model {
+            ObserverModel::Cbw(m) if m.n() == T::ONE => CbwN1::of(&m),
+            _ => CbwN1::default(),
+        }
+    }
+
     /// The model is CBW with `n = 1`, the case [`Hgo::step_cbw_n1`] runs.
     pub(crate) fn is_cbw_n1(&self) -> bool {
         matches!(self.model, ObserverModel::Cbw(m) if m.n() == T::ONE)
     }
 
     /// [`Hgo::step`] for an observer whose model is CBW with `n = 1` (the pipeline's fused
-    /// step checks [`Hgo::is_cbw_n1`] once per configuration); the same arithmetic.
+    /// step checks [`Hgo::is_cbw_n1`] once per configuration), `m` its parameters
+    /// ([`Hgo::cbw_n1`]); the same arithmetic.
     #[inline(always)]
-    pub(crate) fn step_cbw_n1(&self, m: &Cbw<T>, s: &mut HgoState<T>, y: T, u: T) {
+    pub(crate) fn step_cbw_n1(&self, m: &CbwN1<T>, s: &mut HgoState<T>, y: T, u: T) {
         let du = u - s.u;
         let h_pred = match cbw_n1_piece_unchecked(m, s.h, du) {
             Some(h1) => h1,
-            None => m.advance_h(s.h, s.u, du),
+            // The model's own two-piece step (matched here, once per half cycle).
+            None => match &self.model {
+                ObserverModel::Cbw(cbw) => cbw.advance_h(s.h, s.u, du),
+                other => other.advance_h(s.h, s.u, du),
+            },
         };
         self.correct(s, y, u, h_pred);
     }
@@ -324,7 +369,7 @@ impl<T: Real> Hgo<T> {
         }
         let h = h_pred + corr;
         let b = self.h_bound;
-        s.h = h.clamp_to(-b, b);
+        s.h = h.clamp_sym(b);
         s.d += h - s.h;
         s.u = u;
         // One test for the three: a sum of finite values is finite (or overflowed, which

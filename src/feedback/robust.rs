@@ -1,10 +1,10 @@
 //! Robust output-feedback law with virtual hysteresis control, 000 eq. (7)-(8), on the HGO.
 
 use super::guard::InputGuard;
-use super::hgo::{cbw_n1_slope, Hgo, HgoState, ObserverModel};
+use super::hgo::{cbw_n1_slope_toward, CbwN1, Hgo, HgoState};
 use crate::hysteresis::{ensure, ensure_finite, ParamError};
 use crate::real::Real;
-use crate::signals::LoopSignals;
+use crate::signals::{LoopSignals, Setpoint};
 
 /// Configuration of the law (the observer carries the model and sample period).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,13 +76,25 @@ pub fn finite_time_decay<T: Real>(e: T, k: T, alpha: T, dt: T) -> T {
 pub struct Robust<T> {
     hgo: Hgo<T>,
     cfg: RobustConfig<T>,
-    c2: T,
+    /// `1 - c` of the decay `c = 1 - exp(-lambda2 dt)` above, computed once: what is left of
+    /// `e_h` after a sample.
+    left2: T,
     /// `exp(-lambda1 dt)`.
     p1: T,
     den_lo: T,
     den_hi: T,
     state: RobustState<T>,
+    /// The observer model's parameters when it is CBW with `n = 1` (the fused update's
+    /// case): read without matching the model per sample.
+    cbw_n1: CbwN1<T>,
     pub(crate) guard: InputGuard<T>,
+}
+
+/// The setpoint `y_um` and `y_next`, where it is one sample on (from its derivatives).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Target<T> {
+    y_um: T,
+    y_next: T,
 }
 
 /// Observer state and the values of the previous sample.
@@ -126,10 +138,11 @@ impl<T: Real> Robust<T> {
         Ok(Self {
             hgo,
             cfg,
-            c2,
+            left2: T::ONE - c2,
             p1: (-cfg.lambda1 * hgo.dt_s()).exp(),
             den_lo: m.d() / T::from_f64(20.0),
             den_hi: T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs(),
+            cbw_n1: hgo.cbw_n1(),
             state: RobustState {
                 fresh: true,
                 ..Default::default()
@@ -155,11 +168,10 @@ impl<T: Real> Robust<T> {
     /// would leave 15 % of the velocity feedforward out.) `EXP`: the convergence is known
     /// to be exponential.
     #[inline(always)]
-    fn v_d<const EXP: bool>(&self, io: &LoopSignals<T>, x_hat: T) -> T {
+    fn v_d<const EXP: bool>(&self, target: &Target<T>, x_hat: T) -> T {
         let dt = self.hgo.dt_s();
         let (_, gd) = self.hgo.linear_step();
-        let sp = &io.setpoint;
-        let e = x_hat - sp.y_um;
+        let e = x_hat - target.y_um;
         let e_next = match self.cfg.convergence {
             _ if EXP => self.p1 * e,
             Convergence::Exponential => self.p1 * e,
@@ -173,17 +185,26 @@ impl<T: Real> Robust<T> {
                 e + (e1 - e).clamp_to(-lim, lim)
             }
         };
-        let y_next = sp.y_um + (sp.dy + sp.ddy * dt * T::HALF) * dt;
         // (x_target - ad x_hat) / gd with ad = 1 - gd, written to keep f32 differences small.
-        x_hat + (y_next + e_next - x_hat) / gd
+        x_hat + (target.y_next + e_next - x_hat) / gd
+    }
+
+    /// The setpoint's part of [`Robust::v_d`]: the setpoint and where it is one sample on.
+    #[inline(always)]
+    fn target(&self, sp: &Setpoint<T>) -> Target<T> {
+        let dt = self.hgo.dt_s();
+        Target {
+            y_um: sp.y_um,
+            y_next: sp.y_um + (sp.dy + sp.ddy * dt * T::HALF) * dt,
+        }
     }
 
     /// What is left of the error `e_h` after one sample (`EXP`: as in [`Robust::v_d`]).
     #[inline(always)]
     fn h_error_left<const EXP: bool>(&self, e: T) -> T {
         match self.cfg.convergence {
-            _ if EXP => (T::ONE - self.c2) * e,
-            Convergence::Exponential => (T::ONE - self.c2) * e,
+            _ if EXP => self.left2 * e,
+            Convergence::Exponential => self.left2 * e,
             Convergence::FiniteTime { alpha2, .. } => {
                 finite_time_decay(e, self.cfg.lambda2, alpha2, self.hgo.dt_s())
             }
@@ -193,7 +214,12 @@ impl<T: Real> Robust<T> {
     #[inline]
     pub fn update(&mut self, io: &LoopSignals<T>) -> T {
         let io = self.guard.clean(io);
-        self.update_impl::<false>(io)
+        if self.state.fresh {
+            self.prime(io);
+            return io.u_applied;
+        }
+        let target = self.target(&io.setpoint);
+        self.update_impl::<false>(target, io.y_um, io.u_ff, io.u_applied, |_| io)
     }
 
     /// The configuration [`Robust::update_fused`] runs: exponential convergence, no
@@ -215,44 +241,50 @@ impl<T: Real> Robust<T> {
     /// finite and inside the input guard's bound (the pipeline checks the configuration
     /// once, the rest every sample), and the setpoint too when `setpoint_within` (the
     /// reference generator knows it): the same arithmetic without the checks that cannot
-    /// fire then.
+    /// fire then. In two parts: this one takes the setpoint (before the compensator, so the
+    /// fused step holds one value across it instead of the setpoint's derivatives),
+    /// [`Robust::update_fused`] the rest.
     #[inline(always)]
-    pub(crate) fn update_fused(&mut self, io: &LoopSignals<T>, setpoint_within: bool) -> T {
-        let io = if setpoint_within {
-            self.guard.clean_known(io)
-        } else {
-            self.guard.clean_bounded(io)
-        };
-        self.update_impl::<true>(io)
+    pub(crate) fn fused_target(&mut self, sp: &Setpoint<T>, setpoint_within: bool) -> Target<T> {
+        let sp = self.guard.clean_setpoint_fused(sp, setpoint_within);
+        self.target(&sp)
     }
 
-    /// The law on inputs the guard has cleaned.
+    /// The command after [`Robust::fused_target`].
     #[inline(always)]
-    fn update_impl<const FUSED: bool>(&mut self, io: LoopSignals<T>) -> T {
-        // The fused caller runs only a primed law (`is_fresh` is its condition).
-        if !FUSED && self.state.fresh {
-            self.prime(&io);
-            return io.u_applied;
-        }
-        let u0 = io.u_applied;
-        let cbw = match self.hgo.model() {
-            ObserverModel::Cbw(m) if FUSED => Some(m),
-            _ => None,
-        };
-        match cbw {
-            Some(m) => self.hgo.step_cbw_n1(m, &mut self.state.obs, io.y_um, u0),
-            None => self.hgo.step(&mut self.state.obs, io.y_um, u0),
+    pub(crate) fn update_fused(&mut self, target: Target<T>, y_um: T, u_ff: T, u_applied: T) -> T {
+        self.guard.remember_fused(y_um, u_ff, u_applied);
+        // Unfiltered, the guard remembers the law's inputs as they are.
+        self.update_impl::<true>(target, y_um, u_ff, u_applied, |law| law.guard.last())
+    }
+
+    /// The law on inputs the guard has cleaned (`io`: all of them, for a restart).
+    #[inline(always)]
+    fn update_impl<const FUSED: bool>(
+        &mut self,
+        target: Target<T>,
+        y_um: T,
+        u_ff: T,
+        u0: T,
+        io: impl FnOnce(&Self) -> LoopSignals<T>,
+    ) -> T {
+        // FUSED: the model is CBW with n = 1 (`fusable`), no match per sample.
+        if FUSED {
+            self.hgo
+                .step_cbw_n1(&self.cbw_n1, &mut self.state.obs, y_um, u0);
+        } else {
+            self.hgo.step(&mut self.state.obs, y_um, u0);
         }
         let d_p = self.hgo.d_p();
         let h_hat = self.state.obs.h_hat();
         let v_hat = d_p * u0 - h_hat;
-        let v_d = self.v_d::<FUSED>(&io, self.state.obs.x);
+        let v_d = self.v_d::<FUSED>(&target, self.state.obs.x);
         // Target effective input for this sample: what is left of the error to v_d.
         let (dv, du_ff) = if self.cfg.feedforward {
             let e = v_hat - v_d;
             (
                 self.h_error_left::<FUSED>(e) - e,
-                io.u_ff - self.state.u_ff_prev,
+                u_ff - self.state.u_ff_prev,
             )
         } else {
             let left = self.h_error_left::<FUSED>(v_hat - self.state.v_d_prev);
@@ -260,27 +292,29 @@ impl<T: Real> Robust<T> {
         };
         let s = &mut self.state;
         s.v_d_prev = v_d;
-        s.u_ff_prev = io.u_ff;
+        s.u_ff_prev = u_ff;
         // The model's slope at the hysteresis part of the estimate (inside the loop bound).
-        let slope = match cbw {
-            Some(m) => cbw_n1_slope(m, s.obs.h, dv.sgn()),
-            None => self.hgo.model().slope(s.obs.h, dv.sgn()),
+        let slope = if FUSED {
+            cbw_n1_slope_toward(&self.cbw_n1, s.obs.h, dv)
+        } else {
+            self.hgo.model().slope(s.obs.h, dv.sgn())
         };
         let den = (d_p - slope).clamp_to(self.den_lo, self.den_hi);
         let u = u0 + du_ff + dv / den;
         if u.is_finite() {
             u
         } else {
-            self.prime(&io);
+            self.prime(io(self));
             u0
         }
     }
 
-    fn prime(&mut self, io: &LoopSignals<T>) {
+    // By value: a reference would keep the caller's inputs in memory on the hot path.
+    fn prime(&mut self, io: LoopSignals<T>) {
         let obs = self.hgo.init(io.y_um, io.u_applied);
         self.state = RobustState {
             obs,
-            v_d_prev: self.v_d::<false>(io, obs.x),
+            v_d_prev: self.v_d::<false>(&self.target(&io.setpoint), obs.x),
             u_ff_prev: io.u_ff,
             fresh: false,
         };

@@ -192,8 +192,7 @@ fn invert_cbw_n1<T: Real>(
     let r = y_ref - (d * state.u - h0);
     // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) without `sgn` products:
     // this runs every sample.
-    let up = r > T::ZERO;
-    if !(up || r < T::ZERO) {
+    if !r.is_nonzero() {
         // Already there (or NaN: the caller holds the output).
         return if r == T::ZERO {
             Some(Inverted {
@@ -214,7 +213,7 @@ fn invert_cbw_n1<T: Real>(
     if h0 * (h0 + dh) < T::ZERO {
         // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
         // moving in direction s, where sgn(h) = s.
-        let s = if up { T::ONE } else { -T::ONE };
+        let s = if r > T::ZERO { T::ONE } else { -T::ONE };
         let du0 = if k == T::ZERO {
             -h0 / alpha
         } else {
@@ -397,6 +396,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     creep: Option<CreepInverse<T>>,
     /// Largest voltage change per sample (the pipeline's slew limit), `T::MAX`: none.
     max_step_volts: T,
+    /// `max_step_volts != T::MAX`, kept so the per-sample test is a flag, not a float compare.
+    slew_limited: bool,
     /// Output offset of the model (`y = offset_um + model(u)`, see [`Ims::with_offset`]).
     offset_um: T,
     /// Secant slope of the last solved step (first trial of the next solve).
@@ -456,6 +457,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             quad: T::ZERO,
             creep: None,
             max_step_volts: T::MAX,
+            slew_limited: false,
             offset_um: T::ZERO,
             slope_hint,
             step_hint: T::ONE,
@@ -510,6 +512,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             "IMS: slew limit finite and > 0",
         )?;
         self.max_step_volts = volts_per_s * self.dt_s;
+        self.slew_limited = self.max_step_volts != T::MAX;
         Ok(self)
     }
 
@@ -587,7 +590,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     #[inline(always)]
     fn take_inverted<const NO_CREEP: bool>(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
         // Without a slew limit the range alone (`u -+ T::MAX` lies beyond it).
-        let (lo, hi) = if self.max_step_volts == T::MAX {
+        let (lo, hi) = if !self.slew_limited {
             (self.volts_min, self.volts_max)
         } else {
             (

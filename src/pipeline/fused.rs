@@ -19,7 +19,6 @@ use crate::feedback::guard::{inside_bound, INPUT_BOUND};
 use crate::feedback::Feedback;
 use crate::feedforward::{Feedforward, MultiFeedforward};
 use crate::real::Real;
-use crate::signals::LoopSignals;
 
 impl<T: Real, const N: usize> Pipeline<T, N> {
     /// The configuration runs the fused step (see the module documentation).
@@ -117,21 +116,14 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         *y_tr = y;
         let (sp, sp_within) = gen.next_setpoint_guarded();
         *sp_tr = sp;
+        let target = law.fused_target(&sp, sp_within);
         let u_ff = ims.compensate_plain_cbw_n1(sp.y_um, sp_within);
         *u_ff_tr = u_ff;
         // The generic step's test for a non-finite command is left out: the robust law
         // returns a finite command or, if its own would not be, the applied voltage (finite
         // here), so the law's test is the one that matters. Whatever `u` is, the limits
         // below keep the code inside the range and the slew limit (NaN -> lowest code).
-        let u = law.update_fused(
-            &LoopSignals {
-                setpoint: sp,
-                y_um: y,
-                u_ff,
-                u_applied: *u_applied,
-            },
-            sp_within,
-        );
+        let u = law.update_fused(target, y, u_ff, *u_applied);
         *u_cmd_tr = u;
         // The last code is always inside the output range (`new`, `limit` and
         // `dac_write_failed` put it there).

@@ -103,6 +103,16 @@ impl<T: Real> Output<T> {
         if !(sample_hz.is_finite() && sample_hz > T::ZERO) {
             return Err(ConfigError::new("sample_hz must be finite and > 0"));
         }
+        // The per-sample rounding of a position `x` clamped into `[0, span]`, `(x + 1/2) as
+        // i32`, is monotone in `x`: at most that of the span itself, checked here, so the
+        // code it gives needs no clamp to `code_hi` (`limit_from_code_in_range`). Not so for
+        // a span wider than the number type resolves (f32: above 2^23 codes).
+        let span = code_hi - code_lo;
+        if (T::from_f64(span) + T::HALF).to_i32() as f64 > span {
+            return Err(ConfigError::new(
+                "dac: the code range is too wide for the number type",
+            ));
+        }
         let step = (limits.slew_volts_per_s / sample_hz / dac.volts_per_code).to_f64();
         if !(step >= 1.0) {
             return Err(ConfigError::new(
@@ -113,7 +123,7 @@ impl<T: Real> Output<T> {
             dac: *dac,
             codes_per_volt: T::ONE / dac.volts_per_code,
             code_lo_real: T::from_f64(code_lo),
-            code_span_real: T::from_f64(code_hi - code_lo),
+            code_span_real: T::from_f64(span),
             code_lo: code_lo as i32,
             code_hi: code_hi as i32,
             max_step: libm::floor(step).min(i32::MAX as f64 / 4.0) as i32,
@@ -151,11 +161,8 @@ impl<T: Real> Output<T> {
         let in_range = x >= T::ZERO && x <= self.code_span_real;
         let x = x.clamp_to(T::ZERO, self.code_span_real);
         // x >= 0, so truncation of x + 1/2 is the rounding (no floor); the sum stays in the
-        // range because the span is exact.
-        let want = self
-            .code_lo
-            .saturating_add((x + T::HALF).to_i32())
-            .min(self.code_hi);
+        // range: `new` checked the rounding of the span itself.
+        let want = self.code_lo.saturating_add((x + T::HALF).to_i32());
         let code = want
             .max(prev.saturating_sub(self.max_step))
             .min(prev.saturating_add(self.max_step));
@@ -222,5 +229,30 @@ mod tests {
         assert!(Output::new(&lim(0.0, 5.0, 1e-3), &dac, 1e5).is_err());
         assert!(Output::new(&lim(0.0, f64::NAN, 1e4), &dac, 1e5).is_err());
         assert!(Output::new(&lim(0.0, 5.0, f64::NAN), &dac, 1e5).is_err());
+    }
+
+    /// f32 takes a 20-bit converter, not one whose codes it cannot round to within the span
+    /// (2^23 + 1 codes: the top one plus 1/2 rounds to 2^23 + 2); the top of the range stays
+    /// the top code.
+    #[test]
+    fn code_span_within_the_number_type() {
+        let dac = |code_max: i32| DacScale {
+            volts_per_code: 1e-5f32,
+            volts_at_zero: 0.0,
+            code_min: 0,
+            code_max,
+        };
+        let lim = OutputLimits {
+            volts_min: 0.0,
+            volts_max: 100.0,
+            slew_volts_per_s: 1e9,
+        };
+        let top = (1 << 20) - 1;
+        let o = Output::new(&lim, &dac(top), 1e5).unwrap();
+        assert_eq!(o.code_range(), (0, top));
+        assert_eq!(o.limit(10.5, top - 1).code, top);
+        assert_eq!(o.limit(1e9, top - 1).code, top);
+        assert!(Output::new(&lim, &dac((1 << 23) + 1), 1e5).is_err());
+        assert!(Output::new(&lim, &dac(1 << 23), 1e5).is_ok());
     }
 }

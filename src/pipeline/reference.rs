@@ -554,8 +554,10 @@ impl<T: Real> WaveGen<T> {
         }
     }
 
-    /// Phasor exactly at the current phase.
+    /// Phasor exactly at the current phase. Cold: once in many samples, and the rotation
+    /// then falls through to the setpoint's use.
     #[inline(never)]
+    #[cold]
     fn resync(&mut self) {
         if let Some(p) = self.phasor.as_mut() {
             (p.s, p.c) = sin_cos_turns(T::from_turns(self.phase));
