@@ -136,17 +136,17 @@ pub(crate) fn cbw_n1_slope_toward<T: Real>(m: &CbwN1<T>, h: T, dv: T) -> T {
     m.alpha - m.gamma * h.abs() - bs * h
 }
 
-/// [`cbw_n1_piece`] for a model known to have `n = 1`.
+/// [`cbw_n1_piece`] for a model known to have `n = 1`. Written in `k du = beta |du| + gamma
+/// sgn(h) du`, the piece's sign taken from `h du` (which also takes the piece `h` moves
+/// into at `h = 0`): no sign tests of its own, and `du = 0` gives `k du = 0`, `phi = 1` and
+/// `h1 = h` (a NaN `du` is refused by the callers).
 #[inline(always)]
 fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
-    if !du.is_nonzero() {
-        return Some(h); // no move (NaN du is refused by the callers)
-    }
-    // k = beta sgn(du) + gamma sgn(h) (sgn(du) at h = 0), as sign flips.
-    let h_side = if h == T::ZERO { du } else { h };
-    let k = m.beta.mul_sign(du) + m.gamma.mul_sign(h_side);
-    let (phi, _) = (k * du).phi_expm1_neg();
-    let h1 = h + (m.alpha - k * h) * du * phi;
+    let a = du.abs();
+    let sgn_h_du = if h * du < T::ZERO { -a } else { a };
+    let k_du = m.beta * a + m.gamma * sgn_h_du;
+    let (phi, _) = k_du.phi_expm1_neg();
+    let h1 = h + (m.alpha * du - k_du * h) * phi;
     if h * h1 < T::ZERO {
         None
     } else {
