@@ -125,6 +125,17 @@ pub trait Real:
     fn clamp_sym(self, b: Self) -> Self {
         self.clamp_to(-b, b)
     }
+    /// `self` and `other` of opposite signs (neither zero nor NaN): `self * other < 0`,
+    /// which IEEE types compute (one product and one compare); fixed point compares instead
+    /// (its product is a 64-bit multiply with rounding and saturation).
+    #[inline(always)]
+    fn opposite_signs(self, other: Self) -> bool {
+        if self < Self::ZERO {
+            other > Self::ZERO
+        } else {
+            self > Self::ZERO && other < Self::ZERO
+        }
+    }
     /// Smaller of two; returns `other` when `self` is NaN.
     #[inline(always)]
     fn min(self, other: Self) -> Self {
@@ -194,6 +205,11 @@ macro_rules! real_impl {
             #[inline(always)]
             fn is_nonzero(self) -> bool {
                 self.abs() > 0.0
+            }
+            /// The product's sign (an underflow to 0 counts as the same signs).
+            #[inline(always)]
+            fn opposite_signs(self, other: Self) -> bool {
+                self * other < 0.0
             }
             /// Strictly inside the bound (the usual case) on one compare, the clamp otherwise
             /// (NaN: `-b`): the same value.
@@ -507,6 +523,22 @@ mod tests {
     }
 
     /// The sign flip of the IEEE types is the select the fixed point type runs.
+    #[test]
+    fn opposite_signs_is_the_sign_of_the_product() {
+        use crate::fixed::Q16;
+        let xs = [-3.0, -1e-3, -0.0, 0.0, 1e-3, 2.5];
+        for &a in &xs {
+            for &b in &xs {
+                let want = a * b < 0.0;
+                assert_eq!(a.opposite_signs(b), want, "f64 {a} {b}");
+                assert_eq!((a as f32).opposite_signs(b as f32), want, "f32 {a} {b}");
+                let (qa, qb) = (Q16::from_f64(a), Q16::from_f64(b));
+                assert_eq!(qa.opposite_signs(qb), want, "Q16 {a} {b}");
+            }
+        }
+        assert!(!f32::NAN.opposite_signs(1.0) && !1.0f32.opposite_signs(f32::NAN));
+    }
+
     #[test]
     fn mul_sign_is_the_product_with_the_sign() {
         use crate::fixed::Q16;

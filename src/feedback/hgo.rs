@@ -93,7 +93,14 @@ pub(crate) fn cbw_n1_piece<T: Real>(m: &Cbw<T>, h: T, du: T) -> Option<T> {
     if m.n() != T::ONE {
         return None;
     }
-    cbw_n1_piece_unchecked(&CbwN1::of(m), h, du)
+    let m = CbwN1::of(m);
+    if du == T::ZERO {
+        // No move, as NMPC's held input gives on most samples: the step's own value there
+        // (`k du = +0`, `phi = 1`; so the same bits, zero's sign included) without its
+        // polynomial. The fused step, whose input moves every sample, goes without the test.
+        return Some(h + (m.alpha * du - T::ZERO * h));
+    }
+    cbw_n1_piece_unchecked(&m, h, du)
 }
 
 /// The parameters of CBW with `n = 1` its per-sample step and slope use.
@@ -137,17 +144,17 @@ pub(crate) fn cbw_n1_slope_toward<T: Real>(m: &CbwN1<T>, h: T, dv: T) -> T {
 }
 
 /// [`cbw_n1_piece`] for a model known to have `n = 1`. Written in `k du = beta |du| + gamma
-/// sgn(h) du`, the piece's sign taken from `h du` (which also takes the piece `h` moves
-/// into at `h = 0`): no sign tests of its own, and `du = 0` gives `k du = 0`, `phi = 1` and
-/// `h1 = h` (a NaN `du` is refused by the callers).
+/// sgn(h) du`, the piece's sign from the signs of `h` and `du` (at `h = 0`: the piece `h`
+/// moves into): one sign test instead of two sign flips, and no branch for `du = 0`, which
+/// gives `k du = 0`, `phi = 1` and `h1 = h` (a NaN `du` is refused by the callers).
 #[inline(always)]
 fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
     let a = du.abs();
-    let sgn_h_du = if h * du < T::ZERO { -a } else { a };
+    let sgn_h_du = if h.opposite_signs(du) { -a } else { a };
     let k_du = m.beta * a + m.gamma * sgn_h_du;
     let (phi, _) = k_du.phi_expm1_neg();
     let h1 = h + (m.alpha * du - k_du * h) * phi;
-    if h * h1 < T::ZERO {
+    if h.opposite_signs(h1) {
         None
     } else {
         Some(h1)
@@ -500,6 +507,28 @@ mod tests {
 
     pub(crate) fn cbw() -> Cbw<f64> {
         Cbw::with_n1(0.16, 0.07, 0.02, 0.01).unwrap()
+    }
+
+    /// The shortcut for a held input is the step's own value at `du = 0`, bit for bit
+    /// (zero's sign included), in f32 and in fixed point.
+    #[test]
+    fn held_input_shortcut_is_the_step() {
+        use crate::fixed::Q16;
+        let m = Cbw::<f32>::with_n1(0.16, 0.07, 0.02, -0.01).unwrap();
+        for h in [-3.0f32, -1e-20, -0.0, 0.0, 1e-20, 2.5] {
+            for du in [0.0f32, -0.0] {
+                let short = cbw_n1_piece(&m, h, du).unwrap();
+                let full = cbw_n1_piece_unchecked(&CbwN1::of(&m), h, du).unwrap();
+                assert_eq!(short.to_bits(), full.to_bits(), "h {h} du {du}");
+            }
+        }
+        let q = |x: f64| Q16::from_f64(x);
+        let m = Cbw::with_n1(q(0.16), q(0.07), q(0.02), q(0.01)).unwrap();
+        for h in [-3.0, 0.0, 2.5] {
+            let short = cbw_n1_piece(&m, q(h), Q16::ZERO);
+            let full = cbw_n1_piece_unchecked(&CbwN1::of(&m), q(h), Q16::ZERO);
+            assert_eq!(short, full, "Q16 h {h}");
+        }
     }
 
     fn spectral_radius(f: [[f64; 2]; 2]) -> f64 {

@@ -210,7 +210,7 @@ fn invert_cbw_n1<T: Real>(
     let h_side = if h0 == T::ZERO { r } else { h0 };
     let k = beta.mul_sign(r) + gamma.mul_sign(h_side);
     let (mut du, mut dh, mut it, mut phi) = cbw_piece(d, alpha - k * h0, k, r, tol, hint)?;
-    if h0 * (h0 + dh) < T::ZERO {
+    if h0.opposite_signs(h0 + dh) {
         // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
         // moving in direction s, where sgn(h) = s.
         let s = if r > T::ZERO { T::ONE } else { -T::ONE };
