@@ -122,20 +122,15 @@ impl<T: Real> CbwN1<T> {
     }
 }
 
-/// `dh/du` of CBW for `n = 1` at `h` moving in direction `s`: `beta s sgn(h) |h| = beta s
-/// h`, exactly (no sign tests).
+/// `dh/du` of CBW for `n = 1` at `h` moving in the direction of `s`'s sign: `beta s sgn(h)
+/// |h| = beta s h` for `s` in {-1, 0, 1}, exactly (no sign tests of `h`), with `beta s`
+/// picked instead of multiplied (`beta * 1` and `beta * -1` are `beta` and `-beta` exactly,
+/// in fixed point too), so the fused law can pass `dv` itself.
 #[inline(always)]
 pub(crate) fn cbw_n1_slope<T: Real>(m: &CbwN1<T>, h: T, s: T) -> T {
-    m.alpha - m.gamma * h.abs() - m.beta * s * h
-}
-
-/// [`cbw_n1_slope`] with `s = sgn(dv)`: `beta * s` picked instead of multiplied (`beta * 1`
-/// and `beta * -1` are `beta` and `-beta` exactly, in fixed point too).
-#[inline(always)]
-pub(crate) fn cbw_n1_slope_toward<T: Real>(m: &CbwN1<T>, h: T, dv: T) -> T {
-    let bs = if dv > T::ZERO {
+    let bs = if s > T::ZERO {
         m.beta
-    } else if dv < T::ZERO {
+    } else if s < T::ZERO {
         -m.beta
     } else {
         m.beta * T::ZERO

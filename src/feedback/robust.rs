@@ -1,7 +1,7 @@
 //! Robust output-feedback law with virtual hysteresis control, 000 eq. (7)-(8), on the HGO.
 
 use super::guard::InputGuard;
-use super::hgo::{cbw_n1_slope_toward, CbwN1, Hgo, HgoState};
+use super::hgo::{cbw_n1_slope, CbwN1, Hgo, HgoState};
 use crate::hysteresis::{ensure, ensure_finite, ParamError};
 use crate::real::Real;
 use crate::signals::{LoopSignals, Setpoint};
@@ -295,7 +295,7 @@ impl<T: Real> Robust<T> {
         s.u_ff_prev = u_ff;
         // The model's slope at the hysteresis part of the estimate (inside the loop bound).
         let slope = if FUSED {
-            cbw_n1_slope_toward(&self.cbw_n1, s.obs.h, dv)
+            cbw_n1_slope(&self.cbw_n1, s.obs.h, dv)
         } else {
             self.hgo.model().slope(s.obs.h, dv.sgn())
         };
