@@ -113,6 +113,12 @@ pub trait Real:
             self
         }
     }
+    /// 1 when the sign is negative, else 0: [`Real::mul_sign`]'s test as an index (IEEE
+    /// types read the sign bit: `-0.0` counts as negative there, as in `mul_sign`).
+    #[inline(always)]
+    fn sign_index(self) -> usize {
+        usize::from(self < Self::ZERO)
+    }
     /// Neither zero nor NaN.
     #[inline(always)]
     fn is_nonzero(self) -> bool {
@@ -200,6 +206,11 @@ macro_rules! real_impl {
                 // `sign_of`'s sign bit XORed into `self`'s.
                 let sign = (-0.0 as $t).to_bits();
                 <$t>::from_bits(self.to_bits() ^ (sign_of.to_bits() & sign))
+            }
+            /// The sign bit (integer instructions, no compare).
+            #[inline(always)]
+            fn sign_index(self) -> usize {
+                (self.to_bits() >> (8 * core::mem::size_of::<$t>() - 1)) as usize
             }
             /// One compare of `|x|` (two on fixed point's integers are cheaper than its `abs`).
             #[inline(always)]
