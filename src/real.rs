@@ -71,6 +71,12 @@ pub trait Real:
         };
         (phi, em)
     }
+    /// [`Real::phi_expm1_neg`] for `self >= 0` or NaN (the same values; the per-sample
+    /// test of `f32` skips its `abs`).
+    #[inline(always)]
+    fn phi_expm1_neg_nonneg(self) -> (Self, Self) {
+        self.phi_expm1_neg()
+    }
 
     #[inline(always)]
     fn from_usize(n: usize) -> Self {
@@ -188,7 +194,7 @@ pub trait Real:
 }
 
 macro_rules! real_impl {
-    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:path, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:path, $fabs:path, $phi:path) => {
+    ($t:ty, $turn_shift:expr, $exp:ident, $expm1:path, $ln:ident, $ln1p:ident, $pow:ident, $sin:path, $cos:path, $tanh:ident, $atan2:ident, $floor:path, $fabs:path, $phi:path, $phi_nn:path) => {
         impl Real for $t {
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
@@ -309,6 +315,10 @@ macro_rules! real_impl {
             fn phi_expm1_neg(self) -> (Self, Self) {
                 $phi(self)
             }
+            #[inline(always)]
+            fn phi_expm1_neg_nonneg(self) -> (Self, Self) {
+                $phi_nn(self)
+            }
         }
     };
 }
@@ -327,7 +337,8 @@ real_impl!(
     atan2f,
     floor_f32,
     abs_f32,
-    phi_expm1_neg_f32
+    phi_expm1_neg_f32,
+    phi_expm1_neg_nonneg_f32
 );
 real_impl!(
     f64,
@@ -343,6 +354,7 @@ real_impl!(
     atan2,
     libm::floor,
     libm::fabs,
+    phi_expm1_neg_f64,
     phi_expm1_neg_f64
 );
 
@@ -359,7 +371,19 @@ fn phi_expm1_neg_f64(x: f64) -> (f64, f64) {
 /// = -x phi`: no division and no test for `x = 0`; elsewhere from `exp_m1`.
 #[inline(always)]
 fn phi_expm1_neg_f32(x: f32) -> (f32, f32) {
-    if x.abs() <= 1.0 / 32.0 {
+    phi_expm1_neg_f32_small(x, x.abs())
+}
+
+/// [`phi_expm1_neg_f32`] for `x >= 0` or NaN, where `|x| = x`.
+#[inline(always)]
+fn phi_expm1_neg_nonneg_f32(x: f32) -> (f32, f32) {
+    phi_expm1_neg_f32_small(x, x)
+}
+
+/// [`phi_expm1_neg_f32`] with `ax = |x|`.
+#[inline(always)]
+fn phi_expm1_neg_f32_small(x: f32, ax: f32) -> (f32, f32) {
+    if ax <= 1.0 / 32.0 {
         let p = 1.0 / 24.0 - x * (1.0 / 120.0);
         let p = 1.0 / 6.0 - x * p;
         let p = 0.5 - x * p;
