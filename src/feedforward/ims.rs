@@ -100,10 +100,12 @@ const CBW_NEWTON_MAX: usize = 8;
 /// `None` if it did not converge.
 #[inline(always)]
 fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T, T, usize, T)> {
+    // No guard of the slope: it is positive. `d - c > 0` (the IMS checks d against the
+    // largest slope over its range) and the hint is a `phi(k du)` in `[0, 1]` (or 1): on a
+    // piece `k du >= 0` (`k` has the sign of `r`, or is 0, and so has `du` while the slope
+    // is positive), so `c phi_hint <= max(c, 0)` as rounded. A slope that still were not
+    // positive would only cost Newton steps (or the bracketed solve for a zero one).
     let slope = d - c * phi_hint;
-    // d - c > 0 always (the IMS checks d against the largest slope); a wild hint could
-    // leave the secant without that.
-    let slope = if slope > T::ZERO { slope } else { d - c };
     let du = r / slope;
     // The first point inline (the per-sample case), the Newton steps out of line.
     let (phi, em) = (k * du).phi_expm1_neg(); // em = e^-(k du) - 1
