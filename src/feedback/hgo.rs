@@ -397,8 +397,8 @@ impl<T: Real> Hgo<T> {
         s.d += h - s.h;
         s.u = u;
         // One test for the three: a sum of finite values is finite (or overflowed, which
-        // is as bad).
-        if !(s.x + s.h + s.d).is_finite() {
+        // is as bad). `h + d` is the estimate the laws read next (`HgoState::h_hat`).
+        if !(s.x + s.h_hat()).is_finite() {
             *s = self.init(y, u);
         }
     }
