@@ -233,24 +233,10 @@ fn invert_cbw_n1<T: Real>(
     let (d, alpha) = (m.d(), m.alpha());
     let h0 = state.h;
     let r = y_ref - (d * state.u - h0);
-    // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) without `sgn` products:
-    // this runs every sample.
-    if !r.is_nonzero() {
-        // Already there (or NaN: the caller holds the output).
-        return if r == T::ZERO {
-            Some(Inverted {
-                u: state.u,
-                y: y_ref,
-                state: *state,
-                iterations: 0,
-                hint,
-            })
-        } else {
-            None
-        };
-    }
-    // k = beta s + gamma sgn(h0) (s at h0 = 0), picked by the sign bits (r is neither 0 nor
-    // NaN): no float compare but the zero test of h0.
+    // k = beta s + gamma sgn(h0) (s at h0 = 0), picked by the sign bits: no float compare
+    // but the zero test of h0. No test of r either: at r = 0 the piece's first point is
+    // du = 0, dh = 0 with a zero residual (accepted, phi = 1 the next hint), and a NaN r
+    // fails every residual test (`None`: the caller's bracketed solve holds the output).
     let h_side = if h0 == T::ZERO { r } else { h0 };
     let (rs, hs) = (r.sign_index(), h_side.sign_index());
     let k = pieces[(2 * rs + (rs ^ hs)) & 3];
