@@ -237,9 +237,14 @@ fn invert_cbw_n1<T: Real>(
     // but the zero test of h0. No test of r either: at r = 0 the piece's first point is
     // du = 0, dh = 0 with a zero residual (accepted, phi = 1 the next hint), and a NaN r
     // fails every residual test (`None`: the caller's bracketed solve holds the output).
-    let h_side = if h0 == T::ZERO { r } else { h0 };
-    let (rs, hs) = (r.sign_index(), h_side.sign_index());
-    let k = pieces[(2 * rs + (rs ^ hs)) & 3];
+    let rs = r.sign_index();
+    // sgn(h0) != s, where h0 = 0 takes the side of s.
+    let other = if h0 == T::ZERO {
+        0
+    } else {
+        rs ^ h0.sign_index()
+    };
+    let k = pieces[(2 * rs + other) & 3];
     let (mut du, mut dh, mut it, mut phi) = cbw_piece(d, alpha - k * h0, k, r, tol, hint)?;
     if h0.opposite_signs(h0 + dh) {
         // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
