@@ -377,7 +377,15 @@ fn phi_expm1_neg_f32(x: f32) -> (f32, f32) {
 /// [`phi_expm1_neg_f32`] for `x >= 0` or NaN, where `|x| = x`.
 #[inline(always)]
 fn phi_expm1_neg_nonneg_f32(x: f32) -> (f32, f32) {
-    phi_expm1_neg_f32_small(x, x)
+    if x <= 1.0 / 32.0 {
+        // Degree 3: the remainder x^4/120 is below 8e-9 relative (0.07 ulp) here.
+        let p = 1.0 / 6.0 - x * (1.0 / 24.0);
+        let p = 0.5 - x * p;
+        let phi = 1.0 - x * p;
+        (phi, -x * phi)
+    } else {
+        phi_expm1_neg_f32_small(x, x)
+    }
 }
 
 /// [`phi_expm1_neg_f32`] with `ax = |x|`.
@@ -641,6 +649,16 @@ mod tests {
         let (phi, em) = 1e3f32.phi_expm1_neg();
         assert_eq!((phi, em), (1e-3, -1.0));
         assert!(f32::NAN.phi_expm1_neg().0.is_nan());
+        // The variant for x >= 0 (a shorter polynomial): as close.
+        let mut worst: f64 = 0.0;
+        for i in 0..=100_000 {
+            let x = i as f32 * 1e-6;
+            let want = (x as f64).phi_expm1_neg().0;
+            worst = worst.max((x.phi_expm1_neg_nonneg().0 as f64 - want).abs() / want);
+        }
+        assert!(worst < 2.5e-7, "f32 nonneg relative error {worst}");
+        assert_eq!(0.0f32.phi_expm1_neg_nonneg(), (1.0, -0.0));
+        assert!(f32::NAN.phi_expm1_neg_nonneg().0.is_nan());
     }
 
     #[test]
