@@ -178,7 +178,8 @@ pub struct Pipeline<T: Real, const N: usize> {
     feedback: [Feedback<T>; N],
     state: State<T, N>,
     /// [`Pipeline::step`] takes the fused path of `fused.rs` (decided when the mode, the
-    /// feedforward or the feedback changes).
+    /// feedforward or the feedback changes; a latched fault clears it, so the step tests
+    /// one flag).
     fused: bool,
     /// A configuration handed over by [`Pipeline::adopt`] waits for its bumpless restart:
     /// the next step runs it first (in the control task, not under the command's lock).
@@ -245,7 +246,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             p.state.trace.u_ff[i] = a.safe_volts;
             p.state.trace.setpoint[i] = p.reference[i].current();
         }
-        p.fused = p.fusable();
+        p.fused = p.fused_due();
         Ok(p)
     }
 
@@ -273,10 +274,17 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     pub fn reference(&self, axis: usize) -> Option<&WaveGen<T>> {
         self.reference.get(axis)
     }
-    /// The configuration runs the fused step (see [`Pipeline::step`]) while no fault is
-    /// latched.
+    /// The next sample runs the fused step (see [`Pipeline::step`]): the configuration
+    /// allows it and no fault is latched.
     pub fn is_fused(&self) -> bool {
         self.fused
+    }
+
+    /// What [`Pipeline::is_fused`] is: no restart due, no fault latched and a configuration
+    /// the fused step covers. Every change of one of them decides again (a latched fault
+    /// only clears the flag).
+    fn fused_due(&self) -> bool {
+        !self.restart_due && self.state.fault.is_none() && self.fusable()
     }
     /// The DAC codes of the last sample (at start-up: the codes of `safe_volts`).
     pub fn codes(&self) -> [i32; N] {
@@ -359,7 +367,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         self.clamp_code(axis);
         // The fused step's guard proof covers the output range: decide again (a restart
         // still due keeps the generic path until it ran).
-        self.fused = !self.restart_due && self.fusable();
+        self.fused = self.fused_due();
         Ok(())
     }
 
@@ -382,6 +390,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         if st.fault.is_none() {
             st.fault = Some(Fault::DacWrite { axis });
         }
+        self.fused = false;
     }
 
     /// A sensor check outside the pipeline (the stuck-code detector on the converter's own
@@ -392,6 +401,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         if st.fault.is_none() {
             st.fault = Some(fault);
         }
+        self.fused = false;
     }
 
     /// Replaces the sensor scaling and window of `axis` (validated like [`Pipeline::new`]).
@@ -404,7 +414,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             .ok_or(ConfigError::new("axis index out of range"))?;
         a.sensor = sensor;
         // The fused step's guard proof covers the sensor window: decide again.
-        self.fused = !self.restart_due && self.fusable();
+        self.fused = self.fused_due();
         Ok(())
     }
 
@@ -452,7 +462,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                 u_applied: u,
             });
         }
-        self.fused = self.fusable();
+        self.fused = self.fused_due();
     }
 
     /// One sample: ADC codes in, DAC codes out.
@@ -467,7 +477,8 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     #[cfg_attr(target_os = "none", inline(never))]
     #[cfg_attr(not(target_os = "none"), inline)]
     pub fn step(&mut self, adc: [i32; N]) -> [i32; N] {
-        if self.fused && self.state.fault.is_none() {
+        // The flag holds the fault test too (a latched fault clears it).
+        if self.fused {
             if let Some(codes) = self.step_fused(adc) {
                 return codes;
             }
@@ -494,6 +505,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                 None => {
                     if !bad_sensor && st.fault.is_none() {
                         st.fault = Some(Fault::SensorRange { axis: i });
+                        self.fused = false;
                     }
                     bad_sensor = true;
                 }
@@ -542,6 +554,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             }
             if let Some(i) = u.iter().position(|u| !u.is_finite()) {
                 st.fault = Some(Fault::NonFiniteCommand { axis: i });
+                self.fused = false;
                 st.counters.nonfinite_commands = st.counters.nonfinite_commands.saturating_add(1);
             }
         }

@@ -111,7 +111,8 @@ impl<T: Real> InputGuard<T> {
             hold_setpoint(sp, &self.last.setpoint)
         };
         self.last.setpoint = sp;
-        self.settled = true;
+        // `settled` is already true: the fused update runs on a primed law only, and the
+        // law primes itself in an update after `clean` (a restart clears both together).
         sp
     }
 

@@ -147,7 +147,8 @@ fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
     let a = du.abs();
     let sgn_h_du = if h.opposite_signs(du) { -a } else { a };
     let k_du = m.beta * a + m.gamma * sgn_h_du;
-    let (phi, _) = k_du.phi_expm1_neg();
+    // k du >= 0: beta >= |gamma| (CBW's bounded loops), so beta a >= |gamma a| as rounded.
+    let (phi, _) = k_du.phi_expm1_neg_nonneg();
     let h1 = h + (m.alpha * du - k_du * h) * phi;
     if h.opposite_signs(h1) {
         None
@@ -330,6 +331,27 @@ impl<T: Real> Hgo<T> {
         }
     }
 
+    /// For the model's parameters `m` ([`Hgo::cbw_n1`]): every `d_p - cbw_n1_slope(m, h, s)`
+    /// over the states the observer keeps (`|h| <= h_bound`, any `s`), as `T` rounds it,
+    /// lies strictly below `upper`. The slope is at least `alpha - (beta + gamma) |h| >=
+    /// alpha - (beta + gamma) h_bound`, which is 0 (`h_bound = alpha / (beta + gamma)`) up
+    /// to the rounding; the margin covers the rounding of `T` (relative for IEEE types,
+    /// absolute for fixed point).
+    pub(crate) fn cbw_n1_den_below(&self, m: &CbwN1<T>, upper: T) -> bool {
+        let f = |x: T| x.to_f64();
+        let (a, b, g, hb, dp) = (
+            f(m.alpha),
+            f(m.beta),
+            f(m.gamma),
+            f(self.h_bound),
+            f(self.d_p),
+        );
+        let eps = f(T::EPSILON);
+        let margin = 16.0 * eps * (1.0 + dp + a + (b.abs() + g.abs()) * hb.abs());
+        let slope_min = a - (b + g) * hb.abs();
+        dp - slope_min + margin < f(upper)
+    }
+
     /// The model is CBW with `n = 1`, the case [`Hgo::step_cbw_n1`] runs.
     pub(crate) fn is_cbw_n1(&self) -> bool {
         matches!(self.model, ObserverModel::Cbw(m) if m.n() == T::ONE)
@@ -375,8 +397,8 @@ impl<T: Real> Hgo<T> {
         s.d += h - s.h;
         s.u = u;
         // One test for the three: a sum of finite values is finite (or overflowed, which
-        // is as bad).
-        if !(s.x + s.h + s.d).is_finite() {
+        // is as bad). `h + d` is the estimate the laws read next (`HgoState::h_hat`).
+        if !(s.x + s.h_hat()).is_finite() {
             *s = self.init(y, u);
         }
     }

@@ -228,6 +228,7 @@ impl<T: Real> Robust<T> {
         self.cfg.convergence == Convergence::Exponential
             && self.guard.is_unfiltered()
             && self.hgo.is_cbw_n1()
+            && self.hgo.cbw_n1_den_below(&self.cbw_n1, self.den_hi)
     }
 
     /// The law has not primed its observer yet (the next update does that).
@@ -299,7 +300,13 @@ impl<T: Real> Robust<T> {
         } else {
             self.hgo.model().slope(s.obs.h, dv.sgn())
         };
-        let den = (d_p - slope).clamp_to(self.den_lo, self.den_hi);
+        // Fused: the upper bound cannot bind (`fusable` checks `Hgo::cbw_n1_den_below`), so
+        // the lower one alone gives the same value (NaN: the lower bound, as `clamp_to`).
+        let den = if FUSED {
+            (d_p - slope).max(self.den_lo)
+        } else {
+            (d_p - slope).clamp_to(self.den_lo, self.den_hi)
+        };
         let u = u0 + du_ff + dv / den;
         if u.is_finite() {
             u

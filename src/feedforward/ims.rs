@@ -49,6 +49,24 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     ) -> Option<Inverted<T, Self::State>> {
         None
     }
+    /// What [`ImsModel::invert_step`] can compute once per model ([`Ims`] keeps it; CBW:
+    /// its slopes `k` of the four pieces, [`CbwPieces`]).
+    fn pieces(&self) -> [T; 4] {
+        [T::ZERO; 4]
+    }
+    /// [`ImsModel::invert_step`] with `pieces` from [`ImsModel::pieces`] (the same result).
+    #[inline]
+    fn invert_step_with(
+        &self,
+        state: &Self::State,
+        y_ref: T,
+        tol: T,
+        hint: T,
+        pieces: &[T; 4],
+    ) -> Option<Inverted<T, Self::State>> {
+        let _ = pieces;
+        self.invert_step(state, y_ref, tol, hint)
+    }
 }
 
 /// A solved step (see [`ImsModel::invert_step`]).
@@ -82,10 +100,12 @@ const CBW_NEWTON_MAX: usize = 8;
 /// `None` if it did not converge.
 #[inline(always)]
 fn cbw_piece<T: Real>(d: T, c: T, k: T, r: T, tol: T, phi_hint: T) -> Option<(T, T, usize, T)> {
+    // No guard of the slope: it is positive. `d - c > 0` (the IMS checks d against the
+    // largest slope over its range) and the hint is a `phi(k du)` in `[0, 1]` (or 1): on a
+    // piece `k du >= 0` (`k` has the sign of `r`, or is 0, and so has `du` while the slope
+    // is positive), so `c phi_hint <= max(c, 0)` as rounded. A slope that still were not
+    // positive would only cost Newton steps (or the bracketed solve for a zero one).
     let slope = d - c * phi_hint;
-    // d - c > 0 always (the IMS checks d against the largest slope); a wild hint could
-    // leave the secant without that.
-    let slope = if slope > T::ZERO { slope } else { d - c };
     let du = r / slope;
     // The first point inline (the per-sample case), the Newton steps out of line.
     let (phi, em) = (k * du).phi_expm1_neg(); // em = e^-(k du) - 1
@@ -171,44 +191,60 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
         tol: T,
         hint: T,
     ) -> Option<Inverted<T, BwState<T>>> {
+        self.invert_step_with(state, y_ref, tol, hint, &cbw_pieces(self))
+    }
+    fn pieces(&self) -> [T; 4] {
+        cbw_pieces(self)
+    }
+    #[inline]
+    fn invert_step_with(
+        &self,
+        state: &BwState<T>,
+        y_ref: T,
+        tol: T,
+        hint: T,
+        pieces: &[T; 4],
+    ) -> Option<Inverted<T, BwState<T>>> {
         if self.n() != T::ONE {
             return None;
         }
-        invert_cbw_n1(self, state, y_ref, tol, hint)
+        invert_cbw_n1(self, pieces, state, y_ref, tol, hint)
     }
+}
+
+/// The slope `k = beta s + gamma sgn(h)` of CBW's step for `n = 1` on each of its four pieces,
+/// indexed by `2 [s < 0] + [sgn(h) != s]` ([`Real::sign_index`]): `(+-beta) + (+-gamma)`,
+/// the same sums (and bits) as the sign flips of `beta` and `gamma` give.
+fn cbw_pieces<T: Real>(m: &Cbw<T>) -> [T; 4] {
+    let (b, g) = (m.beta(), m.gamma());
+    [b + g, b + -g, -b + -g, -b + g]
 }
 
 /// [`ImsModel::invert_step`] of CBW for `n = 1` (the caller checks `n`).
 #[inline(always)]
 fn invert_cbw_n1<T: Real>(
     m: &Cbw<T>,
+    pieces: &[T; 4],
     state: &BwState<T>,
     y_ref: T,
     tol: T,
     hint: T,
 ) -> Option<Inverted<T, BwState<T>>> {
-    let (d, alpha, beta, gamma) = (m.d(), m.alpha(), m.beta(), m.gamma());
+    let (d, alpha) = (m.d(), m.alpha());
     let h0 = state.h;
     let r = y_ref - (d * state.u - h0);
-    // Direction s = sgn(r) and piece sigma = sgn(h) (s at h = 0) without `sgn` products:
-    // this runs every sample.
-    if !r.is_nonzero() {
-        // Already there (or NaN: the caller holds the output).
-        return if r == T::ZERO {
-            Some(Inverted {
-                u: state.u,
-                y: y_ref,
-                state: *state,
-                iterations: 0,
-                hint,
-            })
-        } else {
-            None
-        };
-    }
-    // k = beta s + gamma sgn(h0) (s at h0 = 0), as sign flips (r is neither 0 nor NaN).
-    let h_side = if h0 == T::ZERO { r } else { h0 };
-    let k = beta.mul_sign(r) + gamma.mul_sign(h_side);
+    // k = beta s + gamma sgn(h0) (s at h0 = 0), picked by the sign bits: no float compare
+    // but the zero test of h0. No test of r either: at r = 0 the piece's first point is
+    // du = 0, dh = 0 with a zero residual (accepted, phi = 1 the next hint), and a NaN r
+    // fails every residual test (`None`: the caller's bracketed solve holds the output).
+    let rs = r.sign_index();
+    // sgn(h0) != s, where h0 = 0 takes the side of s.
+    let other = if h0 == T::ZERO {
+        0
+    } else {
+        rs ^ h0.sign_index()
+    };
+    let k = pieces[(2 * rs + other) & 3];
     let (mut du, mut dh, mut it, mut phi) = cbw_piece(d, alpha - k * h0, k, r, tol, hint)?;
     if h0.opposite_signs(h0 + dh) {
         // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
@@ -223,7 +259,7 @@ fn invert_cbw_n1<T: Real>(
         if !(du0.is_finite() && du0.sgn() != -s && r2.sgn() != -s) {
             return None;
         }
-        let (du2, dh2, it2, phi2) = cbw_piece(d, alpha, (beta + gamma) * s, r2, tol, T::ONE)?;
+        let (du2, dh2, it2, phi2) = cbw_piece(d, alpha, pieces[0] * s, r2, tol, T::ONE)?;
         du = du0 + du2;
         dh = dh2 - h0;
         it += it2;
@@ -362,7 +398,14 @@ impl<T: Real> Ims<T, Cbw<T>> {
             return self.u;
         }
         let tol = self.tol(y_ref_um);
-        if let Some(inv) = invert_cbw_n1(&self.model, &self.state, y_ref_um, tol, self.step_hint) {
+        if let Some(inv) = invert_cbw_n1(
+            &self.model,
+            &self.pieces,
+            &self.state,
+            y_ref_um,
+            tol,
+            self.step_hint,
+        ) {
             if let Some(u) = self.take_inverted::<true>(inv) {
                 return u;
             }
@@ -404,6 +447,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     slope_hint: T,
     /// [`Inverted::hint`] of the last direct inversion (`T::ONE`: none).
     step_hint: T,
+    /// [`ImsModel::pieces`] of the model.
+    pieces: [T; 4],
     state: M::State,
     u: T,
     y: T,
@@ -447,6 +492,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let mut state = model.init(u0);
         let y = model.step(&mut state, u0, dt_s);
         let slope_hint = model.d();
+        let pieces = model.pieces();
         Ok(Self {
             model,
             closure,
@@ -461,6 +507,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             offset_um: T::ZERO,
             slope_hint,
             step_hint: T::ONE,
+            pieces,
             state,
             u: u0,
             y,
@@ -557,10 +604,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             ImsLoop::Solved => {
                 let tol = self.tol(y_ref_um);
                 if self.quad == T::ZERO {
-                    if let Some(inv) =
-                        self.model
-                            .invert_step(&self.state, y_ref_um, tol, self.step_hint)
-                    {
+                    if let Some(inv) = self.model.invert_step_with(
+                        &self.state,
+                        y_ref_um,
+                        tol,
+                        self.step_hint,
+                        &self.pieces,
+                    ) {
                         if let Some(u) = self.take_inverted::<false>(inv) {
                             return u;
                         }

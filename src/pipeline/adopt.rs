@@ -116,7 +116,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             self.fused = false;
         } else if parts.any(Parts::LIMITS.union(Parts::SENSOR)) && !self.restart_due {
             // A restart still due keeps the generic path until it ran.
-            self.fused = self.fusable();
+            self.fused = self.fused_due();
         }
     }
 
@@ -124,5 +124,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     /// command runs on it). A copy.
     pub fn sync_state(&mut self, from: &Self) {
         self.state = from.state;
+        // The fault came with it.
+        self.fused = self.fused_due();
     }
 }
