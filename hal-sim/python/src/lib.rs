@@ -231,7 +231,7 @@ fn fit<'py>(
 /// `piezo fit --model ss | hammerstein-ss | scheduled-ss | lfr` on records: one
 /// multivariable model for all `train` records; returns the `fit.json` text.
 #[pyfunction]
-#[pyo3(signature = (train, model, order=None, hysteresis="cbw".to_string(), lm_iterations=60, joint_iterations=30, schedule_tau_s=0.15, lfr_basis=vec!["soft-cubic".to_string()], lfr_linear=None, lfr_channels="outputs:2".to_string(), lfr_iterations=30, input_delay=0, progress=false))]
+#[pyo3(signature = (train, model, order=None, hysteresis="cbw".to_string(), lm_iterations=60, joint_iterations=30, schedule_tau_s=0.15, lfr_basis=None, lfr_linear=None, lfr_channels="outputs:2".to_string(), lfr_iterations=30, input_delay=0, progress=false))]
 #[allow(clippy::too_many_arguments)]
 fn fit_ss(
     py: Python<'_>,
@@ -242,7 +242,7 @@ fn fit_ss(
     lm_iterations: usize,
     joint_iterations: usize,
     schedule_tau_s: f64,
-    lfr_basis: Vec<String>,
+    lfr_basis: Option<Vec<String>>,
     lfr_linear: Option<String>,
     lfr_channels: String,
     lfr_iterations: usize,
@@ -264,7 +264,7 @@ fn fit_ss(
             lm_iterations,
             joint_iterations,
             schedule_tau_s,
-            lfr_basis: &lfr_basis,
+            lfr_basis: lfr_basis.as_deref().unwrap_or_default(),
             lfr_linear: lfr_linear.as_deref(),
             lfr_channels: &lfr_channels,
             lfr_iterations,

@@ -201,8 +201,9 @@ pub struct Args {
     pub schedule_tau_s: f64,
     /// `lfr`: basis functions of the nonlinearity in feedback, applied to every channel
     /// (comma list of `cubic` = z^3, `abs-square` = z |z|, `soft-cubic` = z - tanh z,
-    /// `play:R` = play operator of half-width R).
-    #[arg(long, value_delimiter = ',', default_value = "soft-cubic")]
+    /// `play:R` = play operator of half-width R, `rms:T` = z r / (1 + r) with r the
+    /// channel's running mean square over T samples: a stiffness that follows the level).
+    #[arg(long, value_delimiter = ',', default_value = crate::ident::ss::lfr::DEFAULT_BASIS)]
     pub lfr_basis: Vec<String>,
     /// `lfr`: the records the linear part is identified on: `all` (the BLA of every
     /// training record) or `lowest` (the lowest input level's: the small-signal model the
@@ -216,7 +217,8 @@ pub struct Args {
     #[arg(long, default_value = "outputs:2")]
     pub lfr_channels: String,
     /// `lfr`: Levenberg-Marquardt iterations on the simulation error (it stops earlier when
-    /// a step no longer lowers the cost).
+    /// a step no longer lowers the cost); with static and `rms` bases together, each of the
+    /// two stages' (the static bases first, then all from there).
     #[arg(long, default_value_t = 30)]
     pub lfr_iterations: usize,
     /// State-space models (`ss`, `hammerstein-ss`, `scheduled-ss`, `lfr`): the inputs reach

@@ -282,6 +282,7 @@ impl IdentifiedPlant {
             for _ in 0..50 {
                 let mut rhs: Vec<f64> = bv.iter().copied().collect();
                 self.lfr_mem = l.rest_memory();
+                l.settle_memory(&self.x, &v, &mut self.lfr_mem);
                 l.add_feedback(&self.x, &v, &mut self.lfr_mem, &mut rhs);
                 let Some(x) = lu.solve(&nalgebra::DVector::from_vec(rhs)) else {
                     self.x = x_lin;
@@ -497,5 +498,70 @@ mod tests {
                 want[0][k]
             );
         }
+    }
+
+    /// Settled at a constant voltage, an LFR whose feedback follows the running mean square
+    /// starts where holding that voltage leaves it: its rest has the mean square of the
+    /// held `z` in memory, not zero, so the output does not move while the voltage holds.
+    #[test]
+    fn an_lfr_with_a_running_mean_square_settles_at_its_rest() {
+        use crate::ident::ss::lfr::{Basis, Lfr};
+        let lfr = Lfr {
+            linear: Modal {
+                blocks: vec![Block::Real(0.9), Block::Pair(0.95, 0.2)],
+                b: DMatrix::from_row_slice(3, 1, &[1.0, 0.5, 0.0]),
+                c: DMatrix::from_row_slice(1, 3, &[0.4, 0.1, 0.2]),
+                d: DMatrix::from_row_slice(1, 1, &[0.0]),
+            },
+            basis: vec![Basis::Rms(50.0)],
+            e: DMatrix::from_row_slice(3, 1, &[-0.05, 0.0, 0.0]),
+            f: DMatrix::from_row_slice(1, 3, &[1.0, 0.0, 0.0]),
+            g: DMatrix::zeros(1, 1),
+        };
+        let fs = 1000.0;
+        let mut saved = SsJson::new(
+            &Hammerstein {
+                fronts: Vec::new(),
+                linear: lfr.linear.clone(),
+            },
+            fs,
+            ("V", "um"),
+            serde_json::Value::Null,
+        )
+        .with_lfr(&lfr);
+        saved.input_range = vec![(0.0, 10.0)];
+        saved.output_range = vec![(-50.0, 50.0)];
+        let path = std::env::temp_dir().join(format!("piezo-rms-{}.json", std::process::id()));
+        std::fs::write(&path, serde_json::to_string(&saved).unwrap()).unwrap();
+        let cfg = IdentifiedCfg {
+            fit_json: path.clone(),
+            volts_min: 0.0,
+            volts_max: 10.0,
+            centre_um: 0.0,
+            half_span_um: 1.0,
+        };
+        let mut plant = IdentifiedPlant::load(&cfg, 1).unwrap();
+        std::fs::remove_file(&path).ok();
+        plant.settle(&[8.0]);
+        let y0 = plant.y[0];
+        for k in 0..500 {
+            plant.advance(&[8.0], 1.0 / fs);
+            assert!(
+                (plant.y[0] - y0).abs() < 1e-6 * (1.0 + y0.abs()),
+                "sample {k}: {} after a rest at {y0}",
+                plant.y[0]
+            );
+        }
+        // The feedback is live there: the linear rest is another point.
+        let lin = lfr
+            .linear
+            .response(crate::ident::ss::model::C64::new(1.0, 0.0))[(0, 0)]
+            .re;
+        assert!(
+            (plant.y[0] - lin * 8.0).abs() > 1e-3,
+            "{} vs {}",
+            plant.y[0],
+            lin * 8.0
+        );
     }
 }

@@ -77,11 +77,15 @@ impl FitOptions {
             (_, None) => false,
         };
         let lfr = LfrOptions {
-            basis: a
-                .lfr_basis
-                .iter()
-                .map(|b| Basis::parse(b))
-                .collect::<Result<_>>()?,
+            // None given (the Python package's default): the default basis.
+            basis: if a.lfr_basis.is_empty() {
+                lfr::default_basis()
+            } else {
+                a.lfr_basis
+                    .iter()
+                    .map(|b| Basis::parse(b))
+                    .collect::<Result<_>>()?
+            },
             channels: lfr::Channels::parse(a.lfr_channels)?,
             iterations: a.lfr_iterations,
             progress: a.progress,

@@ -200,7 +200,7 @@ def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
         lm_iterations: int = 60, upsample: int = 20, progress: bool = False,
         out=None, columns: Optional[dict] = None, order=None, hysteresis: str = "cbw",
         joint_iterations: int = 30, schedule_tau_s: float = 0.15,
-        lfr_basis=("soft-cubic",), lfr_linear: Optional[str] = None,
+        lfr_basis=None, lfr_linear: Optional[str] = None,
         lfr_channels: str = "outputs:2", lfr_iterations: int = 30,
         input_delay: int = 0) -> FitResult:
     """`piezo fit --model MODEL --train TRAIN [--valid VALID | --split F] ...`: identifies
@@ -211,9 +211,10 @@ def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
     fit one multivariable model to `train`, a record or a list of them (periodic records
     for `lfr` and `scheduled-ss`), with the CLI's `order` (a number or `"auto"`; default
     28 for `lfr`, else auto), `hysteresis`, `lm_iterations`, `joint_iterations`,
-    `schedule_tau_s`, `lfr_basis`, `lfr_linear`, `lfr_channels`, `lfr_iterations` and
-    `input_delay`; the answer's `report` is the `fit.json` (`report["report"]` its training
-    errors) and it has no simulated records: score it with `predict`."""
+    `schedule_tau_s`, `lfr_basis` (`None`: the CLI's default), `lfr_linear`,
+    `lfr_channels`, `lfr_iterations` and `input_delay`; the answer's `report` is the
+    `fit.json` (`report["report"]` its training errors) and it has no simulated records:
+    score it with `predict`."""
     lib = _lib()
     rec = lambda r: as_record(r, columns=columns)._native()  # noqa: E731
     if model in STATE_SPACE:
@@ -222,7 +223,8 @@ def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
                              "the per-axis models; score a state-space fit with predict()")
         text = lib.fit_ss([rec(r) for r in _records(train)], model,
                           None if order is None else str(order), hysteresis, lm_iterations,
-                          joint_iterations, schedule_tau_s, list(lfr_basis), lfr_linear,
+                          joint_iterations, schedule_tau_s,
+                          None if lfr_basis is None else list(lfr_basis), lfr_linear,
                           lfr_channels, lfr_iterations, input_delay, progress)
         r = FitResult(text, json.loads(text), np.empty((0, 0)))
         if out is not None:
