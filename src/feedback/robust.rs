@@ -87,6 +87,12 @@ pub struct Robust<T> {
     /// The observer model's parameters when it is CBW with `n = 1` (the fused update's
     /// case): read without matching the model per sample.
     cbw_n1: CbwN1<T>,
+    /// The fused update's denominator never reaches `den_hi` ([`Hgo::cbw_n1_den_below`]),
+    /// decided once here: the check runs in `f64`, software arithmetic on the M4F, and
+    /// `fusable` is asked whenever the pipeline re-decides its path, in the control
+    /// interrupt and under the command lock (asked there, it made the flood's longest
+    /// control interrupt 4880 instructions instead of 3600: `.ci/test.d/31-qemu-flood.sh`).
+    den_hi_free: bool,
     pub(crate) guard: InputGuard<T>,
 }
 
@@ -135,14 +141,17 @@ impl<T: Real> Robust<T> {
             "robust law: d_p > 0 (the voltage must move the stage)",
         )?;
         let c2 = -(-cfg.lambda2 * hgo.dt_s()).exp_m1();
+        let den_hi = T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs();
+        let cbw_n1 = hgo.cbw_n1();
         Ok(Self {
             hgo,
             cfg,
             left2: T::ONE - c2,
             p1: (-cfg.lambda1 * hgo.dt_s()).exp(),
             den_lo: m.d() / T::from_f64(20.0),
-            den_hi: T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs(),
-            cbw_n1: hgo.cbw_n1(),
+            den_hi,
+            cbw_n1,
+            den_hi_free: hgo.is_cbw_n1() && hgo.cbw_n1_den_below(&cbw_n1, den_hi),
             state: RobustState {
                 fresh: true,
                 ..Default::default()
@@ -228,7 +237,7 @@ impl<T: Real> Robust<T> {
         self.cfg.convergence == Convergence::Exponential
             && self.guard.is_unfiltered()
             && self.hgo.is_cbw_n1()
-            && self.hgo.cbw_n1_den_below(&self.cbw_n1, self.den_hi)
+            && self.den_hi_free
     }
 
     /// The law has not primed its observer yet (the next update does that).
