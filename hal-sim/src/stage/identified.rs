@@ -424,6 +424,22 @@ mod tests {
     use crate::ident::ss::model::Block;
     use nalgebra::DMatrix;
 
+    /// `saved` as a one-axis stage over 0-10 V (through a file, as `--stage` loads it).
+    fn load_one_axis(saved: &SsJson, name: &str) -> IdentifiedPlant {
+        let path = std::env::temp_dir().join(format!("piezo-{name}-{}.json", std::process::id()));
+        std::fs::write(&path, serde_json::to_string(saved).unwrap()).unwrap();
+        let cfg = IdentifiedCfg {
+            fit_json: path.clone(),
+            volts_min: 0.0,
+            volts_max: 10.0,
+            centre_um: 0.0,
+            half_span_um: 1.0,
+        };
+        let plant = IdentifiedPlant::load(&cfg, 1).unwrap();
+        std::fs::remove_file(&path).ok();
+        plant
+    }
+
     /// The simulator's stage runs an extended model's delay, creep and drift as the
     /// model's own simulation does, sample for sample (inputs mapped one to one).
     #[test]
@@ -455,21 +471,7 @@ mod tests {
             drift: Some(vec![0.5]),
             ..Model::of_saved(&base).unwrap()
         };
-        let path = std::env::temp_dir().join(format!("piezo-ext-{}.json", std::process::id()));
-        std::fs::write(
-            &path,
-            serde_json::to_string(&model.to_saved(&base, serde_json::Value::Null)).unwrap(),
-        )
-        .unwrap();
-        let cfg = IdentifiedCfg {
-            fit_json: path.clone(),
-            volts_min: 0.0,
-            volts_max: 10.0,
-            centre_um: 0.0,
-            half_span_um: 1.0,
-        };
-        let mut plant = IdentifiedPlant::load(&cfg, 1).unwrap();
-        std::fs::remove_file(&path).ok();
+        let mut plant = load_one_axis(&model.to_saved(&base, serde_json::Value::Null), "ext");
         // The scale counts creep's static gain beside G(1): the 10 V range moves the axis
         // by 2 um at rest.
         let g1 = model
@@ -531,17 +533,7 @@ mod tests {
         .with_lfr(&lfr);
         saved.input_range = vec![(0.0, 10.0)];
         saved.output_range = vec![(-50.0, 50.0)];
-        let path = std::env::temp_dir().join(format!("piezo-rms-{}.json", std::process::id()));
-        std::fs::write(&path, serde_json::to_string(&saved).unwrap()).unwrap();
-        let cfg = IdentifiedCfg {
-            fit_json: path.clone(),
-            volts_min: 0.0,
-            volts_max: 10.0,
-            centre_um: 0.0,
-            half_span_um: 1.0,
-        };
-        let mut plant = IdentifiedPlant::load(&cfg, 1).unwrap();
-        std::fs::remove_file(&path).ok();
+        let mut plant = load_one_axis(&saved, "rms");
         plant.settle(&[8.0]);
         let y0 = plant.y[0];
         for k in 0..500 {
