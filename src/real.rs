@@ -371,7 +371,7 @@ fn phi_expm1_neg_f64(x: f64) -> (f64, f64) {
 /// = -x phi`: no division and no test for `x = 0`; elsewhere from `exp_m1`.
 #[inline(always)]
 fn phi_expm1_neg_f32(x: f32) -> (f32, f32) {
-    phi_expm1_neg_f32_small(x, x.abs())
+    phi_expm1_neg_f32_abs(x, x.abs())
 }
 
 /// [`phi_expm1_neg_f32`] for `x >= 0` or NaN, where `|x| = x`.
@@ -384,13 +384,13 @@ fn phi_expm1_neg_nonneg_f32(x: f32) -> (f32, f32) {
         let phi = 1.0 - x * p;
         (phi, -x * phi)
     } else {
-        phi_expm1_neg_f32_small(x, x)
+        phi_expm1_neg_f32_abs(x, x)
     }
 }
 
 /// [`phi_expm1_neg_f32`] with `ax = |x|`.
 #[inline(always)]
-fn phi_expm1_neg_f32_small(x: f32, ax: f32) -> (f32, f32) {
+fn phi_expm1_neg_f32_abs(x: f32, ax: f32) -> (f32, f32) {
     if ax <= 1.0 / 32.0 {
         let p = 1.0 / 24.0 - x * (1.0 / 120.0);
         let p = 1.0 / 6.0 - x * p;

@@ -37,8 +37,9 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     /// Direct inversion of one step, for models whose step has a closed form: the input
     /// `u` whose step from `state` gives `y_model(u) = y_ref` to within `tol`, the model
     /// output there and the state after the step. `hint`: the [`Inverted::hint`] of the
-    /// previous solved step (`T::ONE` when there is none), a start for the solve. `None`
-    /// (the default): the IMS runs its bracketed solve on [`Hysteresis::step`] instead.
+    /// previous solved step (`T::ONE` when there is none), a start for the solve;
+    /// `pieces`: the model's [`ImsModel::pieces`]. `None` (the default): the IMS runs its
+    /// bracketed solve on [`Hysteresis::step`] instead.
     #[inline]
     fn invert_step(
         &self,
@@ -46,26 +47,14 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
         _y_ref: T,
         _tol: T,
         _hint: T,
+        _pieces: &[T; 4],
     ) -> Option<Inverted<T, Self::State>> {
         None
     }
     /// What [`ImsModel::invert_step`] can compute once per model ([`Ims`] keeps it; CBW:
-    /// its slopes `k` of the four pieces, [`CbwPieces`]).
+    /// the slopes `k` of its four pieces).
     fn pieces(&self) -> [T; 4] {
         [T::ZERO; 4]
-    }
-    /// [`ImsModel::invert_step`] with `pieces` from [`ImsModel::pieces`] (the same result).
-    #[inline]
-    fn invert_step_with(
-        &self,
-        state: &Self::State,
-        y_ref: T,
-        tol: T,
-        hint: T,
-        pieces: &[T; 4],
-    ) -> Option<Inverted<T, Self::State>> {
-        let _ = pieces;
-        self.invert_step(state, y_ref, tol, hint)
     }
 }
 
@@ -190,25 +179,15 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
         y_ref: T,
         tol: T,
         hint: T,
-    ) -> Option<Inverted<T, BwState<T>>> {
-        self.invert_step_with(state, y_ref, tol, hint, &cbw_pieces(self))
-    }
-    fn pieces(&self) -> [T; 4] {
-        cbw_pieces(self)
-    }
-    #[inline]
-    fn invert_step_with(
-        &self,
-        state: &BwState<T>,
-        y_ref: T,
-        tol: T,
-        hint: T,
         pieces: &[T; 4],
     ) -> Option<Inverted<T, BwState<T>>> {
         if self.n() != T::ONE {
             return None;
         }
         invert_cbw_n1(self, pieces, state, y_ref, tol, hint)
+    }
+    fn pieces(&self) -> [T; 4] {
+        cbw_pieces(self)
     }
 }
 
@@ -604,7 +583,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             ImsLoop::Solved => {
                 let tol = self.tol(y_ref_um);
                 if self.quad == T::ZERO {
-                    if let Some(inv) = self.model.invert_step_with(
+                    if let Some(inv) = self.model.invert_step(
                         &self.state,
                         y_ref_um,
                         tol,
@@ -907,7 +886,9 @@ mod invert_step_tests {
             let t = k as f64 * 1e-4;
             let y_ref = 8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())
                 + 0.5 * (2.0 * core::f64::consts::PI * 130.0 * t).sin();
-            let inv = m.invert_step(&st, y_ref, 1e-12, 1.0).expect("converges");
+            let inv = m
+                .invert_step(&st, y_ref, 1e-12, 1.0, &m.pieces())
+                .expect("converges");
             let mut s2 = st;
             let y = m.step(&mut s2, inv.u, 1e-4);
             worst = worst.max((y - y_ref).abs()).max((s2.h - inv.state.h).abs());
@@ -921,7 +902,7 @@ mod invert_step_tests {
             let t = k as f64 * 1e-4;
             let y_ref = (8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())) as f32;
             let inv = m
-                .invert_step(&st, y_ref, 8.0 * f32::EPSILON * 17.0, 1.0)
+                .invert_step(&st, y_ref, 8.0 * f32::EPSILON * 17.0, 1.0, &m.pieces())
                 .expect("converges");
             let mut s2 = st;
             let y = m.step(&mut s2, inv.u, 1e-4);
