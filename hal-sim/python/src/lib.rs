@@ -231,7 +231,7 @@ fn fit<'py>(
 /// `piezo fit --model ss | hammerstein-ss | scheduled-ss | lfr` on records: one
 /// multivariable model for all `train` records; returns the `fit.json` text.
 #[pyfunction]
-#[pyo3(signature = (train, model, order=None, hysteresis="cbw".to_string(), lm_iterations=60, joint_iterations=30, schedule_tau_s=0.15, lfr_basis=None, lfr_linear=None, lfr_channels="outputs:2".to_string(), lfr_iterations=30, input_delay=0, progress=false))]
+#[pyo3(signature = (train, model, order=None, hysteresis="cbw".to_string(), lm_iterations=60, joint_iterations=30, schedule_tau_s=0.15, lfr_basis=None, lfr_linear=None, lfr_channels="outputs:2".to_string(), lfr_iterations=30, lfr_guard=None, input_delay=0, progress=false))]
 #[allow(clippy::too_many_arguments)]
 fn fit_ss(
     py: Python<'_>,
@@ -246,6 +246,7 @@ fn fit_ss(
     lfr_linear: Option<String>,
     lfr_channels: String,
     lfr_iterations: usize,
+    lfr_guard: Option<f64>,
     input_delay: usize,
     progress: bool,
 ) -> PyResult<String> {
@@ -268,6 +269,7 @@ fn fit_ss(
             lfr_linear: lfr_linear.as_deref(),
             lfr_channels: &lfr_channels,
             lfr_iterations,
+            lfr_guard,
             input_delay,
             progress,
         })?;

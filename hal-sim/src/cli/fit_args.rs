@@ -202,7 +202,8 @@ pub struct Args {
     /// `lfr`: basis functions of the nonlinearity in feedback, applied to every channel
     /// (comma list of `cubic` = z^3, `abs-square` = z |z|, `soft-cubic` = z - tanh z,
     /// `play:R` = play operator of half-width R, `rms:T` = z r / (1 + r) with r the
-    /// channel's running mean square over T samples: a stiffness that follows the level).
+    /// channel's running mean square over T samples: a stiffness that follows the level;
+    /// `mav:T` the same with the running mean of |z|).
     #[arg(long, value_delimiter = ',', default_value = crate::ident::ss::lfr::DEFAULT_BASIS)]
     pub lfr_basis: Vec<String>,
     /// `lfr`: the records the linear part is identified on: `all` (the BLA of every
@@ -217,10 +218,15 @@ pub struct Args {
     #[arg(long, default_value = "outputs:2")]
     pub lfr_channels: String,
     /// `lfr`: Levenberg-Marquardt iterations on the simulation error (it stops earlier when
-    /// a step no longer lowers the cost); with static and `rms` bases together, each of the
-    /// two stages' (the static bases first, then all from there).
+    /// a step no longer lowers the cost); with static bases and ones with memory (`rms`,
+    /// `mav`, `play`) together, each of the two stages' (the static bases first, then all
+    /// from there).
     #[arg(long, default_value_t = 30)]
     pub lfr_iterations: usize,
+    /// `lfr`: refuse every step of the fit whose model diverges from rest on the training
+    /// inputs scaled by this factor (e.g. 1.5); default: no check.
+    #[arg(long)]
+    pub lfr_guard: Option<f64>,
     /// State-space models (`ss`, `hammerstein-ss`, `scheduled-ss`, `lfr`): the inputs reach
     /// the model this many samples late (an input delay, as `piezo diagnose --base` names
     /// it; periodic records are shifted within each period). Saved in fit.json.

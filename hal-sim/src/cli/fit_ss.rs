@@ -40,6 +40,7 @@ pub fn run(args: &Args) -> Result<()> {
         lfr_linear: args.lfr_linear.as_deref(),
         lfr_channels: &args.lfr_channels,
         lfr_iterations: args.lfr_iterations,
+        lfr_guard: args.lfr_guard,
         input_delay: args.input_delay,
         progress: !args.quiet,
     })?;

@@ -39,6 +39,8 @@ pub struct FitArgs<'a> {
     pub lfr_linear: Option<&'a str>,
     pub lfr_channels: &'a str,
     pub lfr_iterations: usize,
+    /// Refuse steps whose model diverges at this multiple of the training inputs.
+    pub lfr_guard: Option<f64>,
     pub input_delay: usize,
     pub progress: bool,
 }
@@ -88,6 +90,12 @@ impl FitOptions {
             },
             channels: lfr::Channels::parse(a.lfr_channels)?,
             iterations: a.lfr_iterations,
+            guard: match a.lfr_guard {
+                Some(g) if !(g.is_finite() && g >= 1.0) => {
+                    anyhow::bail!("--lfr-guard {g}: expected a factor >= 1 (e.g. 1.5)")
+                }
+                g => g,
+            },
             progress: a.progress,
             ..Default::default()
         };

@@ -50,6 +50,10 @@ pub enum Basis {
     /// by), with no harmonics of its own; it vanishes for small signals and tends to `z`
     /// (slope 1) for large ones, as `soft-cubic` does.
     Rms(f64),
+    /// `z m / (1 + m)`, `m` the channel's running mean of `|z|` over this many samples
+    /// (`m+ = m + (|z| - m) / T`): as `rms`, but a gain that grows with the level itself
+    /// for small signals (as `abs-square`'s stiffness does), not with its square.
+    Mav(f64),
 }
 
 impl Basis {
@@ -60,11 +64,12 @@ impl Basis {
             Basis::SoftCubic => "soft-cubic".into(),
             Basis::Play(r) => format!("play:{r}"),
             Basis::Rms(t) => format!("rms:{t}"),
+            Basis::Mav(t) => format!("mav:{t}"),
         }
     }
 
-    /// `cubic`, `abs-square`, `soft-cubic`, `play:R` (R >= 0, the half-width) or `rms:T`
-    /// (T >= 1 samples, the running mean square's time constant).
+    /// `cubic`, `abs-square`, `soft-cubic`, `play:R` (R >= 0, the half-width), `rms:T` or
+    /// `mav:T` (T >= 1 samples, the running mean's time constant).
     pub fn parse(s: &str) -> anyhow::Result<Self> {
         let s = s.trim();
         match s {
@@ -80,23 +85,28 @@ impl Basis {
                 }
             }
         }
-        if let Some(t) = s.strip_prefix("rms:") {
-            if let Ok(t) = t.trim().parse::<f64>() {
-                if t.is_finite() && t >= 1.0 {
-                    return Ok(Basis::Rms(t));
+        for (prefix, make) in [
+            ("rms:", Basis::Rms as fn(f64) -> Basis),
+            ("mav:", Basis::Mav),
+        ] {
+            if let Some(t) = s.strip_prefix(prefix) {
+                if let Ok(t) = t.trim().parse::<f64>() {
+                    if t.is_finite() && t >= 1.0 {
+                        return Ok(make(t));
+                    }
                 }
             }
         }
         anyhow::bail!(
-            "LFR basis `{s}`: expected cubic, abs-square, soft-cubic, play:R (half-width R >= 0) \
-             or rms:T (time constant T >= 1 samples)"
+            "LFR basis `{s}`: expected cubic, abs-square, soft-cubic, play:R (half-width R >= 0), \
+             rms:T or mav:T (time constant T >= 1 samples)"
         )
     }
 
     fn valid(self) -> bool {
         match self {
             Basis::Play(r) => r.is_finite() && r >= 0.0,
-            Basis::Rms(t) => t.is_finite() && t >= 1.0,
+            Basis::Rms(t) | Basis::Mav(t) => t.is_finite() && t >= 1.0,
             _ => true,
         }
     }
@@ -130,15 +140,42 @@ impl Basis {
                 *mem = r + (z * z - r) / t;
                 (z * g, g, true)
             }
+            Basis::Mav(t) => {
+                let m = *mem;
+                let g = m / (1.0 + m);
+                *mem = m + (z.abs() - m) / t;
+                (z * g, g, true)
+            }
         }
     }
 
-    /// `rms`'s memory slopes at `z` and the memory `r` before [`Self::step`]: `(dw/dr,
+    /// Whether `w` depends on `z` now only (no memory): fitted first in a staged fit.
+    fn is_static(self) -> bool {
+        matches!(self, Basis::Cubic | Basis::AbsSquare | Basis::SoftCubic)
+    }
+
+    /// Whether the basis carries a running level (`rms`, `mav`) as its memory.
+    fn follows_level(self) -> bool {
+        matches!(self, Basis::Rms(_) | Basis::Mav(_))
+    }
+
+    /// The memory after `z` has been held for long (a level's running mean).
+    fn settled(self, z: f64) -> f64 {
+        match self {
+            Basis::Rms(_) => z * z,
+            Basis::Mav(_) => z.abs(),
+            _ => 0.0,
+        }
+    }
+
+    /// A level's memory slopes at `z` and the memory `r` before [`Self::step`]: `(dw/dr,
     /// dr+/dz, dr+/dr)`, for the forward sensitivities (`None` for the other bases).
     #[inline]
     fn memory_slopes(self, z: f64, r: f64) -> Option<(f64, f64, f64)> {
+        let dw = z / ((1.0 + r) * (1.0 + r));
         match self {
-            Basis::Rms(t) => Some((z / ((1.0 + r) * (1.0 + r)), 2.0 * z / t, 1.0 - 1.0 / t)),
+            Basis::Rms(t) => Some((dw, 2.0 * z / t, 1.0 - 1.0 / t)),
+            Basis::Mav(t) => Some((dw, z.signum() / t, 1.0 - 1.0 / t)),
             _ => None,
         }
     }
@@ -371,14 +408,15 @@ impl Lfr {
     }
 
     /// The memory after `z = F x + G v` has been held for long: `rms`'s mean square is
-    /// `z^2`; a play keeps its memory (every memory within its half-width is a rest).
+    /// `z^2`, `mav`'s mean `|z|`; a play keeps its memory (every memory within its
+    /// half-width is a rest).
     pub fn settle_memory(&self, x: &[f64], v: &[f64], mem: &mut [f64]) {
         let nz = self.channels();
         for i in 0..nz {
             let z = self.channel(i, x, v);
             for (b, basis) in self.basis.iter().enumerate() {
-                if let Basis::Rms(_) = basis {
-                    mem[b * nz + i] = z * z;
+                if basis.follows_level() {
+                    mem[b * nz + i] = basis.settled(z);
                 }
             }
         }
@@ -776,7 +814,7 @@ fn normal_record(
     // `rms` columns: the memory's slopes this sample and `(dr/dtheta)^T` (other columns
     // unused).
     let mut slopes: Vec<Option<(f64, f64, f64)>> = vec![None; nw];
-    let has_memory = mdl.basis.iter().any(|b| matches!(b, Basis::Rms(_)));
+    let has_memory = mdl.basis.iter().any(|b| b.follows_level());
     let mut srt = DMatrix::<f64>::zeros(if has_memory { np } else { 0 }, nw);
     let mut err = vec![0.0; p];
     // J^T of a batch of scored samples: `p` columns per sample.
@@ -977,6 +1015,10 @@ pub struct LfrOptions {
     pub stride: usize,
     /// Stop when an accepted step lowers the cost by less than this (relative).
     pub ftol: f64,
+    /// Refuse a step whose model diverges from rest on the training inputs scaled by this
+    /// (`None`: no check). A fit that ends at the edge of stability diverges on other
+    /// records of its highest level (the mirror's delayed fits: docs/src/lfr.md).
+    pub guard: Option<f64>,
     pub progress: bool,
 }
 
@@ -1001,6 +1043,7 @@ impl Default for LfrOptions {
             iterations: 30,
             stride: 2,
             ftol: 1e-6,
+            guard: None,
             progress: false,
         }
     }
@@ -1073,18 +1116,7 @@ pub fn start_modes(
     recs: &[Scored],
 ) -> anyhow::Result<(Lfr, Vec<usize>)> {
     let (n, m) = (linear.order(), linear.inputs());
-    let mut modes = Vec::new();
-    let mut i = 0;
-    for b in &linear.blocks {
-        if let Block::Pair(..) = b {
-            modes.push(i);
-        }
-        i += b.states();
-    }
-    anyhow::ensure!(
-        !modes.is_empty(),
-        "the LFR's mode channels need a lightly damped mode (a complex pair) in the linear part"
-    );
+    let modes = mode_states(linear)?;
     // The states' RMS along the linear model: its states as outputs.
     let states = Modal {
         c: DMatrix::identity(n, n),
@@ -1107,6 +1139,23 @@ pub fn start_modes(
         },
         modes,
     ))
+}
+
+/// The first state of each complex pair of `linear` (the mode channels' states).
+fn mode_states(linear: &Modal) -> anyhow::Result<Vec<usize>> {
+    let mut modes = Vec::new();
+    let mut i = 0;
+    for b in &linear.blocks {
+        if let Block::Pair(..) = b {
+            modes.push(i);
+        }
+        i += b.states();
+    }
+    anyhow::ensure!(
+        !modes.is_empty(),
+        "the LFR's mode channels need a lightly damped mode (a complex pair) in the linear part"
+    );
+    Ok(modes)
 }
 
 /// `linear` refined on the simulation error of `recs` by the LFR's own Levenberg-Marquardt
@@ -1147,20 +1196,21 @@ pub fn identify(
         .sum::<usize>()
         * linear.outputs();
     let rms = |c: f64| (c / samples.max(1) as f64).sqrt();
-    let (mut mdl, modes) = match opts.channels {
-        Channels::Outputs(k) => (start(linear, &opts.basis, &data, k)?, None),
-        Channels::Modes => {
-            let (m, md) = start_modes(linear, &opts.basis, &data)?;
-            (m, Some(md))
-        }
+    let modes = match opts.channels {
+        Channels::Outputs(_) => None,
+        Channels::Modes => Some(mode_states(linear)?),
     };
-    // Static and `rms` bases together: the static ones first, then all from there (the
-    // `rms` columns of `E` at zero), so the fit ends no higher than the static bases' own.
-    // From the linear start at once the mirror's fits sat on a plateau for 20 or more of
-    // their 30 iterations, and where the descent came depended on the records
-    // (docs/src/lfr.md).
-    let memory = |b: &Basis| matches!(b, Basis::Rms(_));
-    let statics: Vec<Basis> = opts.basis.iter().copied().filter(|b| !memory(b)).collect();
+    // Static bases and ones with memory (`rms`, `mav`, `play`) together: the static ones
+    // first, then all from there (the others' columns of `E` at zero), so the fit ends no
+    // higher than the static bases' own. From the linear start at once the mirror's fits
+    // sat on a plateau for 20 or more of their 30 iterations, and where the descent came
+    // depended on the records (docs/src/lfr.md).
+    let statics: Vec<Basis> = opts
+        .basis
+        .iter()
+        .copied()
+        .filter(|b| b.is_static())
+        .collect();
     let (mdl, c, start_rms, it0) = if !statics.is_empty() && statics.len() < opts.basis.len() {
         let first = identify(
             linear,
@@ -1182,6 +1232,10 @@ pub fn identify(
         let c = project(&mut m, &data)?;
         (m, c, first.start_rms, first.iterations)
     } else {
+        let mut mdl = match opts.channels {
+            Channels::Outputs(k) => start(linear, &opts.basis, &data, k)?,
+            Channels::Modes => start_modes(linear, &opts.basis, &data)?.0,
+        };
         let c = project(&mut mdl, &data)?;
         if opts.progress {
             eprintln!(
@@ -1199,6 +1253,7 @@ pub fn identify(
         stride: opts.stride.max(1),
         ftol: opts.ftol,
         samples,
+        guard: opts.guard,
         progress: opts.progress,
     };
     let (mdl, c, it) = lm.run(mdl, c, opts.iterations)?;
@@ -1244,10 +1299,23 @@ struct Lm<'a> {
     ftol: f64,
     /// Scored samples times outputs: the cost over it is the mean square error.
     samples: usize,
+    guard: Option<f64>,
     progress: bool,
 }
 
 impl Lm<'_> {
+    /// Whether `mdl` passes the guard: bounded from rest on every record's inputs scaled
+    /// by the guard's factor (true without a guard).
+    fn guarded(&self, mdl: &Lfr) -> bool {
+        let Some(s) = self.guard else { return true };
+        let inputs: Vec<&[Vec<f64>]> = self.data.iter().map(|d| d.u.as_slice()).collect();
+        let ok = mdl.bounded_input_scale(&inputs, &[s]).diverges.is_none();
+        if !ok && self.progress {
+            eprintln!("lfr: a step refused: its model diverges at {s}x the training inputs");
+        }
+        ok
+    }
+
     /// Up to `iterations` steps from `mdl` (cost `c`); returns the model, its cost and the
     /// iterations run (fewer when no step lowers the cost or one lowers it by less than
     /// `ftol`).
@@ -1290,7 +1358,7 @@ impl Lm<'_> {
                 let zt: Vec<f64> = z0.iter().zip(dz.iter()).map(|(z, d)| z + d).collect();
                 let mut mt = unpack(&mdl, self.params, &zt);
                 match project(&mut mt, self.data) {
-                    Ok(ct) if ct < c => {
+                    Ok(ct) if ct < c && self.guarded(&mt) => {
                         improved = Some((mt, ct));
                         lambda = (lambda / 3.0).max(1e-12);
                         break;
@@ -1411,6 +1479,9 @@ mod tests {
                 -0.05, 0.02, 0.01, -0.02, 0.03, -0.01, 0.02, 0.0, 0.0, 0.01, -0.01, 0.01,
             ],
         );
+        sensitivities_match(mdl.clone(), None);
+        // The running mean of `|z|` in its place.
+        mdl.basis = vec![Basis::Mav(20.0), Basis::SoftCubic];
         sensitivities_match(mdl, None);
     }
 
@@ -1632,6 +1703,46 @@ mod tests {
     }
 
     #[test]
+    fn the_guard_refuses_a_fit_that_diverges_just_above_its_inputs() {
+        // Records of the cubic truth at an amplitude where it is bounded but diverges
+        // before twice that: the unguarded fit goes there, the guarded one stays bounded.
+        let t = truth();
+        let bounded_at = |m: &Lfr, recs: &[Record], s: f64| {
+            let u: Vec<Vec<Vec<f64>>> =
+                recs.iter().map(|r| score::with_warmup(&r.u, 512)).collect();
+            let u: Vec<&[Vec<f64>]> = u.iter().map(|u| u.as_slice()).collect();
+            m.bounded_input_scale(&u, &[s]).diverges.is_none()
+        };
+        let amp = (1..400)
+            .map(|i| i as f64 * 0.25)
+            .find(|&a| {
+                let r = [record(&t, a, 5)];
+                !bounded_at(&t, &r, 1.5)
+            })
+            .expect("an amplitude where the truth diverges at 1.5x");
+        let recs = [record(&t, amp, 5)];
+        let opts = |guard| LfrOptions {
+            basis: vec![Basis::Cubic],
+            channels: Channels::Outputs(1),
+            iterations: 40,
+            stride: 1,
+            guard,
+            ..Default::default()
+        };
+        let free = identify(&t.linear, &recs, &opts(None)).unwrap();
+        let kept = identify(&t.linear, &recs, &opts(Some(1.5))).unwrap();
+        assert!(!bounded_at(&free.model, &recs, 1.5), "{free:?}");
+        assert!(bounded_at(&kept.model, &recs, 1.5), "{kept:?}");
+        // It still fits what it may: below the linear start.
+        assert!(
+            kept.rms < 0.9 * kept.start_rms,
+            "{} {}",
+            kept.rms,
+            kept.start_rms
+        );
+    }
+
+    #[test]
     fn the_soft_cubic_stays_bounded_where_the_cubic_diverges() {
         let cubic = truth();
         let soft = Lfr {
@@ -1742,6 +1853,9 @@ mod tests {
         assert!(Lfr::from_json(r.linear.clone(), &j).is_err());
         assert_eq!(Basis::parse("rms:64").unwrap(), Basis::Rms(64.0));
         assert!(Basis::parse("rms:0.5").is_err());
+        assert_eq!(Basis::parse("mav:960").unwrap(), Basis::Mav(960.0));
+        assert_eq!(Basis::Mav(960.0).name(), "mav:960");
+        assert!(Basis::parse("mav:0").is_err());
     }
 
     #[test]

@@ -202,7 +202,7 @@ def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
         joint_iterations: int = 30, schedule_tau_s: float = 0.15,
         lfr_basis=None, lfr_linear: Optional[str] = None,
         lfr_channels: str = "outputs:2", lfr_iterations: int = 30,
-        input_delay: int = 0) -> FitResult:
+        lfr_guard: Optional[float] = None, input_delay: int = 0) -> FitResult:
     """`piezo fit --model MODEL --train TRAIN [--valid VALID | --split F] ...`: identifies
     `model` (`models()` lists them) on `train`, scores it there and on the validation
     samples. The keywords are the CLI's options; `out` writes `fit.json` into that folder.
@@ -212,9 +212,9 @@ def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
     for `lfr` and `scheduled-ss`), with the CLI's `order` (a number or `"auto"`; default
     28 for `lfr`, else auto), `hysteresis`, `lm_iterations`, `joint_iterations`,
     `schedule_tau_s`, `lfr_basis` (`None`: the CLI's default), `lfr_linear`,
-    `lfr_channels`, `lfr_iterations` and `input_delay`; the answer's `report` is the
-    `fit.json` (`report["report"]` its training errors) and it has no simulated records:
-    score it with `predict`."""
+    `lfr_channels`, `lfr_iterations`, `lfr_guard` and `input_delay`; the answer's
+    `report` is the `fit.json` (`report["report"]` its training errors) and it has no
+    simulated records: score it with `predict`."""
     lib = _lib()
     rec = lambda r: as_record(r, columns=columns)._native()  # noqa: E731
     if model in STATE_SPACE:
@@ -225,7 +225,7 @@ def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
                           None if order is None else str(order), hysteresis, lm_iterations,
                           joint_iterations, schedule_tau_s,
                           None if lfr_basis is None else list(lfr_basis), lfr_linear,
-                          lfr_channels, lfr_iterations, input_delay, progress)
+                          lfr_channels, lfr_iterations, lfr_guard, input_delay, progress)
         r = FitResult(text, json.loads(text), np.empty((0, 0)))
         if out is not None:
             r.save(out)
