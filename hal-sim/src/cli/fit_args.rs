@@ -186,7 +186,7 @@ pub struct Args {
     #[command(flatten)]
     pub records: Records,
     /// State-space models: order (number of states) or `auto` (chosen by validation on
-    /// every fourth training record). Default: `auto`; `lfr`: 28.
+    /// every fourth training record). Default: `auto`; `lfr`: 32.
     #[arg(long)]
     pub order: Option<String>,
     /// `hammerstein-ss`: hysteresis model of the core ahead of each input (a

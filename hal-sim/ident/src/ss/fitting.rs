@@ -27,7 +27,7 @@ pub struct FitOptions {
 #[derive(Debug, Clone)]
 pub struct FitArgs<'a> {
     pub model: &'a str,
-    /// A number 1..=200 or `auto`; `None`: 28 for `lfr`, else `auto`.
+    /// A number 1..=200 or `auto`; `None`: [`lfr::DEFAULT_ORDER`] for `lfr`, else `auto`.
     pub order: Option<&'a str>,
     /// `hammerstein-ss`: the hysteresis per actuator (a registry model, or `none`).
     pub hysteresis: &'a str,
@@ -53,10 +53,11 @@ impl FitOptions {
             crate::saved::handles(model),
             "model `{model}`: expected ss, hammerstein-ss, scheduled-ss or lfr"
         );
-        let order = match a
-            .order
-            .unwrap_or(if model == "lfr" { "28" } else { "auto" })
-        {
+        let order = match a.order.unwrap_or(if model == "lfr" {
+            lfr::DEFAULT_ORDER
+        } else {
+            "auto"
+        }) {
             "auto" => None,
             s => Some(
                 s.parse::<usize>()

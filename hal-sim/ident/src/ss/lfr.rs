@@ -1027,6 +1027,11 @@ pub struct LfrOptions {
 /// Chosen on the mirror inside r1-r4 (docs/src/lfr.md).
 pub const DEFAULT_BASIS: &str = "soft-cubic,rms:960";
 
+/// The default order of the linear part (`piezo fit --model lfr` without `--order`): 32
+/// states. Chosen on the mirror inside r1-r4 against the BLA's 28 (docs/src/lfr.md): about
+/// half the 28-state model's residual was a linear error at the modes.
+pub const DEFAULT_ORDER: &str = "32";
+
 /// [`DEFAULT_BASIS`] parsed.
 pub fn default_basis() -> Vec<Basis> {
     DEFAULT_BASIS

@@ -210,7 +210,7 @@ def fit(train, model: str = "cbw", *, valid: Optional[RecordLike] = None,
     The state-space models (`ss`, `hammerstein-ss`, `scheduled-ss`, `lfr`: `STATE_SPACE`)
     fit one multivariable model to `train`, a record or a list of them (periodic records
     for `lfr` and `scheduled-ss`), with the CLI's `order` (a number or `"auto"`; default
-    28 for `lfr`, else auto), `hysteresis`, `lm_iterations`, `joint_iterations`,
+    32 for `lfr`, else auto), `hysteresis`, `lm_iterations`, `joint_iterations`,
     `schedule_tau_s`, `lfr_basis` (`None`: the CLI's default), `lfr_linear`,
     `lfr_channels`, `lfr_iterations`, `lfr_guard` and `input_delay`; the answer's
     `report` is the `fit.json` (`report["report"]` its training errors) and it has no
