@@ -320,7 +320,16 @@ impl<T: Real> Hgo<T> {
     pub fn step(&self, s: &mut HgoState<T>, y: T, u: T) {
         // f(h, u') integrated over the input increment (000 eq. 6, second line).
         let h_pred = self.model.advance_h(s.h, s.u, u - s.u);
-        self.correct(s, y, u, h_pred);
+        self.correct::<true>(s, y, u, h_pred);
+    }
+
+    /// [`Hgo::step`] without its finiteness test of the state (IEEE types), for a law whose
+    /// command is non-finite whenever the state is: the robust law, which then primes the
+    /// observer again (and holds the applied voltage for that sample).
+    #[inline]
+    pub(crate) fn step_unguarded(&self, s: &mut HgoState<T>, y: T, u: T) {
+        let h_pred = self.model.advance_h(s.h, s.u, u - s.u);
+        self.correct::<false>(s, y, u, h_pred);
     }
 
     /// The model's parameters when [`Hgo::is_cbw_n1`] (else zeros).
@@ -357,9 +366,9 @@ impl<T: Real> Hgo<T> {
         matches!(self.model, ObserverModel::Cbw(m) if m.n() == T::ONE)
     }
 
-    /// [`Hgo::step`] for an observer whose model is CBW with `n = 1` (the pipeline's fused
-    /// step checks [`Hgo::is_cbw_n1`] once per configuration), `m` its parameters
-    /// ([`Hgo::cbw_n1`]); the same arithmetic.
+    /// [`Hgo::step_unguarded`] for an observer whose model is CBW with `n = 1` (the
+    /// pipeline's fused step checks [`Hgo::is_cbw_n1`] once per configuration), `m` its
+    /// parameters ([`Hgo::cbw_n1`]); the same arithmetic.
     #[inline(always)]
     pub(crate) fn step_cbw_n1(&self, m: &CbwN1<T>, s: &mut HgoState<T>, y: T, u: T) {
         let du = u - s.u;
@@ -371,17 +380,43 @@ impl<T: Real> Hgo<T> {
                 other => other.advance_h(s.h, s.u, du),
             },
         };
-        self.correct(s, y, u, h_pred);
+        self.correct::<false>(s, y, u, h_pred);
     }
 
-    /// The measurement update after the prediction `h_pred` of `h`.
+    /// The measurement update after the prediction `h_pred` of `h`; `GUARD`: a non-finite
+    /// state restarts the observer.
     #[inline(always)]
-    fn correct(&self, s: &mut HgoState<T>, y: T, u: T, h_pred: T) {
+    fn correct<const GUARD: bool>(&self, s: &mut HgoState<T>, y: T, u: T, h_pred: T) {
         let x_pred = self.ad * s.x + self.gd * (self.d_p * u - h_pred - s.d);
         let e = y - x_pred;
         s.x = x_pred + self.l1 * e;
         // The correction drains `d` first, so `d` holds only what `h` cannot.
-        let mut corr = self.l2 * e;
+        let corr = self.l2 * e;
+        let b = self.h_bound;
+        let h = h_pred + corr;
+        if s.d == T::ZERO && h.abs() < b {
+            // The usual case, nothing beyond the bound before or after: the values of
+            // `correct_beyond` (one test instead of two; `d` keeps its bits, where that
+            // would turn -0 into +0).
+            s.h = h;
+        } else {
+            self.correct_beyond(s, h_pred, corr);
+        }
+        s.u = u;
+        // One test for the three: a sum of finite values is finite (or overflowed, which
+        // is as bad). `h + d` is the estimate the laws read next (`HgoState::h_hat`).
+        // Unguarded on IEEE types only: there a non-finite state stays non-finite through
+        // the law's arithmetic; a saturated fixed-point one need not.
+        if (GUARD || !T::OVERFLOW_PROPAGATES) && !(s.x + s.h_hat()).is_finite() {
+            *s = self.init(y, u);
+        }
+    }
+
+    /// The correction `corr` of `h` when `d` holds something or `h_pred + corr` leaves the
+    /// bound: it drains `d` first, so `d` holds only what `h` cannot.
+    #[inline(always)]
+    fn correct_beyond(&self, s: &mut HgoState<T>, h_pred: T, corr: T) {
+        let mut corr = corr;
         if s.d * corr < T::ZERO {
             if corr.abs() <= s.d.abs() {
                 s.d += corr;
@@ -392,15 +427,8 @@ impl<T: Real> Hgo<T> {
             }
         }
         let h = h_pred + corr;
-        let b = self.h_bound;
-        s.h = h.clamp_sym(b);
+        s.h = h.clamp_sym(self.h_bound);
         s.d += h - s.h;
-        s.u = u;
-        // One test for the three: a sum of finite values is finite (or overflowed, which
-        // is as bad). `h + d` is the estimate the laws read next (`HgoState::h_hat`).
-        if !(s.x + s.h_hat()).is_finite() {
-            *s = self.init(y, u);
-        }
     }
 
     /// Standard deviation of `h_hat` per unit of white measurement noise: the H2 norm of

@@ -283,7 +283,7 @@ impl<T: Real> Robust<T> {
             self.hgo
                 .step_cbw_n1(&self.cbw_n1, &mut self.state.obs, y_um, u0);
         } else {
-            self.hgo.step(&mut self.state.obs, y_um, u0);
+            self.hgo.step_unguarded(&mut self.state.obs, y_um, u0);
         }
         let d_p = self.hgo.d_p();
         let h_hat = self.state.obs.h_hat();
