@@ -157,6 +157,25 @@ fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
     }
 }
 
+/// The robust law's prediction of `h` over `du` for CBW with `n = 1`: the exact step
+/// `h + (alpha du - k du h) phi(k du)` ([`cbw_n1_piece_unchecked`]) to second order in `k
+/// du`, `phi ~ 1 - k du / 2`, on the piece `h` starts on (where `h` crosses zero inside the
+/// step, the change of piece is left to the correction, as any other model error), while
+/// `k du <= 1/32`: the relative error of the increment is below `(k du)^2 / 6 = 1.6e-4`
+/// (the firmware's 100 Hz, 5 um sine at 100 kHz: `k du < 0.006`, `6e-6`). Larger steps
+/// (and NaN) take `exact`, the model's step.
+#[inline(always)]
+fn cbw_n1_predict<T: Real>(m: &CbwN1<T>, h: T, du: T, exact: impl FnOnce() -> T) -> T {
+    let a = du.abs();
+    let sgn_h_du = if h.opposite_signs(du) { -a } else { a };
+    let k_du = m.beta * a + m.gamma * sgn_h_du;
+    if k_du <= T::from_f64(1.0 / 32.0) {
+        h + (m.alpha * du - k_du * h) * (T::ONE - T::HALF * k_du)
+    } else {
+        exact()
+    }
+}
+
 /// HGO configuration: model, sample period and the discrete gains derived from `eps`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hgo<T> {
@@ -328,7 +347,15 @@ impl<T: Real> Hgo<T> {
     /// observer again (and holds the applied voltage for that sample).
     #[inline]
     pub(crate) fn step_unguarded(&self, s: &mut HgoState<T>, y: T, u: T) {
-        let h_pred = self.model.advance_h(s.h, s.u, u - s.u);
+        let du = u - s.u;
+        let h_pred = match &self.model {
+            ObserverModel::Cbw(m) if m.n() == T::ONE => {
+                cbw_n1_predict(&CbwN1::of(m), s.h, du, || {
+                    self.model.advance_h(s.h, s.u, du)
+                })
+            }
+            model => model.advance_h(s.h, s.u, du),
+        };
         self.correct::<false>(s, y, u, h_pred);
     }
 
@@ -372,14 +399,7 @@ impl<T: Real> Hgo<T> {
     #[inline(always)]
     pub(crate) fn step_cbw_n1(&self, m: &CbwN1<T>, s: &mut HgoState<T>, y: T, u: T) {
         let du = u - s.u;
-        let h_pred = match cbw_n1_piece_unchecked(m, s.h, du) {
-            Some(h1) => h1,
-            // The model's own two-piece step (matched here, once per half cycle).
-            None => match &self.model {
-                ObserverModel::Cbw(cbw) => cbw.advance_h(s.h, s.u, du),
-                other => other.advance_h(s.h, s.u, du),
-            },
-        };
+        let h_pred = cbw_n1_predict(m, s.h, du, || self.model.advance_h(s.h, s.u, du));
         self.correct::<false>(s, y, u, h_pred);
     }
 
