@@ -166,9 +166,9 @@ fn cbw_n1_piece_unchecked<T: Real>(m: &CbwN1<T>, h: T, du: T) -> Option<T> {
 /// (and NaN) take `exact`, the model's step.
 #[inline(always)]
 fn cbw_n1_predict<T: Real>(m: &CbwN1<T>, h: T, du: T, exact: impl FnOnce() -> T) -> T {
-    let a = du.abs();
-    let sgn_h_du = if h.opposite_signs(du) { -a } else { a };
-    let k_du = m.beta * a + m.gamma * sgn_h_du;
+    // k du = beta |du| + gamma sgn(h) du, sgn(h) du by a sign flip (h = 0 counts by its
+    // sign bit: either piece is as near there, h being 0).
+    let k_du = m.beta * du.abs() + m.gamma * du.mul_sign(h);
     if k_du <= T::from_f64(1.0 / 32.0) {
         h + (m.alpha * du - k_du * h) * (T::ONE - T::HALF * k_du)
     } else {
