@@ -67,7 +67,7 @@ pub struct Inverted<T, S> {
     /// Model output at `u` (um).
     pub y: T,
     pub state: S,
-    /// Newton iterations used.
+    /// Newton iterations used (0: a one-point step taken untested, [`Ims::with_one_point`]).
     pub iterations: usize,
     /// What the next step's solve can start from (CBW: `phi(k du)` of this step).
     pub hint: T,
@@ -91,8 +91,8 @@ const CBW_NEWTON_MAX: usize = 8;
 /// point is taken without its residual test while `k du <= 1/32`, and the step there to
 /// second order in `k du` (`phi ~ 1 - k du / 2`, relative error below `(k du)^2 / 6`, as
 /// the robust law's observer predicts it); its residual, `c du (phi_hint - phi)`, at most
-/// `|c du| k |du - du_hint| / 2`, is what the next sample's `r` starts from. Returns `(du,
-/// h1 - h0, iterations, phi(k du))`, `None` if it did not converge.
+/// `|c du| k |du - du_hint| / 2`, is what the next sample's `r` starts from (iterations
+/// 0). Returns `(du, h1 - h0, iterations, phi(k du))`, `None` if it did not converge.
 #[inline(always)]
 fn cbw_piece<T: Real, const ONE_POINT: bool>(
     d: T,
@@ -112,12 +112,12 @@ fn cbw_piece<T: Real, const ONE_POINT: bool>(
     // The first point inline (the per-sample case), the Newton steps out of line.
     let x = k * du;
     if ONE_POINT {
-        // `k du >= 0` (above), or NaN: the polynomial of `f32` without its `abs`.
         // NaN fails the test and goes on to the Newton steps, which refuse it.
-        if x <= T::from_f64(1.0 / 32.0) {
+        if one_point_small(x) {
             let phi = T::ONE - T::HALF * x;
-            return Some((du, c * du * phi, 1, phi));
+            return Some((du, c * du * phi, 0, phi));
         }
+        // `k du >= 0` (above): the polynomial of `f32` without its `abs`.
         let (phi, em) = x.phi_expm1_neg_nonneg();
         let dh = c * du * phi;
         return cbw_piece_test(d, c, k, r, tol(), du, dh, phi, em);
@@ -125,6 +125,13 @@ fn cbw_piece<T: Real, const ONE_POINT: bool>(
     let (phi, em) = x.phi_expm1_neg(); // em = e^-(k du) - 1
     let dh = c * du * phi;
     cbw_piece_test(d, c, k, r, tol(), du, dh, phi, em)
+}
+
+/// [`cbw_piece`] with `ONE_POINT` takes its first point, to second order and untested
+/// (iterations 0), at `x = k du`.
+#[inline(always)]
+fn one_point_small<T: Real>(x: T) -> bool {
+    x <= T::from_f64(1.0 / 32.0)
 }
 
 /// The residual test of [`cbw_piece`]'s first point `du` (`dh`, `phi`, `em` there), then
@@ -271,7 +278,11 @@ fn invert_cbw_n1<T: Real, const ONE_POINT: bool>(
     let k = pieces[(2 * r.sign_index() + other) & 3];
     let (mut du, mut dh, mut it, mut phi) =
         cbw_piece::<T, ONE_POINT>(d, alpha - k * h0, k, r, tol, hint)?;
-    if h0.opposite_signs(h0 + dh) {
+    // A small step taking one point (`it = 0`) is second order already: where h crosses
+    // zero inside it, the change of piece is left out (its error, below 2 |gamma du| |h1|
+    // with |h1| <= |c du|, contracts as any other with the following steps, `k du` per
+    // sample).
+    if it != 0 && h0.opposite_signs(h0 + dh) {
         // h crosses zero: first piece up to h = 0 (000 eq. 1 integrated), then h = 0
         // moving in direction s, where sgn(h) = s.
         let s = if r > T::ZERO { T::ONE } else { -T::ONE };
@@ -632,7 +643,8 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     pub fn closure(&self) -> ImsLoop {
         self.closure
     }
-    /// Model evaluations used by the last solve (0 for [`ImsLoop::Delayed`]).
+    /// Model evaluations used by the last solve (0 for [`ImsLoop::Delayed`] and for a
+    /// one-point step, [`Ims::with_one_point`]).
     pub fn last_evals(&self) -> usize {
         self.evals
     }
