@@ -418,10 +418,11 @@ impl<T: Real> ImsDynamics<T, AbwU<T>> {
 
 impl<T: Real> Ims<T, Cbw<T>> {
     /// The plain case the pipeline's fused step runs: solved loop taking one point
-    /// ([`Ims::with_one_point`]), `n = 1`, no quadratic term, no creep.
+    /// ([`Ims::with_one_point`]), `n = 1`, no quadratic term, no creep, no slew limit.
     pub(crate) fn is_plain_cbw_n1(&self) -> bool {
         self.closure == ImsLoop::Solved
             && self.one_point
+            && !self.slew_limited
             && self.model.n() == T::ONE
             && self.quad == T::ZERO
             && self.offset_um == T::ZERO
@@ -700,12 +701,12 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     }
 
     /// Takes a direct inversion if it lies inside the range and slew limits (the solve's own
-    /// step is then the model's); `None` leaves the state untouched. `NO_CREEP`: the caller
-    /// knows there is no creep compensation.
+    /// step is then the model's); `None` leaves the state untouched. `PLAIN`: the caller
+    /// knows there is no creep compensation and no slew limit ([`Ims::is_plain_cbw_n1`]).
     #[inline(always)]
-    fn take_inverted<const NO_CREEP: bool>(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
+    fn take_inverted<const PLAIN: bool>(&mut self, inv: Inverted<T, M::State>) -> Option<T> {
         // Without a slew limit the range alone (`u -+ T::MAX` lies beyond it).
-        let (lo, hi) = if !self.slew_limited {
+        let (lo, hi) = if PLAIN || !self.slew_limited {
             (self.volts_min, self.volts_max)
         } else {
             (
@@ -717,7 +718,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             self.evals = inv.iterations;
             self.step_hint = inv.hint;
             self.state = inv.state;
-            Some(self.commit::<NO_CREEP>(inv.u, inv.y))
+            Some(self.commit::<PLAIN>(inv.u, inv.y))
         } else {
             None
         }
