@@ -414,10 +414,11 @@ impl<T: Real> Hgo<T> {
         let corr = self.l2 * e;
         let b = self.h_bound;
         let h = h_pred + corr;
-        if s.d == T::ZERO && h.abs() < b {
-            // The usual case, nothing beyond the bound before or after: the values of
-            // `correct_beyond` (one test instead of two; `d` keeps its bits, where that
-            // would turn -0 into +0).
+        if !GUARD && s.d == T::ZERO && h.abs() < b {
+            // The robust law's usual case, nothing beyond the bound before or after: the
+            // values of `correct_beyond` (one test instead of two; `d` keeps its bits,
+            // where that would turn -0 into +0). The guarded step (NMPC, whose observer
+            // often holds a `d`) keeps the two tests: the third one cost it instructions.
             s.h = h;
         } else {
             self.correct_beyond(s, h_pred, corr);
