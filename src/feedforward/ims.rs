@@ -625,7 +625,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// slope, the model advanced over it. What it leaves of the reference is part of the
     /// next sample's residual `r`, so it does not add up: on the exact model, the
     /// firmware's 100 Hz, 5 um sine at 100 kHz in f32 keeps within 1.3e-4 um of it (solved:
-    /// 2.1e-5 um, f32's rounding), 50 Hz at 16 384 Hz within 7.6e-4 um
+    /// 2.1e-5 um, f32's rounding), 50 Hz at 16 384 Hz within 7.5e-4 um
     /// (`one_point_tracks_the_exact_model`). Larger steps are solved to the tolerance as
     /// before. For fast sampling (the firmware's main mode).
     pub fn with_one_point(mut self) -> Self {
@@ -1055,7 +1055,7 @@ mod iteration_tests {
             }
             worst
         };
-        // Measured (2026-12-01): 1.28e-4 and 7.56e-4 um (solved: 2.1e-5 and 1.9e-5 um).
+        // Measured (2026-12-01): 1.28e-4 and 7.48e-4 um (solved: 2.1e-5 and 1.9e-5 um).
         for (fs, f_hz, bound) in [(1e5, 100.0, 2e-4), (16_384.0, 50.0, 1e-3)] {
             let (one, solved) = (run(true, fs, f_hz), run(false, fs, f_hz));
             std::eprintln!("{fs} Hz, {f_hz} Hz: max |y - y_ref| one point {one:.3e} um, solved {solved:.3e} um");
