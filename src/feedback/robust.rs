@@ -81,6 +81,10 @@ pub struct Robust<T> {
     left2: T,
     /// `exp(-lambda1 dt)`.
     p1: T,
+    /// [`Robust::v_d`] for exponential convergence (`e_next = p1 e`) on a floating-point
+    /// type ([`Robust::vd_linear`]), linear in `x_hat` and the setpoint: `v_d = vd[0] x_hat +
+    /// vd[1] y_d + vd[2] y_d' + vd[3] y_d''` (computed once, in `f64`).
+    vd: [T; 4],
     den_lo: T,
     den_hi: T,
     state: RobustState<T>,
@@ -101,6 +105,8 @@ pub struct Robust<T> {
 pub(crate) struct Target<T> {
     y_um: T,
     y_next: T,
+    /// The setpoint's part of [`Robust::v_d`] for exponential convergence.
+    vd_setpoint: T,
 }
 
 /// Observer state and the values of the previous sample.
@@ -141,6 +147,12 @@ impl<T: Real> Robust<T> {
             "robust law: d_p > 0 (the voltage must move the stage)",
         )?;
         let c2 = -(-cfg.lambda2 * hgo.dt_s()).exp_m1();
+        // v_d = x + (y_next + p1 (x - y) - x) / gd with y_next = y + (y' + y'' dt / 2) dt:
+        // x (1 - q) + y q + y' dt / gd + y'' dt^2 / (2 gd), q = (1 - p1) / gd.
+        let (dt, a) = (hgo.dt_s().to_f64(), hgo.a_per_s().to_f64());
+        let gd = -libm::expm1(-a * dt);
+        let q = -libm::expm1(-cfg.lambda1.to_f64() * dt) / gd;
+        let vd = [1.0 - q, q, dt / gd, dt * dt / (2.0 * gd)].map(T::from_f64);
         let den_hi = T::TWO * m.d() + m.slope(T::ZERO, T::ONE).abs();
         let cbw_n1 = hgo.cbw_n1();
         Ok(Self {
@@ -148,6 +160,7 @@ impl<T: Real> Robust<T> {
             cfg,
             left2: T::ONE - c2,
             p1: (-cfg.lambda1 * hgo.dt_s()).exp(),
+            vd,
             den_lo: m.d() / T::from_f64(20.0),
             den_hi,
             cbw_n1,
@@ -182,6 +195,12 @@ impl<T: Real> Robust<T> {
         let (_, gd) = self.hgo.linear_step();
         let e = x_hat - target.y_um;
         let e_next = match self.cfg.convergence {
+            // Exponential: the same expression, linear in x_hat (`Robust::vd`), its
+            // setpoint part computed before the compensator.
+            _ if EXP && Self::vd_linear() => return self.vd[0] * x_hat + target.vd_setpoint,
+            Convergence::Exponential if Self::vd_linear() => {
+                return self.vd[0] * x_hat + target.vd_setpoint
+            }
             _ if EXP => self.p1 * e,
             Convergence::Exponential => self.p1 * e,
             Convergence::FiniteTime {
@@ -198,13 +217,23 @@ impl<T: Real> Robust<T> {
         x_hat + (target.y_next + e_next - x_hat) / gd
     }
 
+    /// [`Robust::v_d`] in its linear form (`Robust::vd`): on a floating-point type, which
+    /// keeps the coefficients' relative precision (fixed point would round the `y''` one,
+    /// `dt^2 / (2 gd)`, to zero).
+    #[inline(always)]
+    fn vd_linear() -> bool {
+        T::EPSILON < T::from_f64(1e-6)
+    }
+
     /// The setpoint's part of [`Robust::v_d`]: the setpoint and where it is one sample on.
     #[inline(always)]
     fn target(&self, sp: &Setpoint<T>) -> Target<T> {
         let dt = self.hgo.dt_s();
+        let vd = &self.vd;
         Target {
             y_um: sp.y_um,
             y_next: sp.y_um + (sp.dy + sp.ddy * dt * T::HALF) * dt,
+            vd_setpoint: vd[1] * sp.y_um + vd[2] * sp.dy + vd[3] * sp.ddy,
         }
     }
 
@@ -283,7 +312,7 @@ impl<T: Real> Robust<T> {
             self.hgo
                 .step_cbw_n1(&self.cbw_n1, &mut self.state.obs, y_um, u0);
         } else {
-            self.hgo.step(&mut self.state.obs, y_um, u0);
+            self.hgo.step_unguarded(&mut self.state.obs, y_um, u0);
         }
         let d_p = self.hgo.d_p();
         let h_hat = self.state.obs.h_hat();

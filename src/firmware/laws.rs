@@ -160,13 +160,16 @@ pub fn ff_by_name(name: &str, sample_hz: R) -> Option<Feedforward<R>> {
 }
 
 /// The feedforward compensators, by name: linear scaling, or IMS around the CBW model of
-/// `p` (0..150 V).
+/// `p` (0..150 V). The solved IMS takes one point per sample ([`Ims::with_one_point`]).
 pub fn ff_with(name: &str, p: &Params, sample_hz: R) -> Option<Feedforward<R>> {
     let ims = |closure| {
         let model = p.model()?;
-        Ims::new(model, closure, c(0.0), c(150.0), c(1.0) / sample_hz)
-            .ok()
-            .map(Feedforward::ImsCbw)
+        let ims = Ims::new(model, closure, c(0.0), c(150.0), c(1.0) / sample_hz).ok()?;
+        Some(Feedforward::ImsCbw(if closure == ImsLoop::Solved {
+            ims.with_one_point()
+        } else {
+            ims
+        }))
     };
     match *FIRMWARE_FFS.iter().find(|f| f.name() == name)? {
         FfKind::Linear => Some(Feedforward::Linear(p.linear())),

@@ -49,9 +49,9 @@ impl<T: Real> DacScale<T> {
 pub struct Output<T> {
     pub dac: DacScale<T>,
     codes_per_volt: T,
-    /// `code_lo` and `code_hi - code_lo` as reals (precomputed: the per-sample path only
-    /// compares against them).
-    code_lo_real: T,
+    /// `volts_at_zero * codes_per_volt + code_lo` and `code_hi - code_lo` as reals
+    /// (precomputed: the per-sample path only subtracts and compares against them).
+    code_origin: T,
     code_span_real: T,
     code_lo: i32,
     code_hi: i32,
@@ -122,7 +122,9 @@ impl<T: Real> Output<T> {
         Ok(Self {
             dac: *dac,
             codes_per_volt: T::ONE / dac.volts_per_code,
-            code_lo_real: T::from_f64(code_lo),
+            code_origin: T::from_f64(
+                dac.volts_at_zero.to_f64() / dac.volts_per_code.to_f64() + code_lo,
+            ),
             code_span_real: T::from_f64(span),
             code_lo: code_lo as i32,
             code_hi: code_hi as i32,
@@ -157,7 +159,7 @@ impl<T: Real> Output<T> {
     #[inline(always)]
     pub(crate) fn limit_from_code_in_range(&self, volts: T, prev: i32) -> Limited {
         // Codes above the range's lowest, as a real: `clamp_to` maps NaN to 0 (the lowest).
-        let x = (volts - self.dac.volts_at_zero) * self.codes_per_volt - self.code_lo_real;
+        let x = volts * self.codes_per_volt - self.code_origin;
         let in_range = x >= T::ZERO && x <= self.code_span_real;
         let x = x.clamp_to(T::ZERO, self.code_span_real);
         // x >= 0, so truncation of x + 1/2 is the rounding (no floor); the sum stays in the

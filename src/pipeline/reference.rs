@@ -406,20 +406,23 @@ fn catmull_rom<T: Real>(points: &[T; TABLE_LEN], len: usize, x: T, freq_hz: T) -
 /// Samples between two exact evaluations of a sine generator's rotation (see [`WaveGen`]).
 pub const SINE_RESYNC: u16 = 32;
 
-/// A sine as a rotating phasor: `(s, c) = (sin, cos)` of the current phase, rotated by the
-/// phase step each sample, and the setpoint's coefficients precomputed.
+/// A sine as a rotating phasor scaled by the setpoint's coefficients: `(s, c) = (A sin, A w
+/// cos)` of the current phase, rotated by the phase step each sample, so the setpoint is `y
+/// = offset + s`, `y' = c`, `y'' = -w^2 s` (two operations, not four).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Phasor<T> {
     s: T,
     c: T,
-    /// `(cos, sin)` of the phase step.
+    /// The rotation by the phase step `d` in the scaled coordinates: `cos d`, `sin d / w`
+    /// and `w sin d`.
     cd: T,
-    sd: T,
+    sd_w: T,
+    w_sd: T,
     offset_um: T,
-    /// `A`, `A w`, `-A w^2`.
+    /// `A`, `A w`, `-w^2`.
     amp: T,
     amp_w: T,
-    amp_w2: T,
+    minus_w2: T,
     /// Rotations left before the next exact evaluation.
     left: u16,
     /// Rotations between exact evaluations (1: every sample exact).
@@ -465,7 +468,6 @@ impl<T: Real> WaveGen<T> {
             } => {
                 let delta = core::f64::consts::TAU * step as f64 / TURN;
                 let w = T::TWO * T::PI * freq_hz;
-                let (s, c) = sin_cos_turns(T::from_turns(phase));
                 let (amp_w, amp_w2) = (amplitude_um * w, -(amplitude_um * w * w));
                 let mag = |x: T| {
                     if x.is_finite() {
@@ -479,15 +481,18 @@ impl<T: Real> WaveGen<T> {
                     2.0 * mag(amp_w),
                     2.0 * mag(amp_w2),
                 );
+                let (wf, sd) = (w.to_f64(), libm::sin(delta));
                 Some(Phasor {
-                    s,
-                    c,
+                    // Set by the resync below.
+                    s: T::ZERO,
+                    c: T::ZERO,
                     cd: T::from_f64(libm::cos(delta)),
-                    sd: T::from_f64(libm::sin(delta)),
+                    sd_w: T::from_f64(if wf == 0.0 { 0.0 } else { sd / wf }),
+                    w_sd: T::from_f64(wf * sd),
                     offset_um,
                     amp: amplitude_um,
                     amp_w,
-                    amp_w2,
+                    minus_w2: -(w * w),
                     within_guard,
                     left: 0,
                     every: if T::EPSILON < T::from_f64(1e-6) {
@@ -560,7 +565,8 @@ impl<T: Real> WaveGen<T> {
     #[cold]
     fn resync(&mut self) {
         if let Some(p) = self.phasor.as_mut() {
-            (p.s, p.c) = sin_cos_turns(T::from_turns(self.phase));
+            let (s, c) = sin_cos_turns(T::from_turns(self.phase));
+            (p.s, p.c) = (p.amp * s, p.amp_w * c);
             p.left = p.every.saturating_sub(1);
         }
     }
@@ -580,17 +586,17 @@ impl<T: Real> WaveGen<T> {
             Some(p) => {
                 let within = p.within_guard;
                 let sp = Setpoint {
-                    y_um: p.offset_um + p.amp * p.s,
-                    dy: p.amp_w * p.c,
-                    ddy: p.amp_w2 * p.s,
+                    y_um: p.offset_um + p.s,
+                    dy: p.c,
+                    ddy: p.minus_w2 * p.s,
                 };
                 if p.left == 0 {
                     self.resync();
                 } else {
                     p.left -= 1;
                     let (s, c) = (p.s, p.c);
-                    p.s = s * p.cd + c * p.sd;
-                    p.c = c * p.cd - s * p.sd;
+                    p.s = s * p.cd + c * p.sd_w;
+                    p.c = c * p.cd - s * p.w_sd;
                 }
                 (sp, within)
             }
