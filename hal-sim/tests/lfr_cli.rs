@@ -338,6 +338,10 @@ fn lfr_with_mode_channels_from_the_lowest_level_stays_bounded() {
             "LFR channels `outputs:9`: expected",
         ),
         (&["--lfr-basis", "quintic"][..], "LFR basis `quintic`"),
+        (
+            &["--lfr-guard", "0.5"][..],
+            "--lfr-guard 0.5: expected a factor >= 1",
+        ),
     ] {
         let o = run(extra, "bad");
         let e = String::from_utf8_lossy(&o.stderr);
