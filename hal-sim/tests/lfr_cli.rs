@@ -35,6 +35,7 @@ fn truth() -> Lfr {
         e: DMatrix::from_row_slice(3, 1, &[-0.02, 0.01, 0.0]),
         f: DMatrix::from_row_slice(1, 3, &[1.0, 0.0, 0.0]),
         g: DMatrix::zeros(1, 1),
+        z_limit: Vec::new(),
     }
 }
 
@@ -180,10 +181,32 @@ fn lfr_beats_the_linear_model_on_a_held_out_level_and_predict_runs_it() {
         .unwrap()
         .write(&far)
         .unwrap();
+    // The fit holds the feedback beyond 1.5x each channel's training peak: bounded there,
+    // both records are scored.
     let o = piezo(&[
         "score",
         "--model",
         &fitjson,
+        "--record",
+        &d(&valid),
+        "--record",
+        &d(&far),
+    ]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}");
+    let far_line = out.lines().find(|l| l.contains("far.csv")).unwrap();
+    assert!(far_line.contains("official RMSE"), "{out}");
+    // Without the limit (a fit.json written before it) the cubic feedback runs away there.
+    let mut j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fitjson).unwrap()).unwrap();
+    let limit = j["lfr"].as_object_mut().unwrap().remove("z_limit");
+    assert!(limit.is_some_and(|l| l.as_array().is_some_and(|a| a.len() == 1)));
+    let unlimited = dir.join("unlimited.json");
+    std::fs::write(&unlimited, j.to_string()).unwrap();
+    let o = piezo(&[
+        "score",
+        "--model",
+        &d(&unlimited),
         "--record",
         &d(&valid),
         "--record",
@@ -289,28 +312,36 @@ fn lfr_with_mode_channels_from_the_lowest_level_stays_bounded() {
     let scale = &j["report"]["lfr_input_scale"];
     assert_eq!(scale["bounded"].as_f64(), Some(2.0), "{scale}");
     assert!(scale["diverges"].is_null(), "{scale}");
-    // Far above them it is not: the loop with every channel at slope 1 (where the soft
-    // cubic tends) is unstable, and the fit says so.
+    // Far above them the loop with every channel at slope 1 (where the soft cubic tends)
+    // is unstable; the fit holds the feedback beyond 1.5x each channel's training peak, so
+    // far out the model is its linear part: the radius reported is that part's, and 200x
+    // the inputs give a bounded prediction.
     let r = j["report"]["lfr_large_signal_radius"].as_f64().unwrap();
-    assert!(r > 1.0, "{r}");
-    let e = String::from_utf8_lossy(&fit_modes.stderr);
-    assert!(
-        e.contains("large-signal loop A + E F has spectral radius"),
-        "{e}"
-    );
+    assert!(r < 1.0, "{r}");
+    assert_eq!(j["lfr"]["z_limit"].as_array().unwrap().len(), 1);
     let big = dir.join("big.csv");
     let mut v = Record::read(&valid).unwrap();
     v.u[0].iter_mut().for_each(|x| *x *= 200.0);
     v.write(&big).unwrap();
-    let o = piezo(&[
-        "predict",
-        "--model",
-        &d(&dir.join("modes").join("fit.json")),
-        "--input",
-        &d(&big),
-        "--out",
-        &d(&dir.join("big_y.csv")),
-    ]);
+    let predict = |model: &Path| {
+        piezo(&[
+            "predict",
+            "--model",
+            &d(model),
+            "--input",
+            &d(&big),
+            "--out",
+            &d(&dir.join("big_y.csv")),
+        ])
+    };
+    let limited = dir.join("modes").join("fit.json");
+    ok(&predict(&limited));
+    // Without the limit (a fit.json written before it) it diverges there.
+    let mut nolimit = j.clone();
+    nolimit["lfr"].as_object_mut().unwrap().remove("z_limit");
+    let unlimited = dir.join("modes_unlimited.json");
+    std::fs::write(&unlimited, nolimit.to_string()).unwrap();
+    let o = predict(&unlimited);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("diverged"), "{e}");
     // Two channels per output at input gains 1/sqrt(2) and sqrt(2): two rows of F, and

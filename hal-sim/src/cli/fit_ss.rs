@@ -8,6 +8,7 @@ pub use crate::ident::saved::handles;
 use crate::ident::saved::{score_last_period, Loaded};
 pub use crate::ident::ss::fitting::bla_levels;
 use crate::ident::ss::fitting::{self, FitArgs, FitOptions};
+use crate::ident::ss::lfr;
 use crate::record::{Quantity, Record};
 use anyhow::{Context, Result};
 
@@ -128,7 +129,21 @@ pub fn run(args: &Args) -> Result<()> {
             (None, None) => {}
         }
     }
-    if let Some(f) = &lfr_fit {
+    if lfr_fit
+        .as_ref()
+        .is_some_and(|f| !f.model.z_limit.is_empty())
+    {
+        match lfr_radius {
+            Some(r) if r < 1.0 => println!(
+                "  lfr: feedback held beyond {} times each channel's peak |z| on the training records: far out the model is its linear part (spectral radius {r:.4} < 1), bounded for every input",
+                lfr::Z_LIMIT_FACTOR
+            ),
+            _ => eprintln!(
+                "warning: the LFR's linear part is not stable (spectral radius {}): the model diverges",
+                lfr_radius.map_or("unknown".into(), |r| format!("{r:.4}"))
+            ),
+        }
+    } else if let Some(f) = &lfr_fit {
         match lfr_radius {
             Some(r) if r < 1.0 => println!(
                 "  lfr: large-signal loop A + E F (every channel at slope 1) has spectral radius {r:.4} < 1: stable far above the training amplitudes (necessary for bounded responses; amplitudes in between are checked only up to the scale above)"

@@ -89,7 +89,7 @@ impl IdentifiedPlant {
         if let Some(r) = lfr.as_ref().and_then(Lfr::large_signal_radius) {
             if r >= 1.0 {
                 eprintln!(
-                    "warning: {}: the LFR's large-signal loop A + E F has spectral radius {r:.4} >= 1: the simulated stage diverges for drives far above the fit's training amplitudes",
+                    "warning: {}: the LFR's large-signal loop has spectral radius {r:.4} >= 1: the simulated stage diverges for drives far above the fit's training amplitudes (a fit.json written before 2026-12-01 has no limit on its feedback: fit it again)",
                     path.display()
                 );
             }
@@ -519,6 +519,7 @@ mod tests {
             e: DMatrix::from_row_slice(3, 1, &[-0.05, 0.0, 0.0]),
             f: DMatrix::from_row_slice(1, 3, &[1.0, 0.0, 0.0]),
             g: DMatrix::zeros(1, 1),
+            z_limit: Vec::new(),
         };
         let fs = 1000.0;
         let mut saved = SsJson::new(

@@ -931,6 +931,7 @@ mod tests {
             e: DMatrix::zeros(3, 1),
             f: DMatrix::from_row_slice(1, 3, &[1.0, 0.0, 0.0]),
             g: DMatrix::zeros(1, 1),
+            z_limit: Vec::new(),
         };
         let m = Model {
             core: Core::Lfr(l),

@@ -193,7 +193,16 @@ pub struct Lfr {
     pub f: DMatrix<f64>,
     /// `channels x m`.
     pub g: DMatrix<f64>,
+    /// Per channel, the largest `|z|` the feedback sees: `w = N(clamp(z, -l, l))`, held
+    /// beyond. [`identify`] sets it to [`Z_LIMIT_FACTOR`] times the channel's peak on the
+    /// training records, where it does not bind; beyond, the feedback is bounded and the
+    /// stable linear part bounds the state, for every input. Empty: no limit (the fit's own
+    /// models, `fit.json` files written before 2026-12-01).
+    pub z_limit: Vec<f64>,
 }
+
+/// [`Lfr::z_limit`] over the training records' peak `|z|` per channel.
+pub const Z_LIMIT_FACTOR: f64 = 1.5;
 
 /// `fit.json`'s form (the linear part is `linear` beside it).
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -205,6 +214,9 @@ pub struct LfrJson {
     pub e: Vec<Vec<f64>>,
     pub f: Vec<Vec<f64>>,
     pub g: Vec<Vec<f64>>,
+    /// [`Lfr::z_limit`] (absent: no limit).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub z_limit: Vec<f64>,
 }
 
 fn rows(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -239,6 +251,7 @@ impl Lfr {
             e: rows(&self.e),
             f: rows(&self.f),
             g: rows(&self.g),
+            z_limit: self.z_limit.clone(),
         }
     }
 
@@ -249,7 +262,13 @@ impl Lfr {
             nz > 0 && !j.basis.is_empty() && j.basis.iter().all(|b| b.valid()),
             "fit.json: the LFR needs at least one channel and one basis function (play half-widths >= 0, rms time constants >= 1 sample)"
         );
+        anyhow::ensure!(
+            j.z_limit.is_empty()
+                || (j.z_limit.len() == nz && j.z_limit.iter().all(|l| l.is_finite() && *l > 0.0)),
+            "fit.json: the LFR's `z_limit` must hold one finite positive value per channel ({nz}) or be absent"
+        );
         Ok(Self {
+            z_limit: j.z_limit.clone(),
             e: from_rows(&j.e, n, nz * j.basis.len(), "e")?,
             f: from_rows(&j.f, nz, n, "f")?,
             g: from_rows(&j.g, nz, m, "g")?,
@@ -368,16 +387,19 @@ impl Lfr {
     /// 2x. `None` with a basis of unbounded slope (`cubic`, `abs-square`: their feedback
     /// outgrows any linear loop).
     pub fn large_signal_radius(&self) -> Option<f64> {
-        if self
-            .basis
-            .iter()
-            .any(|b| matches!(b, Basis::Cubic | Basis::AbsSquare))
+        let limited = self.z_limit.len() == self.channels();
+        if !limited
+            && self
+                .basis
+                .iter()
+                .any(|b| matches!(b, Basis::Cubic | Basis::AbsSquare))
         {
             return None;
         }
         let (n, nz) = (self.linear.order(), self.channels());
         let mut a = self.linear.a();
-        for b in 0..self.basis.len() {
+        // With the limit the feedback is bounded far out: the linear part alone.
+        for b in (0..self.basis.len()).filter(|_| !limited) {
             let e = self.e.columns(b * nz, nz);
             a += e * &self.f;
         }
@@ -393,6 +415,29 @@ impl Lfr {
     /// Memory of the hysteresis operators at rest (`channels * basis`).
     pub fn rest_memory(&self) -> Vec<f64> {
         vec![0.0; self.e.ncols()]
+    }
+
+    /// `z` of channel `i` within its limit, and whether it was (`false`: held at the limit).
+    #[inline]
+    fn limited(&self, i: usize, z: f64) -> (f64, bool) {
+        match self.z_limit.get(i) {
+            Some(&l) if !(z.abs() <= l) => (z.clamp(-l, l), false),
+            _ => (z, true),
+        }
+    }
+
+    /// Per channel, the largest `|z|` from rest on each of `inputs` (`inputs[r][j][k]`).
+    pub fn channel_peaks(&self, inputs: &[&[Vec<f64>]]) -> anyhow::Result<Vec<f64>> {
+        let nz = self.channels();
+        let mut peak = vec![0.0f64; nz];
+        for u in inputs {
+            self.run(u, |_, x, uk| {
+                for (i, p) in peak.iter_mut().enumerate() {
+                    *p = p.max(self.channel(i, x, uk).abs());
+                }
+            })?;
+        }
+        Ok(peak)
     }
 
     /// Channel `i` of `z = F x + G v`.
@@ -413,7 +458,7 @@ impl Lfr {
     pub fn settle_memory(&self, x: &[f64], v: &[f64], mem: &mut [f64]) {
         let nz = self.channels();
         for i in 0..nz {
-            let z = self.channel(i, x, v);
+            let z = self.limited(i, self.channel(i, x, v)).0;
             for (b, basis) in self.basis.iter().enumerate() {
                 if basis.follows_level() {
                     mem[b * nz + i] = basis.settled(z);
@@ -427,7 +472,7 @@ impl Lfr {
     pub fn add_feedback(&self, x: &[f64], v: &[f64], mem: &mut [f64], out: &mut [f64]) {
         let nz = self.channels();
         for i in 0..nz {
-            let z = self.channel(i, x, v);
+            let z = self.limited(i, self.channel(i, x, v)).0;
             for (b, basis) in self.basis.iter().enumerate() {
                 let q = b * nz + i;
                 let w = basis.step(z, &mut mem[q]).0;
@@ -849,11 +894,20 @@ fn normal_record(
             *v = rec.u[j][k];
         }
         for i in 0..nz {
-            z[i] = dot(&f_rows[i], &x) + (0..m).map(|j| mdl.g[(i, j)] * uk[j]).sum::<f64>();
+            let zi = dot(&f_rows[i], &x) + (0..m).map(|j| mdl.g[(i, j)] * uk[j]).sum::<f64>();
+            let inside;
+            (z[i], inside) = mdl.limited(i, zi);
             for (b, basis) in mdl.basis.iter().enumerate() {
                 let q = b * nz + i;
                 slopes[q] = basis.memory_slopes(z[i], mem[q]);
                 (w[q], dw[q], moved[q]) = basis.step(z[i], &mut mem[q]);
+                if !inside {
+                    // Held at the limit: `w` no longer follows `z`.
+                    dw[q] = 0.0;
+                    if let Some(s) = slopes[q].as_mut() {
+                        s.1 = 0.0;
+                    }
+                }
             }
         }
         let scored = rec.scored(k);
@@ -1110,6 +1164,7 @@ pub fn start(
         e: DMatrix::zeros(n, p * k * basis.len()),
         basis: basis.to_vec(),
         linear: linear.clone(),
+        z_limit: Vec::new(),
     })
 }
 
@@ -1141,6 +1196,7 @@ pub fn start_modes(
             e: DMatrix::zeros(n, nz * basis.len()),
             basis: basis.to_vec(),
             linear: linear.clone(),
+            z_limit: Vec::new(),
         },
         modes,
     ))
@@ -1178,11 +1234,33 @@ pub fn refine_linear(
         iterations,
         ..Default::default()
     };
-    identify(linear, recs, &opts)
+    fit_stages(linear, recs, &opts)
 }
 
-/// Identifies the LFR on `recs` (periodic records), started from the linear model.
+/// Identifies the LFR on `recs` (periodic records), started from the linear model; the
+/// model returned carries [`Lfr::z_limit`].
 pub fn identify(
+    linear: &Modal,
+    recs: &[crate::record::Record],
+    opts: &LfrOptions,
+) -> anyhow::Result<LfrFit> {
+    let mut fit = fit_stages(linear, recs, opts)?;
+    let data = recs
+        .iter()
+        .map(Scored::of)
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let inputs: Vec<&[Vec<f64>]> = data.iter().map(|d| d.u.as_slice()).collect();
+    let peaks = fit.model.channel_peaks(&inputs)?;
+    // A silent channel (peak 0) keeps a tiny limit: its feedback is nothing either way.
+    fit.model.z_limit = peaks
+        .iter()
+        .map(|p| (Z_LIMIT_FACTOR * p).max(f64::MIN_POSITIVE))
+        .collect();
+    Ok(fit)
+}
+
+/// [`identify`] without the limit (the limit is set on the final model only).
+fn fit_stages(
     linear: &Modal,
     recs: &[crate::record::Record],
     opts: &LfrOptions,
@@ -1217,7 +1295,7 @@ pub fn identify(
         .filter(|b| b.is_static())
         .collect();
     let (mdl, c, start_rms, it0) = if !statics.is_empty() && statics.len() < opts.basis.len() {
-        let first = identify(
+        let first = fit_stages(
             linear,
             recs,
             &LfrOptions {
@@ -1453,6 +1531,7 @@ mod tests {
             g: DMatrix::zeros(1, 1),
             basis: vec![Basis::Cubic],
             linear: lin,
+            z_limit: Vec::new(),
         }
     }
 
@@ -1515,6 +1594,77 @@ mod tests {
         m.e = DMatrix::from_row_slice(3, 2, &[0.0, 0.0, 0.0, 0.0, 0.3, 0.2]);
         assert!(m.large_signal_radius().unwrap() > 1.0);
         assert!(m.simulate(&u).is_err());
+    }
+
+    /// A model whose large-signal loop is unstable (radius 1.1) diverges far outside; with
+    /// the limit at 1.5x its peaks on a record it gives that record's outputs bit for bit and
+    /// stays bounded at 1e4 times those inputs (the feedback held, the stable linear part
+    /// bounding the state), its radius then the linear part's.
+    #[test]
+    fn the_limit_bounds_an_unstable_large_signal_loop_and_changes_nothing_within() {
+        let mut m = truth();
+        m.basis = vec![Basis::SoftCubic];
+        m.e = DMatrix::from_row_slice(3, 1, &[0.0, 0.0, 0.5]);
+        m.f = DMatrix::from_row_slice(1, 3, &[0.0, 0.0, 1.0]);
+        assert!((m.large_signal_radius().unwrap() - 1.1).abs() < 1e-9);
+        let u = vec![multisine(256, 4, 0.5, 7)];
+        let far: Vec<Vec<f64>> = vec![u[0].iter().map(|v| v * 1e4).collect()];
+        assert!(m.simulate(&far).is_err());
+        let free = m.simulate(&u).unwrap();
+        let peaks = m.channel_peaks(&[&u]).unwrap();
+        assert!(peaks[0] > 0.0);
+        let mut held = m.clone();
+        held.z_limit = peaks.iter().map(|p| Z_LIMIT_FACTOR * p).collect();
+        assert_eq!(held.simulate(&u).unwrap(), free);
+        assert!(held.simulate(&far).is_ok());
+        let lin = m.linear.spectral_radius();
+        assert!((held.large_signal_radius().unwrap() - lin).abs() < 1e-12);
+        // A cubic has no bound of its own, but held it is bounded too.
+        held.basis = vec![Basis::Cubic];
+        assert!(held.large_signal_radius().is_some());
+        assert!(held.simulate(&far).is_ok());
+    }
+
+    /// `identify` sets the limit from the training records' peaks, and `fit.json` keeps it
+    /// (absent in older files: no limit; a wrong one refused).
+    #[test]
+    fn identify_sets_the_limit_and_json_keeps_it() {
+        let t = truth();
+        let recs = [record(&t, 1.0, 5)];
+        let opts = LfrOptions {
+            basis: vec![Basis::SoftCubic],
+            channels: Channels::Outputs(1),
+            iterations: 3,
+            stride: 1,
+            ..Default::default()
+        };
+        let fit = identify(&t.linear, &recs, &opts).unwrap();
+        let scored = Scored::of(&recs[0]).unwrap();
+        let peaks = fit.model.channel_peaks(&[scored.u.as_slice()]).unwrap();
+        assert_eq!(fit.model.z_limit.len(), 1);
+        assert!((fit.model.z_limit[0] - Z_LIMIT_FACTOR * peaks[0]).abs() <= 1e-12 * peaks[0]);
+        let j = fit.model.to_json();
+        let back = Lfr::from_json(fit.model.linear.clone(), &j).unwrap();
+        assert_eq!(back, fit.model);
+        let old = LfrJson {
+            z_limit: Vec::new(),
+            ..j.clone()
+        };
+        assert!(Lfr::from_json(fit.model.linear.clone(), &old)
+            .unwrap()
+            .z_limit
+            .is_empty());
+        for bad in [vec![-1.0], vec![f64::NAN], vec![1.0, 2.0]] {
+            let e = Lfr::from_json(
+                fit.model.linear.clone(),
+                &LfrJson {
+                    z_limit: bad,
+                    ..j.clone()
+                },
+            )
+            .unwrap_err();
+            assert!(e.to_string().contains("z_limit"), "{e}");
+        }
     }
 
     #[test]
@@ -1736,8 +1886,15 @@ mod tests {
         };
         let free = identify(&t.linear, &recs, &opts(None)).unwrap();
         let kept = identify(&t.linear, &recs, &opts(Some(1.5))).unwrap();
-        assert!(!bounded_at(&free.model, &recs, 1.5), "{free:?}");
-        assert!(bounded_at(&kept.model, &recs, 1.5), "{kept:?}");
+        // The fit's own models, without the limit `identify` puts on the result.
+        let unlimited = |m: &Lfr| Lfr {
+            z_limit: Vec::new(),
+            ..m.clone()
+        };
+        assert!(!bounded_at(&unlimited(&free.model), &recs, 1.5), "{free:?}");
+        assert!(bounded_at(&unlimited(&kept.model), &recs, 1.5), "{kept:?}");
+        // With the limit both are bounded.
+        assert!(bounded_at(&free.model, &recs, 1.5), "{free:?}");
         // It still fits what it may: below the linear start.
         assert!(
             kept.rms < 0.9 * kept.start_rms,
