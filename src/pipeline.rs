@@ -489,7 +489,10 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     /// The generic step: any mode, feedforward, feedback and axis count.
     /// [`Pipeline::step`] runs it whenever the fused step does not apply; public so tests
     /// can run it as the reference of the fused step.
-    #[inline]
+    // Out of line on the target: inlined, its stack frame and spills were set up and torn
+    // down on the fused path too.
+    #[cfg_attr(target_os = "none", inline(never))]
+    #[cfg_attr(not(target_os = "none"), inline)]
     pub fn step_generic(&mut self, adc: [i32; N]) -> [i32; N] {
         if self.restart_due {
             self.restart();
