@@ -52,6 +52,9 @@ pub struct Output<T> {
     /// `volts_at_zero * codes_per_volt + code_lo - 1/2` as a real (precomputed: the
     /// per-sample path only subtracts it, the rounding's half code included).
     code_origin: T,
+    /// `code_hi - code_lo + 1/2` as a real: the top of the range in `x` (fixed point's
+    /// clamp, see [`Output::limit_from_code_in_range`]).
+    code_top_real: T,
     code_lo: i32,
     code_hi: i32,
     max_step: i32,
@@ -123,6 +126,7 @@ impl<T: Real> Output<T> {
             code_origin: T::from_f64(
                 dac.volts_at_zero.to_f64() / dac.volts_per_code.to_f64() + code_lo - 0.5,
             ),
+            code_top_real: T::from_f64(span + 0.5),
             code_lo: code_lo as i32,
             code_hi: code_hi as i32,
             max_step: libm::floor(step).min(i32::MAX as f64 / 4.0) as i32,
@@ -155,20 +159,35 @@ impl<T: Real> Output<T> {
     /// [`Output::limit`] from a `prev` known to lie in [`Output::code_range`].
     #[inline(always)]
     pub(crate) fn limit_from_code_in_range(&self, volts: T, prev: i32) -> Limited {
-        // Codes above the range's lowest plus 1/2, as a real; truncated, the nearest code
-        // (NaN -> 0, the lowest; `as i32` saturates). The range and the slew limit then
-        // clamp in integers, together.
+        // Codes above the range's lowest plus 1/2, as a real.
         let x = volts * self.codes_per_volt - self.code_origin;
-        let want = self.code_lo.saturating_add(x.to_i32());
-        let lo = prev.saturating_sub(self.max_step).max(self.code_lo);
-        let hi = prev.saturating_add(self.max_step).min(self.code_hi);
-        let code = want.max(lo).min(hi);
-        // Truncation takes (-1, 0) to 0: a command that rounds below the lowest code
-        // (or NaN) is told by its sign.
-        let in_range = x >= T::ZERO;
-        Limited {
-            code,
-            saturated: code != want || !in_range,
+        if T::IEEE {
+            // Truncated, the nearest code (NaN -> 0, the lowest; `as i32` saturates). The
+            // range and the slew limit then clamp in integers, together.
+            let want = self.code_lo.saturating_add(x.to_i32());
+            let lo = prev.saturating_sub(self.max_step).max(self.code_lo);
+            let hi = prev.saturating_add(self.max_step).min(self.code_hi);
+            let code = want.max(lo).min(hi);
+            // Truncation takes (-1, 0) to 0: a command that rounds below the lowest code
+            // (or NaN) is told by its sign.
+            let in_range = x >= T::ZERO;
+            Limited {
+                code,
+                saturated: code != want || !in_range,
+            }
+        } else {
+            // Fixed point compares its reals as integers already: the range clamps `x` into
+            // `[1/2, span + 1/2]` (truncated, the codes of the range), the slew limit after.
+            let in_range = x >= T::HALF && x <= self.code_top_real;
+            let x = x.clamp_to(T::HALF, self.code_top_real);
+            let want = self.code_lo.saturating_add(x.to_i32());
+            let code = want
+                .max(prev.saturating_sub(self.max_step))
+                .min(prev.saturating_add(self.max_step));
+            Limited {
+                code,
+                saturated: code != want || !in_range,
+            }
         }
     }
 }
