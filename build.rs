@@ -45,7 +45,7 @@ SECTIONS
      * impls `_$LT$piezo_core..hysteresis..pi..Pi...`) and v0 (`_R...10piezo_core8pipeline...`,
      * nightly's default); `.ci/firmware-safety.py` checks that every function the control
      * interrupt reaches landed here. */
-    *(.text.*10piezo_core8pipeline*Pipeline*4step*);
+    *(.text.*10piezo_core8pipeline*Pipeline*4step* .text.*10piezo_core8pipeline*Pipeline*12step_generic*);
     *(.text.*10piezo_core8pipeline5fused* .text.*piezo_core..pipeline..fused*);
     *(.text.*10piezo_core8pipeline9reference*8at_phase* .text.*10piezo_core8pipeline9reference*15next_from_phase*);
     *(.text.*10piezo_core8pipeline9reference*6resync* .text.*10piezo_core8pipeline10excitation*);

@@ -253,6 +253,7 @@ impl Real for Q16 {
     /// The largest *finite* value (`i32::MAX` itself is the saturated, "infinite" one).
     const MAX: Self = Self(i32::MAX - 1);
     const OVERFLOW_PROPAGATES: bool = false;
+    const IEEE: bool = false;
 
     #[inline]
     fn from_f64(x: f64) -> Self {

@@ -178,12 +178,28 @@ pub struct Pipeline<T: Real, const N: usize> {
     feedback: [Feedback<T>; N],
     state: State<T, N>,
     /// [`Pipeline::step`] takes the fused path of `fused.rs` (decided when the mode, the
-    /// feedforward or the feedback changes; a latched fault clears it, so the step tests
-    /// one flag).
+    /// feedforward or the feedback changes, and once the law primed its observer; a
+    /// latched fault clears it, so the step tests one flag).
     fused: bool,
-    /// A configuration handed over by [`Pipeline::adopt`] waits for its bumpless restart:
-    /// the next step runs it first (in the control task, not under the command's lock).
-    restart_due: bool,
+    /// What the generic step settles first (one test per sample while nothing is due).
+    pending: Pending,
+}
+
+/// Work the generic step does before its sample ([`Pipeline::step_generic`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pending {
+    None,
+    /// A configuration handed over by [`Pipeline::adopt`] waits for its bumpless restart
+    /// (in the control task, not under the command's lock).
+    Restart,
+    /// The configuration runs the fused step, but the law has not primed its observer
+    /// yet: the generic step primes it, the next one takes the fused path once the law is
+    /// primed and no fault latched (so the fused step never tests for an unprimed law). The
+    /// configuration was decided already: this costs the control interrupt two tests.
+    Prime,
+    /// The law was handed out for changes ([`Pipeline::feedback_mut`]): the generic step
+    /// decides the fused path again, the configuration too.
+    Decide,
 }
 
 impl<T: Real, const N: usize> Pipeline<T, N> {
@@ -235,7 +251,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                 },
             },
             fused: false,
-            restart_due: false,
+            pending: Pending::None,
         };
         for i in 0..N {
             let (o, a) = (&p.output[i], &p.config.axes[i]);
@@ -246,7 +262,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             p.state.trace.u_ff[i] = a.safe_volts;
             p.state.trace.setpoint[i] = p.reference[i].current();
         }
-        p.fused = p.fused_due();
+        p.decide_fused();
         Ok(p)
     }
 
@@ -268,23 +284,46 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     /// The feedback law of `axis`, to hand a deferred NMPC its plan
     /// ([`crate::feedback::Nmpc::deliver`]; replacing a law is [`Pipeline::set_feedback`]).
     pub fn feedback_mut(&mut self, axis: usize) -> Option<&mut Feedback<T>> {
+        // The caller may reset or change the law: the generic step decides again.
+        if self.fused || self.pending == Pending::Prime {
+            self.fused = false;
+            self.pending = Pending::Decide;
+        }
         self.feedback.get_mut(axis)
     }
     /// The reference generator of `axis`.
     pub fn reference(&self, axis: usize) -> Option<&WaveGen<T>> {
         self.reference.get(axis)
     }
-    /// The next sample runs the fused step (see [`Pipeline::step`]): the configuration
-    /// allows it and no fault is latched.
+    /// The configuration runs the fused step (see [`Pipeline::step`]): it allows it and no
+    /// fault is latched (a law still to prime its observer runs the generic step until
+    /// it did).
     pub fn is_fused(&self) -> bool {
         self.fused
+            || self.pending == Pending::Prime
+            || (self.pending == Pending::Decide && self.state.fault.is_none() && self.fusable())
     }
 
-    /// What [`Pipeline::is_fused`] is: no restart due, no fault latched and a configuration
-    /// the fused step covers. Every change of one of them decides again (a latched fault
-    /// only clears the flag).
-    fn fused_due(&self) -> bool {
-        !self.restart_due && self.state.fault.is_none() && self.fusable()
+    /// Decides the fused path: no restart due, no fault latched, a configuration the fused
+    /// step covers and a primed law (an unprimed one: [`Pending::Prime`]). Every change of
+    /// one of them decides again (a latched fault only clears the flag).
+    fn law_fresh(&self) -> bool {
+        matches!(self.feedback.first(), Some(Feedback::Robust(l)) if l.is_fresh())
+    }
+
+    fn decide_fused(&mut self) {
+        if self.pending == Pending::Restart {
+            self.fused = false;
+            return;
+        }
+        let due = self.state.fault.is_none() && self.fusable();
+        let fresh = self.law_fresh();
+        self.fused = due && !fresh;
+        self.pending = if due && fresh {
+            Pending::Prime
+        } else {
+            Pending::None
+        };
     }
     /// The DAC codes of the last sample (at start-up: the codes of `safe_volts`).
     pub fn codes(&self) -> [i32; N] {
@@ -367,7 +406,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         self.clamp_code(axis);
         // The fused step's guard proof covers the output range: decide again (a restart
         // still due keeps the generic path until it ran).
-        self.fused = self.fused_due();
+        self.decide_fused();
         Ok(())
     }
 
@@ -414,7 +453,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             .ok_or(ConfigError::new("axis index out of range"))?;
         a.sensor = sensor;
         // The fused step's guard proof covers the sensor window: decide again.
-        self.fused = self.fused_due();
+        self.decide_fused();
         Ok(())
     }
 
@@ -445,7 +484,7 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     #[cold]
     #[inline(never)]
     fn restart(&mut self) {
-        self.restart_due = false;
+        self.pending = Pending::None;
         let sp: [Setpoint<T>; N] = core::array::from_fn(|i| {
             self.reference
                 .get(i)
@@ -462,7 +501,26 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                 u_applied: u,
             });
         }
-        self.fused = self.fused_due();
+        self.decide_fused();
+    }
+
+    /// The restart due, or the decision after the law primed (cold: once after a change).
+    #[cold]
+    #[inline(never)]
+    fn settle_pending(&mut self) {
+        match self.pending {
+            Pending::Restart => self.restart(),
+            Pending::Prime => {
+                if self.state.fault.is_some() {
+                    self.pending = Pending::None;
+                } else if !self.law_fresh() {
+                    self.pending = Pending::None;
+                    self.fused = true;
+                }
+            }
+            Pending::Decide => self.decide_fused(),
+            Pending::None => {}
+        }
     }
 
     /// One sample: ADC codes in, DAC codes out.
@@ -483,16 +541,31 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
                 return codes;
             }
         }
-        self.step_generic(adc)
+        // Fixed point (the M3) inlines the generic step: out of line it costs 6-10
+        // instructions a step there (the call, a second frame), while the M4F's gains.
+        if T::IEEE {
+            self.step_generic(adc)
+        } else {
+            self.step_generic_inline(adc)
+        }
     }
 
     /// The generic step: any mode, feedforward, feedback and axis count.
     /// [`Pipeline::step`] runs it whenever the fused step does not apply; public so tests
     /// can run it as the reference of the fused step.
-    #[inline]
+    // Out of line on the target: inlined, its stack frame and spills were set up and torn
+    // down on the fused path too.
+    #[cfg_attr(target_os = "none", inline(never))]
+    #[cfg_attr(not(target_os = "none"), inline)]
     pub fn step_generic(&mut self, adc: [i32; N]) -> [i32; N] {
-        if self.restart_due {
-            self.restart();
+        self.step_generic_inline(adc)
+    }
+
+    /// [`Pipeline::step_generic`]'s body.
+    #[inline(always)]
+    fn step_generic_inline(&mut self, adc: [i32; N]) -> [i32; N] {
+        if self.pending != Pending::None {
+            self.settle_pending();
         }
         let st = &mut self.state;
         st.counters.samples = st.counters.samples.saturating_add(1);

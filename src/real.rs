@@ -40,6 +40,13 @@ pub trait Real:
     /// NaN), so a finite result proves finite operands. False for saturating fixed point,
     /// where a saturated operand can still give a finite result.
     const OVERFLOW_PROPAGATES: bool = true;
+    /// An IEEE binary float (its compares are float compares). Picks the cheaper code
+    /// where the two kinds of type differ: the output stage clamps a command's code in
+    /// integers (float to integer first, range and slew limit as one integer clamp), while
+    /// fixed point, whose compares are integer ones already, clamps the real into the
+    /// range; and [`crate::pipeline::Pipeline::step`] calls the generic step out of line
+    /// on the target (fixed point inlines it).
+    const IEEE: bool = true;
 
     fn from_f64(x: f64) -> Self;
     fn to_f64(self) -> f64;

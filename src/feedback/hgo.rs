@@ -138,6 +138,14 @@ pub(crate) fn cbw_n1_slope<T: Real>(m: &CbwN1<T>, h: T, s: T) -> T {
     m.alpha - m.gamma * h.abs() - bs * h
 }
 
+/// [`cbw_n1_slope`] in the direction of `dv`'s sign bit (a sign flip, no compare): the
+/// robust law's, whose command does not depend on the slope when `dv = 0` (`dv / den` is
+/// then a zero of `dv`'s sign for any positive `den`), so `+-0` may take either side.
+#[inline(always)]
+pub(crate) fn cbw_n1_slope_of_dv<T: Real>(m: &CbwN1<T>, h: T, dv: T) -> T {
+    m.alpha - m.gamma * h.abs() - m.beta.mul_sign(dv) * h
+}
+
 /// [`cbw_n1_piece`] for a model known to have `n = 1`. Written in `k du = beta |du| + gamma
 /// sgn(h) du`, the piece's sign from the signs of `h` and `du` (at `h = 0`: the piece `h`
 /// moves into): one sign test instead of two sign flips, and no branch for `du = 0`, which

@@ -1,7 +1,7 @@
 //! Robust output-feedback law with virtual hysteresis control, 000 eq. (7)-(8), on the HGO.
 
 use super::guard::InputGuard;
-use super::hgo::{cbw_n1_slope, CbwN1, Hgo, HgoState};
+use super::hgo::{cbw_n1_slope_of_dv, CbwN1, Hgo, HgoState};
 use crate::hysteresis::{ensure, ensure_finite, ParamError};
 use crate::real::Real;
 use crate::signals::{LoopSignals, Setpoint};
@@ -319,22 +319,21 @@ impl<T: Real> Robust<T> {
         let v_hat = d_p * u0 - h_hat;
         let v_d = self.v_d::<FUSED>(&target, self.state.obs.x);
         // Target effective input for this sample: what is left of the error to v_d.
+        // Each form keeps only the memory it reads (the form is fixed per law).
         let (dv, du_ff) = if self.cfg.feedforward {
             let e = v_hat - v_d;
-            (
-                self.h_error_left::<FUSED>(e) - e,
-                u_ff - self.state.u_ff_prev,
-            )
+            let du_ff = u_ff - self.state.u_ff_prev;
+            self.state.u_ff_prev = u_ff;
+            (self.h_error_left::<FUSED>(e) - e, du_ff)
         } else {
             let left = self.h_error_left::<FUSED>(v_hat - self.state.v_d_prev);
+            self.state.v_d_prev = v_d;
             (v_d - v_hat + left, T::ZERO)
         };
         let s = &mut self.state;
-        s.v_d_prev = v_d;
-        s.u_ff_prev = u_ff;
         // The model's slope at the hysteresis part of the estimate (inside the loop bound).
         let slope = if FUSED {
-            cbw_n1_slope(&self.cbw_n1, s.obs.h, dv)
+            cbw_n1_slope_of_dv(&self.cbw_n1, s.obs.h, dv)
         } else {
             self.hgo.model().slope(s.obs.h, dv.sgn())
         };

@@ -112,11 +112,11 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
             // The restart (the IMS inverse from the setpoint, the observer's reset) runs at
             // the next step: this stays a copy. The generic step takes it first (it is the
             // path while the flag is up) and decides the fused path again.
-            self.restart_due = true;
+            self.pending = super::Pending::Restart;
             self.fused = false;
-        } else if parts.any(Parts::LIMITS.union(Parts::SENSOR)) && !self.restart_due {
+        } else if parts.any(Parts::LIMITS.union(Parts::SENSOR)) {
             // A restart still due keeps the generic path until it ran.
-            self.fused = self.fused_due();
+            self.decide_fused();
         }
     }
 
@@ -125,6 +125,6 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
     pub fn sync_state(&mut self, from: &Self) {
         self.state = from.state;
         // The fault came with it.
-        self.fused = self.fused_due();
+        self.decide_fused();
     }
 }

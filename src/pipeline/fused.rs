@@ -97,11 +97,11 @@ impl<T: Real, const N: usize> Pipeline<T, N> {
         let Some(Feedforward::ImsCbw(ims)) = ffs.first_mut() else {
             return None;
         };
-        // A code outside the window, or an observer still to prime: the generic path.
+        // A code outside the window: the generic path. The law is primed: the fused path
+        // is decided only for a primed law (`Pending::Prime`), and only a restart, a new law
+        // or `feedback_mut` unprime it, each of which decides again.
         let y = axis.sensor.position_um(adc)?;
-        if law.is_fresh() {
-            return None;
-        }
+        debug_assert!(!law.is_fresh());
         let (Some(y_tr), Some(sp_tr), Some(u_ff_tr), Some(u_cmd_tr), Some(code), Some(u_applied)) = (
             st.trace.y_um.first_mut(),
             st.trace.setpoint.first_mut(),

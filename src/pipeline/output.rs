@@ -49,10 +49,12 @@ impl<T: Real> DacScale<T> {
 pub struct Output<T> {
     pub dac: DacScale<T>,
     codes_per_volt: T,
-    /// `volts_at_zero * codes_per_volt + code_lo` and `code_hi - code_lo` as reals
-    /// (precomputed: the per-sample path only subtracts and compares against them).
+    /// `volts_at_zero * codes_per_volt + code_lo - 1/2` as a real (precomputed: the
+    /// per-sample path only subtracts it, the rounding's half code included).
     code_origin: T,
-    code_span_real: T,
+    /// `code_hi - code_lo + 1/2` as a real: the top of the range in `x` (fixed point's
+    /// clamp, see [`Output::limit_from_code_in_range`]).
+    code_top_real: T,
     code_lo: i32,
     code_hi: i32,
     max_step: i32,
@@ -103,10 +105,9 @@ impl<T: Real> Output<T> {
         if !(sample_hz.is_finite() && sample_hz > T::ZERO) {
             return Err(ConfigError::new("sample_hz must be finite and > 0"));
         }
-        // The per-sample rounding of a position `x` clamped into `[0, span]`, `(x + 1/2) as
-        // i32`, is monotone in `x`: at most that of the span itself, checked here, so the
-        // code it gives needs no clamp to `code_hi` (`limit_from_code_in_range`). Not so for
-        // a span wider than the number type resolves (f32: above 2^23 codes).
+        // The per-sample rounding (`limit_from_code_in_range`) tells the codes of the range
+        // apart only while the number type resolves half a code at the span (f32: up to
+        // 2^23 codes).
         let span = code_hi - code_lo;
         if (T::from_f64(span) + T::HALF).to_i32() as f64 > span {
             return Err(ConfigError::new(
@@ -123,9 +124,9 @@ impl<T: Real> Output<T> {
             dac: *dac,
             codes_per_volt: T::ONE / dac.volts_per_code,
             code_origin: T::from_f64(
-                dac.volts_at_zero.to_f64() / dac.volts_per_code.to_f64() + code_lo,
+                dac.volts_at_zero.to_f64() / dac.volts_per_code.to_f64() + code_lo - 0.5,
             ),
-            code_span_real: T::from_f64(span),
+            code_top_real: T::from_f64(span + 0.5),
             code_lo: code_lo as i32,
             code_hi: code_hi as i32,
             max_step: libm::floor(step).min(i32::MAX as f64 / 4.0) as i32,
@@ -158,19 +159,35 @@ impl<T: Real> Output<T> {
     /// [`Output::limit`] from a `prev` known to lie in [`Output::code_range`].
     #[inline(always)]
     pub(crate) fn limit_from_code_in_range(&self, volts: T, prev: i32) -> Limited {
-        // Codes above the range's lowest, as a real: `clamp_to` maps NaN to 0 (the lowest).
+        // Codes above the range's lowest plus 1/2, as a real.
         let x = volts * self.codes_per_volt - self.code_origin;
-        let in_range = x >= T::ZERO && x <= self.code_span_real;
-        let x = x.clamp_to(T::ZERO, self.code_span_real);
-        // x >= 0, so truncation of x + 1/2 is the rounding (no floor); the sum stays in the
-        // range: `new` checked the rounding of the span itself.
-        let want = self.code_lo.saturating_add((x + T::HALF).to_i32());
-        let code = want
-            .max(prev.saturating_sub(self.max_step))
-            .min(prev.saturating_add(self.max_step));
-        Limited {
-            code,
-            saturated: code != want || !in_range,
+        if T::IEEE {
+            // Truncated, the nearest code (NaN -> 0, the lowest; `as i32` saturates). The
+            // range and the slew limit then clamp in integers, together.
+            let want = self.code_lo.saturating_add(x.to_i32());
+            let lo = prev.saturating_sub(self.max_step).max(self.code_lo);
+            let hi = prev.saturating_add(self.max_step).min(self.code_hi);
+            let code = want.max(lo).min(hi);
+            // Truncation takes (-1, 0) to 0: a command that rounds below the lowest code
+            // (or NaN) is told by its sign.
+            let in_range = x >= T::ZERO;
+            Limited {
+                code,
+                saturated: code != want || !in_range,
+            }
+        } else {
+            // Fixed point compares its reals as integers already: the range clamps `x` into
+            // `[1/2, span + 1/2]` (truncated, the codes of the range), the slew limit after.
+            let in_range = x >= T::HALF && x <= self.code_top_real;
+            let x = x.clamp_to(T::HALF, self.code_top_real);
+            let want = self.code_lo.saturating_add(x.to_i32());
+            let code = want
+                .max(prev.saturating_sub(self.max_step))
+                .min(prev.saturating_add(self.max_step));
+            Limited {
+                code,
+                saturated: code != want || !in_range,
+            }
         }
     }
 }
