@@ -421,7 +421,7 @@ impl Lfr {
     #[inline]
     fn limited(&self, i: usize, z: f64) -> (f64, bool) {
         match self.z_limit.get(i) {
-            Some(&l) if !(z.abs() <= l) => (z.clamp(-l, l), false),
+            Some(&l) if z.abs() > l => (z.clamp(-l, l), false),
             _ => (z, true),
         }
     }
