@@ -4,8 +4,8 @@
 
 use super::dynamics::{AmpFilter, AMP_LEVEL_MIN};
 use super::model::{
-    combine, least_squares, least_squares_refs, play, regressors, sensor_columns, Cause, Causes,
-    OutputModel, Scales, Shape,
+    combine, combine_rmse, least_squares, least_squares_refs, play, regressors, sensor_columns,
+    Cause, Causes, OutputModel, Scales, Shape,
 };
 use super::Signals;
 use crate::numeric::rmse;
@@ -256,7 +256,7 @@ pub(super) fn fit_linear_with(
         Iterate::Rough => 1,
         Iterate::Course(_) => usize::from(side.play > 0.0 || side.sensor),
     };
-    let (coef, y, course) = if side.play > 0.0 || side.sensor || side.amp.is_some() {
+    let (coef, e, course) = if side.play > 0.0 || side.sensor || side.amp.is_some() {
         // The play, the sensor and the amplitude-dependent dynamics act on the model's output,
         // which the coefficients make: a fixed point. Fit the coefficients to the measurement
         // minus the play's offset of the last iterate, with the sensor polynomial of the last
@@ -305,16 +305,15 @@ pub(super) fn fit_linear_with(
         }
         let (y, rho) = side.output_and_course(&cols, &coef);
         let course = rho.iter().map(|r| level * r / (1.0 - r)).collect();
-        (coef, y, course)
+        (coef, rmse(&y, y_meas), course)
     } else {
         let coef = least_squares(&cols, y_meas);
-        let y = combine(&cols, &coef);
-        (coef, y, Vec::new())
+        let e = combine_rmse(&cols, &coef, y_meas);
+        (coef, e, Vec::new())
     };
     if side.sensor {
         names.extend(["sensor_e2", "sensor_e3"]);
     }
-    let e = rmse(&y, y_meas);
     let model = OutputModel {
         shape: *shape,
         names: names.into_iter().map(String::from).collect(),
