@@ -58,6 +58,13 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     fn pieces(&self) -> [T; 4] {
         [T::ZERO; 4]
     }
+    /// The output [`Hysteresis::step`] returned when it left `state`, if the state alone
+    /// gives it (bit for bit): then [`Ims`] computes its last output when it needs it
+    /// instead of storing it per sample. `None` (the default): [`Ims`] stores it.
+    #[inline(always)]
+    fn output_of(&self, _state: &Self::State) -> Option<T> {
+        None
+    }
 }
 
 /// A solved step (see [`ImsModel::invert_step`]).
@@ -243,6 +250,11 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
     }
     fn pieces(&self) -> [T; 4] {
         cbw_pieces(self)
+    }
+    /// `d u - h` ([`BwState::step_piezo`]'s output).
+    #[inline(always)]
+    fn output_of(&self, state: &BwState<T>) -> Option<T> {
+        Some(self.d() * state.u - state.h)
     }
 }
 
@@ -437,13 +449,13 @@ impl<T: Real> Ims<T, Cbw<T>> {
             return self.u;
         }
         // The tolerance only where a residual is tested (a large step).
-        let y_last = self.y;
+        let this = &*self;
         if let Some(inv) = invert_cbw_n1::<T, true>(
             &self.model,
             &self.pieces,
             &self.state,
             y_ref_um,
-            move || tol(y_ref_um, y_last),
+            move || tol(y_ref_um, this.y_last()),
             self.step_hint,
         ) {
             if let Some(u) = self.take_inverted::<true>(inv) {
@@ -501,6 +513,9 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     one_point: bool,
     state: M::State,
     u: T,
+    /// The last model output where the model cannot give it from its state
+    /// ([`ImsModel::output_of`]; CBW can: then it is not stored per sample and stays 0, see
+    /// [`Ims::predicted_um`]).
     y: T,
     evals: usize,
 }
@@ -518,7 +533,7 @@ where
             && self.offset_um == o.offset_um
             && self.state == o.state
             && self.u == o.u
-            && self.y == o.y
+            && self.y_last() == o.y_last()
     }
 }
 
@@ -541,6 +556,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u0 = T::ZERO.clamp_to(volts_min, volts_max);
         let mut state = model.init(u0);
         let y = model.step(&mut state, u0, dt_s);
+        let y = if model.output_of(&state).is_some() {
+            T::ZERO
+        } else {
+            y
+        };
         let slope_hint = model.d();
         let pieces = model.pieces();
         Ok(Self {
@@ -651,7 +671,26 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     }
     /// Output the internal model predicts for the last voltage (um).
     pub fn predicted_um(&self) -> T {
-        self.y
+        self.y_last()
+    }
+
+    /// The last model output (um): from the state where the model gives it
+    /// ([`ImsModel::output_of`], the quadratic term added as the step adds it), else the
+    /// stored one.
+    #[inline(always)]
+    fn y_last(&self) -> T {
+        match self.model.output_of(&self.state) {
+            Some(y) => y + self.quad * self.u * self.u,
+            None => self.y,
+        }
+    }
+
+    /// Keeps `y`, the model output of the state just taken, where the state does not give it.
+    #[inline(always)]
+    fn keep_y(&mut self, y: T) {
+        if self.model.output_of(&self.state).is_none() {
+            self.y = y;
+        }
     }
 
     /// Voltage (V) for the reference `y_ref_um`. A non-finite reference holds the output.
@@ -688,7 +727,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             ImsLoop::Delayed => {
                 self.evals = 0;
                 let d = self.model.d();
-                let h_prev = d * self.u - self.y;
+                let h_prev = d * self.u - self.y_last();
                 self.finish((y_ref_um + h_prev) / d)
             }
         }
@@ -697,7 +736,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Tolerance of the solve on `y` (um) for the reference `y_ref_um`.
     #[inline(always)]
     fn tol(&self, y_ref_um: T) -> T {
-        tol(y_ref_um, self.y)
+        tol(y_ref_um, self.y_last())
     }
 
     /// Takes a direct inversion if it lies inside the range and slew limits (the solve's own
@@ -761,13 +800,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Takes `u` with model output `y` as this sample's voltage.
     #[inline]
     fn commit<const NO_CREEP: bool>(&mut self, u: T, y: T) -> T {
-        self.y = y;
+        self.keep_y(y);
         self.u = u;
         if NO_CREEP {
             return u;
         }
         if let Some(c) = &mut self.creep {
-            c.commit(self.y);
+            c.commit(y);
         }
         u
     }
@@ -782,12 +821,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         };
         let u0 = u0.clamp_to(self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
-        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
+        let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.u = u0;
+        self.keep_y(y);
         self.evals = 0;
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
-            c.settle(self.y);
+            c.settle(y);
         }
     }
 
@@ -795,11 +835,12 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     pub fn reset_volts(&mut self, u0: T) {
         let u0 = super::rest_volts(u0, self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
-        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
+        let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.u = u0;
+        self.keep_y(y);
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
-            c.settle(self.y);
+            c.settle(y);
         }
     }
 }
