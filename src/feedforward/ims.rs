@@ -65,6 +65,12 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     fn output_of(&self, _state: &Self::State) -> Option<T> {
         None
     }
+    /// The input of the step that left `state`, if the state keeps it: then [`Ims`] does
+    /// not store its last voltage a second time. `None` (the default): [`Ims`] stores it.
+    #[inline(always)]
+    fn input_of(&self, _state: &Self::State) -> Option<T> {
+        None
+    }
 }
 
 /// A solved step (see [`ImsModel::invert_step`]).
@@ -256,6 +262,11 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
     fn output_of(&self, state: &BwState<T>) -> Option<T> {
         Some(self.d() * state.u - state.h)
     }
+    /// The step's (sane) input.
+    #[inline(always)]
+    fn input_of(&self, state: &BwState<T>) -> Option<T> {
+        Some(state.u)
+    }
 }
 
 /// The slope `k = beta s + gamma sgn(h)` of CBW's step for `n = 1` on each of its four pieces,
@@ -446,7 +457,7 @@ impl<T: Real> Ims<T, Cbw<T>> {
     #[inline(always)]
     pub(crate) fn compensate_plain_cbw_n1(&mut self, y_ref_um: T, y_ref_finite: bool) -> T {
         if !(y_ref_finite || y_ref_um.is_finite()) {
-            return self.u;
+            return self.u_last();
         }
         // The tolerance only where a residual is tested (a large step).
         let this = &*self;
@@ -512,11 +523,15 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     /// [`Ims::with_one_point`].
     one_point: bool,
     state: M::State,
+    /// The last voltage where the model's state does not keep it ([`ImsModel::input_of`];
+    /// CBW's does: then it stays 0, see [`Ims::volts`]).
     u: T,
     /// The last model output where the model cannot give it from its state
     /// ([`ImsModel::output_of`]; CBW can: then it is not stored per sample and stays 0, see
     /// [`Ims::predicted_um`]).
     y: T,
+    /// [`Ims::last_evals`]: a diagnostic of the tests, not kept per sample in the firmware.
+    #[cfg(test)]
     evals: usize,
 }
 
@@ -532,7 +547,7 @@ where
             && self.dt_s == o.dt_s
             && self.offset_um == o.offset_um
             && self.state == o.state
-            && self.u == o.u
+            && self.u_last() == o.u_last()
             && self.y_last() == o.y_last()
     }
 }
@@ -561,6 +576,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         } else {
             y
         };
+        let u = if model.input_of(&state).is_some() {
+            T::ZERO
+        } else {
+            u0
+        };
         let slope_hint = model.d();
         let pieces = model.pieces();
         Ok(Self {
@@ -580,8 +600,9 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             pieces,
             one_point: false,
             state,
-            u: u0,
+            u,
             y,
+            #[cfg(test)]
             evals: 0,
         })
     }
@@ -601,7 +622,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         )?;
         self.min_slope = min_slope;
         self.quad = quad_um_per_v2;
-        let u = self.u;
+        let u = self.u_last();
         self.reset_volts(u);
         Ok(self)
     }
@@ -609,7 +630,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Inverts linear creep of the stage before the hysteresis (see [`CreepInverse`]).
     pub fn with_creep(mut self, creep: CreepInverse<T>) -> Self {
         self.creep = Some(creep);
-        let u = self.u;
+        let u = self.u_last();
         self.reset_volts(u);
         self
     }
@@ -636,7 +657,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
 
     /// The last voltage (V).
     pub fn volts(&self) -> T {
-        self.u
+        self.u_last()
     }
 
     /// Each sample takes the first point of the direct inversion ([`ImsModel::invert_step`])
@@ -665,7 +686,9 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.closure
     }
     /// Model evaluations used by the last solve (0 for [`ImsLoop::Delayed`] and for a
-    /// one-point step, [`Ims::with_one_point`]).
+    /// one-point step, [`Ims::with_one_point`]). Tests only: a diagnostic the control path
+    /// does not store per sample.
+    #[cfg(test)]
     pub fn last_evals(&self) -> usize {
         self.evals
     }
@@ -680,9 +703,41 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     #[inline(always)]
     fn y_last(&self) -> T {
         match self.model.output_of(&self.state) {
-            Some(y) => y + self.quad * self.u * self.u,
+            Some(y) => {
+                let u = self.u_last();
+                y + self.quad * u * u
+            }
             None => self.y,
         }
+    }
+
+    /// The last voltage (V): from the state where the model keeps it
+    /// ([`ImsModel::input_of`]), else the stored one.
+    #[inline(always)]
+    fn u_last(&self) -> T {
+        match self.model.input_of(&self.state) {
+            Some(u) => u,
+            None => self.u,
+        }
+    }
+
+    /// Keeps `u`, the input of the state just taken, where the state does not keep it.
+    #[inline(always)]
+    fn keep_u(&mut self, u: T) {
+        if self.model.input_of(&self.state).is_none() {
+            self.u = u;
+        }
+    }
+
+    /// Keeps the evaluations of the last solve (`last_evals`, tests only).
+    #[inline(always)]
+    fn set_evals(&mut self, evals: usize) {
+        #[cfg(test)]
+        {
+            self.evals = evals;
+        }
+        #[cfg(not(test))]
+        let _ = evals;
     }
 
     /// Keeps `y`, the model output of the state just taken, where the state does not give it.
@@ -699,7 +754,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         // Checked after the offset: a finite reference far out may overflow with it.
         let y_ref_um = y_ref_um - self.offset_um;
         if !y_ref_um.is_finite() {
-            return self.u;
+            return self.u_last();
         }
         let y_ref_um = match &self.creep {
             Some(c) => c.static_target(y_ref_um),
@@ -725,9 +780,9 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
                 self.solve_bracketed(y_ref_um, tol)
             }
             ImsLoop::Delayed => {
-                self.evals = 0;
+                self.set_evals(0);
                 let d = self.model.d();
-                let h_prev = d * self.u - self.y_last();
+                let h_prev = d * self.u_last() - self.y_last();
                 self.finish((y_ref_um + h_prev) / d)
             }
         }
@@ -749,12 +804,12 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             (self.volts_min, self.volts_max)
         } else {
             (
-                self.volts_min.max(self.u - self.max_step_volts),
-                self.volts_max.min(self.u + self.max_step_volts),
+                self.volts_min.max(self.u_last() - self.max_step_volts),
+                self.volts_max.min(self.u_last() + self.max_step_volts),
             )
         };
         if inv.u >= lo && inv.u <= hi {
-            self.evals = inv.iterations;
+            self.set_evals(inv.iterations);
             self.step_hint = inv.hint;
             self.state = inv.state;
             Some(self.commit::<PLAIN>(inv.u, inv.y))
@@ -773,10 +828,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             model.step(&mut s, u, dt) + quad * u * u - y_ref_um
         };
         // f at the held voltage: not `self.y - y_ref` for models with rate terms.
-        let f0 = f(self.u);
-        let root = solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
-        self.evals = root.evals + 1;
-        let secant = (root.fx - f0) / (root.x - self.u);
+        let u0 = self.u_last();
+        let f0 = f(u0);
+        let root = solve_increasing_hinted(f, u0, f0, self.min_slope, self.slope_hint, tol);
+        self.set_evals(root.evals + 1);
+        let secant = (root.fx - f0) / (root.x - u0);
         if secant.is_finite() && secant > self.min_slope {
             self.slope_hint = secant;
         }
@@ -788,10 +844,11 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     #[inline]
     fn finish(&mut self, u: T) -> T {
         // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
-        let u = if u.is_finite() { u } else { self.u };
+        let u_prev = self.u_last();
+        let u = if u.is_finite() { u } else { u_prev };
         let u = u
             .clamp_to(self.volts_min, self.volts_max)
-            .clamp_to(self.u - self.max_step_volts, self.u + self.max_step_volts);
+            .clamp_to(u_prev - self.max_step_volts, u_prev + self.max_step_volts);
         let y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
         self.step_hint = T::ONE;
         self.commit::<false>(u, y)
@@ -801,7 +858,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     #[inline]
     fn commit<const NO_CREEP: bool>(&mut self, u: T, y: T) -> T {
         self.keep_y(y);
-        self.u = u;
+        self.keep_u(u);
         if NO_CREEP {
             return u;
         }
@@ -822,9 +879,9 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u0 = u0.clamp_to(self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
         let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
-        self.u = u0;
+        self.keep_u(u0);
         self.keep_y(y);
-        self.evals = 0;
+        self.set_evals(0);
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
             c.settle(y);
@@ -836,7 +893,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u0 = super::rest_volts(u0, self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
         let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
-        self.u = u0;
+        self.keep_u(u0);
         self.keep_y(y);
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
