@@ -36,7 +36,8 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     }
     /// Direct inversion of one step, for models whose step has a closed form: the input
     /// `u` whose step from `state` gives `y_model(u) = y_ref` to within `tol`, the model
-    /// output there and the state after the step. `hint`: the [`Inverted::hint`] of the
+    /// output there and the state after the step (`tol` computes the tolerance where a
+    /// residual is tested). `hint`: the [`Inverted::hint`] of the
     /// previous solved step (`T::ONE` when there is none), a start for the solve;
     /// `pieces`: the model's [`ImsModel::pieces`]; `one_point`: take the solve's first
     /// point unless the step is large ([`Ims::with_one_point`]). `None` (the default): the
@@ -46,7 +47,7 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
         &self,
         _state: &Self::State,
         _y_ref: T,
-        _tol: T,
+        _tol: impl Fn() -> T + Copy,
         _hint: T,
         _pieces: &[T; 4],
         _one_point: bool,
@@ -240,7 +241,7 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
         &self,
         state: &BwState<T>,
         y_ref: T,
-        tol: T,
+        tol: impl Fn() -> T + Copy,
         hint: T,
         pieces: &[T; 4],
         one_point: bool,
@@ -249,9 +250,9 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
             return None;
         }
         if one_point {
-            invert_cbw_n1::<T, true>(self, pieces, state, y_ref, || tol, hint)
+            invert_cbw_n1::<T, true>(self, pieces, state, y_ref, tol, hint)
         } else {
-            invert_cbw_n1::<T, false>(self, pieces, state, y_ref, || tol, hint)
+            invert_cbw_n1::<T, false>(self, pieces, state, y_ref, tol, hint)
         }
     }
     fn pieces(&self) -> [T; 4] {
@@ -466,7 +467,7 @@ impl<T: Real> Ims<T, Cbw<T>> {
             &self.pieces,
             &self.state,
             y_ref_um,
-            move || tol(y_ref_um, this.y_last()),
+            move || tol(y_ref_um, this.y_solved()),
             self.step_hint,
         ) {
             if let Some(u) = self.take_inverted::<true>(inv) {
@@ -527,8 +528,8 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     /// CBW's does: then it stays 0, see [`Ims::volts`]).
     u: T,
     /// The last model output where the model cannot give it from its state
-    /// ([`ImsModel::output_of`]; CBW can: then it is not stored per sample and stays 0, see
-    /// [`Ims::predicted_um`]).
+    /// ([`ImsModel::output_of`]) or the delayed loop reads it each sample; otherwise (CBW,
+    /// solved) it is not stored per sample and stays 0, see [`Ims::predicted_um`].
     y: T,
     /// [`Ims::last_evals`]: a diagnostic of the tests, not kept per sample in the firmware.
     #[cfg(test)]
@@ -571,7 +572,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u0 = T::ZERO.clamp_to(volts_min, volts_max);
         let mut state = model.init(u0);
         let y = model.step(&mut state, u0, dt_s);
-        let y = if model.output_of(&state).is_some() {
+        let y = if closure == ImsLoop::Solved && model.output_of(&state).is_some() {
             T::ZERO
         } else {
             y
@@ -702,6 +703,15 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// stored one.
     #[inline(always)]
     fn y_last(&self) -> T {
+        if self.closure == ImsLoop::Delayed {
+            return self.y;
+        }
+        self.y_solved()
+    }
+
+    /// [`Ims::y_last`] of the solved loop.
+    #[inline(always)]
+    fn y_solved(&self) -> T {
         match self.model.output_of(&self.state) {
             Some(y) => {
                 let u = self.u_last();
@@ -748,6 +758,14 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         }
     }
 
+    /// [`Ims::keep_y`] outside the per-sample steps: the delayed loop also keeps it.
+    #[inline]
+    fn keep_y_at_rest(&mut self, y: T) {
+        if self.closure == ImsLoop::Delayed || self.model.output_of(&self.state).is_none() {
+            self.y = y;
+        }
+    }
+
     /// Voltage (V) for the reference `y_ref_um`. A non-finite reference holds the output.
     #[inline]
     pub fn compensate(&mut self, y_ref_um: T) -> T {
@@ -762,12 +780,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         };
         match self.closure {
             ImsLoop::Solved => {
-                let tol = self.tol(y_ref_um);
                 if self.quad == T::ZERO {
+                    // The tolerance only where a residual is tested.
+                    let this = &*self;
                     if let Some(inv) = self.model.invert_step(
                         &self.state,
                         y_ref_um,
-                        tol,
+                        move || this.tol(y_ref_um),
                         self.step_hint,
                         &self.pieces,
                         self.one_point,
@@ -777,13 +796,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
                         }
                     }
                 }
-                self.solve_bracketed(y_ref_um, tol)
+                self.solve_bracketed(y_ref_um, self.tol(y_ref_um))
             }
             ImsLoop::Delayed => {
                 self.set_evals(0);
                 let d = self.model.d();
-                let h_prev = d * self.u_last() - self.y_last();
-                self.finish((y_ref_um + h_prev) / d)
+                let h_prev = d * self.u_last() - self.y;
+                self.finish::<true>((y_ref_um + h_prev) / d)
             }
         }
     }
@@ -791,7 +810,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Tolerance of the solve on `y` (um) for the reference `y_ref_um`.
     #[inline(always)]
     fn tol(&self, y_ref_um: T) -> T {
-        tol(y_ref_um, self.y_last())
+        tol(y_ref_um, self.y_solved())
     }
 
     /// Takes a direct inversion if it lies inside the range and slew limits (the solve's own
@@ -812,7 +831,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             self.set_evals(inv.iterations);
             self.step_hint = inv.hint;
             self.state = inv.state;
-            Some(self.commit::<PLAIN>(inv.u, inv.y))
+            Some(self.commit::<PLAIN, false>(inv.u, inv.y))
         } else {
             None
         }
@@ -836,13 +855,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         if secant.is_finite() && secant > self.min_slope {
             self.slope_hint = secant;
         }
-        self.finish(root.x)
+        self.finish::<false>(root.x)
     }
 
     /// Limits `u` (range, slew; NaN holds the previous voltage), steps the model there and
-    /// takes it.
+    /// takes it. `DELAYED`: the delayed loop's step, which keeps the model output.
     #[inline]
-    fn finish(&mut self, u: T) -> T {
+    fn finish<const DELAYED: bool>(&mut self, u: T) -> T {
         // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
         let u_prev = self.u_last();
         let u = if u.is_finite() { u } else { u_prev };
@@ -851,13 +870,18 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             .clamp_to(u_prev - self.max_step_volts, u_prev + self.max_step_volts);
         let y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
         self.step_hint = T::ONE;
-        self.commit::<false>(u, y)
+        self.commit::<false, DELAYED>(u, y)
     }
 
-    /// Takes `u` with model output `y` as this sample's voltage.
+    /// Takes `u` with model output `y` as this sample's voltage. `KEEP_Y`: store `y` even
+    /// where the state gives it (the delayed loop reads it each sample).
     #[inline]
-    fn commit<const NO_CREEP: bool>(&mut self, u: T, y: T) -> T {
-        self.keep_y(y);
+    fn commit<const NO_CREEP: bool, const KEEP_Y: bool>(&mut self, u: T, y: T) -> T {
+        if KEEP_Y {
+            self.y = y;
+        } else {
+            self.keep_y(y);
+        }
         self.keep_u(u);
         if NO_CREEP {
             return u;
@@ -880,7 +904,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.state = self.model.init(u0);
         let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.keep_u(u0);
-        self.keep_y(y);
+        self.keep_y_at_rest(y);
         self.set_evals(0);
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
@@ -894,7 +918,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.state = self.model.init(u0);
         let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
         self.keep_u(u0);
-        self.keep_y(y);
+        self.keep_y_at_rest(y);
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
             c.settle(y);
@@ -1072,7 +1096,7 @@ mod invert_step_tests {
             let y_ref = 8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())
                 + 0.5 * (2.0 * core::f64::consts::PI * 130.0 * t).sin();
             let inv = m
-                .invert_step(&st, y_ref, 1e-12, 1.0, &m.pieces(), false)
+                .invert_step(&st, y_ref, || 1e-12, 1.0, &m.pieces(), false)
                 .expect("converges");
             let mut s2 = st;
             let y = m.step(&mut s2, inv.u, 1e-4);
@@ -1090,7 +1114,7 @@ mod invert_step_tests {
                 .invert_step(
                     &st,
                     y_ref,
-                    8.0 * f32::EPSILON * 17.0,
+                    || 8.0 * f32::EPSILON * 17.0,
                     1.0,
                     &m.pieces(),
                     false,
