@@ -36,7 +36,8 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     }
     /// Direct inversion of one step, for models whose step has a closed form: the input
     /// `u` whose step from `state` gives `y_model(u) = y_ref` to within `tol`, the model
-    /// output there and the state after the step. `hint`: the [`Inverted::hint`] of the
+    /// output there and the state after the step (`tol` computes the tolerance where a
+    /// residual is tested). `hint`: the [`Inverted::hint`] of the
     /// previous solved step (`T::ONE` when there is none), a start for the solve;
     /// `pieces`: the model's [`ImsModel::pieces`]; `one_point`: take the solve's first
     /// point unless the step is large ([`Ims::with_one_point`]). `None` (the default): the
@@ -46,7 +47,7 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
         &self,
         _state: &Self::State,
         _y_ref: T,
-        _tol: T,
+        _tol: impl Fn() -> T + Copy,
         _hint: T,
         _pieces: &[T; 4],
         _one_point: bool,
@@ -57,6 +58,19 @@ pub trait ImsModel<T: Real>: Hysteresis<T> {
     /// the slopes `k` of its four pieces).
     fn pieces(&self) -> [T; 4] {
         [T::ZERO; 4]
+    }
+    /// The output [`Hysteresis::step`] returned when it left `state`, if the state alone
+    /// gives it (bit for bit): then [`Ims`] computes its last output when it needs it
+    /// instead of storing it per sample. `None` (the default): [`Ims`] stores it.
+    #[inline(always)]
+    fn output_of(&self, _state: &Self::State) -> Option<T> {
+        None
+    }
+    /// The input of the step that left `state`, if the state keeps it: then [`Ims`] does
+    /// not store its last voltage a second time. `None` (the default): [`Ims`] stores it.
+    #[inline(always)]
+    fn input_of(&self, _state: &Self::State) -> Option<T> {
+        None
     }
 }
 
@@ -227,7 +241,7 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
         &self,
         state: &BwState<T>,
         y_ref: T,
-        tol: T,
+        tol: impl Fn() -> T + Copy,
         hint: T,
         pieces: &[T; 4],
         one_point: bool,
@@ -236,13 +250,23 @@ impl<T: Real> ImsModel<T> for Cbw<T> {
             return None;
         }
         if one_point {
-            invert_cbw_n1::<T, true>(self, pieces, state, y_ref, || tol, hint)
+            invert_cbw_n1::<T, true>(self, pieces, state, y_ref, tol, hint)
         } else {
-            invert_cbw_n1::<T, false>(self, pieces, state, y_ref, || tol, hint)
+            invert_cbw_n1::<T, false>(self, pieces, state, y_ref, tol, hint)
         }
     }
     fn pieces(&self) -> [T; 4] {
         cbw_pieces(self)
+    }
+    /// `d u - h` ([`BwState::step_piezo`]'s output).
+    #[inline(always)]
+    fn output_of(&self, state: &BwState<T>) -> Option<T> {
+        Some(self.d() * state.u - state.h)
+    }
+    /// The step's (sane) input.
+    #[inline(always)]
+    fn input_of(&self, state: &BwState<T>) -> Option<T> {
+        Some(state.u)
     }
 }
 
@@ -434,16 +458,16 @@ impl<T: Real> Ims<T, Cbw<T>> {
     #[inline(always)]
     pub(crate) fn compensate_plain_cbw_n1(&mut self, y_ref_um: T, y_ref_finite: bool) -> T {
         if !(y_ref_finite || y_ref_um.is_finite()) {
-            return self.u;
+            return self.u_last();
         }
         // The tolerance only where a residual is tested (a large step).
-        let y_last = self.y;
+        let this = &*self;
         if let Some(inv) = invert_cbw_n1::<T, true>(
             &self.model,
             &self.pieces,
             &self.state,
             y_ref_um,
-            move || tol(y_ref_um, y_last),
+            move || tol(y_ref_um, this.y_solved()),
             self.step_hint,
         ) {
             if let Some(u) = self.take_inverted::<true>(inv) {
@@ -500,8 +524,15 @@ pub struct Ims<T: Real, M: ImsModel<T>> {
     /// [`Ims::with_one_point`].
     one_point: bool,
     state: M::State,
+    /// The last voltage where the model's state does not keep it ([`ImsModel::input_of`];
+    /// CBW's does: then it stays 0, see [`Ims::volts`]).
     u: T,
+    /// The last model output where the model cannot give it from its state
+    /// ([`ImsModel::output_of`]) or the delayed loop reads it each sample; otherwise (CBW,
+    /// solved) it is not stored per sample and stays 0, see [`Ims::predicted_um`].
     y: T,
+    /// [`Ims::last_evals`]: a diagnostic of the tests, not kept per sample in the firmware.
+    #[cfg(test)]
     evals: usize,
 }
 
@@ -517,8 +548,8 @@ where
             && self.dt_s == o.dt_s
             && self.offset_um == o.offset_um
             && self.state == o.state
-            && self.u == o.u
-            && self.y == o.y
+            && self.u_last() == o.u_last()
+            && self.y_last() == o.y_last()
     }
 }
 
@@ -541,6 +572,16 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         let u0 = T::ZERO.clamp_to(volts_min, volts_max);
         let mut state = model.init(u0);
         let y = model.step(&mut state, u0, dt_s);
+        let y = if closure == ImsLoop::Solved && model.output_of(&state).is_some() {
+            T::ZERO
+        } else {
+            y
+        };
+        let u = if model.input_of(&state).is_some() {
+            T::ZERO
+        } else {
+            u0
+        };
         let slope_hint = model.d();
         let pieces = model.pieces();
         Ok(Self {
@@ -560,8 +601,9 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             pieces,
             one_point: false,
             state,
-            u: u0,
+            u,
             y,
+            #[cfg(test)]
             evals: 0,
         })
     }
@@ -581,7 +623,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         )?;
         self.min_slope = min_slope;
         self.quad = quad_um_per_v2;
-        let u = self.u;
+        let u = self.u_last();
         self.reset_volts(u);
         Ok(self)
     }
@@ -589,7 +631,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Inverts linear creep of the stage before the hysteresis (see [`CreepInverse`]).
     pub fn with_creep(mut self, creep: CreepInverse<T>) -> Self {
         self.creep = Some(creep);
-        let u = self.u;
+        let u = self.u_last();
         self.reset_volts(u);
         self
     }
@@ -616,7 +658,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
 
     /// The last voltage (V).
     pub fn volts(&self) -> T {
-        self.u
+        self.u_last()
     }
 
     /// Each sample takes the first point of the direct inversion ([`ImsModel::invert_step`])
@@ -645,13 +687,83 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         self.closure
     }
     /// Model evaluations used by the last solve (0 for [`ImsLoop::Delayed`] and for a
-    /// one-point step, [`Ims::with_one_point`]).
+    /// one-point step, [`Ims::with_one_point`]). Tests only: a diagnostic the control path
+    /// does not store per sample.
+    #[cfg(test)]
     pub fn last_evals(&self) -> usize {
         self.evals
     }
     /// Output the internal model predicts for the last voltage (um).
     pub fn predicted_um(&self) -> T {
-        self.y
+        self.y_last()
+    }
+
+    /// The last model output (um): from the state where the model gives it
+    /// ([`ImsModel::output_of`], the quadratic term added as the step adds it), else the
+    /// stored one.
+    #[inline(always)]
+    fn y_last(&self) -> T {
+        if self.closure == ImsLoop::Delayed {
+            return self.y;
+        }
+        self.y_solved()
+    }
+
+    /// [`Ims::y_last`] of the solved loop.
+    #[inline(always)]
+    fn y_solved(&self) -> T {
+        match self.model.output_of(&self.state) {
+            Some(y) => {
+                let u = self.u_last();
+                y + self.quad * u * u
+            }
+            None => self.y,
+        }
+    }
+
+    /// The last voltage (V): from the state where the model keeps it
+    /// ([`ImsModel::input_of`]), else the stored one.
+    #[inline(always)]
+    fn u_last(&self) -> T {
+        match self.model.input_of(&self.state) {
+            Some(u) => u,
+            None => self.u,
+        }
+    }
+
+    /// Keeps `u`, the input of the state just taken, where the state does not keep it.
+    #[inline(always)]
+    fn keep_u(&mut self, u: T) {
+        if self.model.input_of(&self.state).is_none() {
+            self.u = u;
+        }
+    }
+
+    /// Keeps the evaluations of the last solve (`last_evals`, tests only).
+    #[inline(always)]
+    fn set_evals(&mut self, evals: usize) {
+        #[cfg(test)]
+        {
+            self.evals = evals;
+        }
+        #[cfg(not(test))]
+        let _ = evals;
+    }
+
+    /// Keeps `y`, the model output of the state just taken, where the state does not give it.
+    #[inline(always)]
+    fn keep_y(&mut self, y: T) {
+        if self.model.output_of(&self.state).is_none() {
+            self.y = y;
+        }
+    }
+
+    /// [`Ims::keep_y`] outside the per-sample steps: the delayed loop also keeps it.
+    #[inline]
+    fn keep_y_at_rest(&mut self, y: T) {
+        if self.closure == ImsLoop::Delayed || self.model.output_of(&self.state).is_none() {
+            self.y = y;
+        }
     }
 
     /// Voltage (V) for the reference `y_ref_um`. A non-finite reference holds the output.
@@ -660,7 +772,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         // Checked after the offset: a finite reference far out may overflow with it.
         let y_ref_um = y_ref_um - self.offset_um;
         if !y_ref_um.is_finite() {
-            return self.u;
+            return self.u_last();
         }
         let y_ref_um = match &self.creep {
             Some(c) => c.static_target(y_ref_um),
@@ -668,12 +780,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         };
         match self.closure {
             ImsLoop::Solved => {
-                let tol = self.tol(y_ref_um);
                 if self.quad == T::ZERO {
+                    // The tolerance only where a residual is tested.
+                    let this = &*self;
                     if let Some(inv) = self.model.invert_step(
                         &self.state,
                         y_ref_um,
-                        tol,
+                        move || this.tol(y_ref_um),
                         self.step_hint,
                         &self.pieces,
                         self.one_point,
@@ -683,13 +796,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
                         }
                     }
                 }
-                self.solve_bracketed(y_ref_um, tol)
+                self.solve_bracketed(y_ref_um, self.tol(y_ref_um))
             }
             ImsLoop::Delayed => {
-                self.evals = 0;
+                self.set_evals(0);
                 let d = self.model.d();
-                let h_prev = d * self.u - self.y;
-                self.finish((y_ref_um + h_prev) / d)
+                let h_prev = d * self.u_last() - self.y;
+                self.finish::<true>((y_ref_um + h_prev) / d)
             }
         }
     }
@@ -697,7 +810,7 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     /// Tolerance of the solve on `y` (um) for the reference `y_ref_um`.
     #[inline(always)]
     fn tol(&self, y_ref_um: T) -> T {
-        tol(y_ref_um, self.y)
+        tol(y_ref_um, self.y_solved())
     }
 
     /// Takes a direct inversion if it lies inside the range and slew limits (the solve's own
@@ -710,15 +823,15 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             (self.volts_min, self.volts_max)
         } else {
             (
-                self.volts_min.max(self.u - self.max_step_volts),
-                self.volts_max.min(self.u + self.max_step_volts),
+                self.volts_min.max(self.u_last() - self.max_step_volts),
+                self.volts_max.min(self.u_last() + self.max_step_volts),
             )
         };
         if inv.u >= lo && inv.u <= hi {
-            self.evals = inv.iterations;
+            self.set_evals(inv.iterations);
             self.step_hint = inv.hint;
             self.state = inv.state;
-            Some(self.commit::<PLAIN>(inv.u, inv.y))
+            Some(self.commit::<PLAIN, false>(inv.u, inv.y))
         } else {
             None
         }
@@ -734,40 +847,47 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
             model.step(&mut s, u, dt) + quad * u * u - y_ref_um
         };
         // f at the held voltage: not `self.y - y_ref` for models with rate terms.
-        let f0 = f(self.u);
-        let root = solve_increasing_hinted(f, self.u, f0, self.min_slope, self.slope_hint, tol);
-        self.evals = root.evals + 1;
-        let secant = (root.fx - f0) / (root.x - self.u);
+        let u0 = self.u_last();
+        let f0 = f(u0);
+        let root = solve_increasing_hinted(f, u0, f0, self.min_slope, self.slope_hint, tol);
+        self.set_evals(root.evals + 1);
+        let secant = (root.fx - f0) / (root.x - u0);
         if secant.is_finite() && secant > self.min_slope {
             self.slope_hint = secant;
         }
-        self.finish(root.x)
+        self.finish::<false>(root.x)
     }
 
     /// Limits `u` (range, slew; NaN holds the previous voltage), steps the model there and
-    /// takes it.
+    /// takes it. `DELAYED`: the delayed loop's step, which keeps the model output.
     #[inline]
-    fn finish(&mut self, u: T) -> T {
+    fn finish<const DELAYED: bool>(&mut self, u: T) -> T {
         // clamp_to maps NaN to the lower limit; keep the previous voltage instead.
-        let u = if u.is_finite() { u } else { self.u };
+        let u_prev = self.u_last();
+        let u = if u.is_finite() { u } else { u_prev };
         let u = u
             .clamp_to(self.volts_min, self.volts_max)
-            .clamp_to(self.u - self.max_step_volts, self.u + self.max_step_volts);
+            .clamp_to(u_prev - self.max_step_volts, u_prev + self.max_step_volts);
         let y = self.model.step(&mut self.state, u, self.dt_s) + self.quad * u * u;
         self.step_hint = T::ONE;
-        self.commit::<false>(u, y)
+        self.commit::<false, DELAYED>(u, y)
     }
 
-    /// Takes `u` with model output `y` as this sample's voltage.
+    /// Takes `u` with model output `y` as this sample's voltage. `KEEP_Y`: store `y` even
+    /// where the state gives it (the delayed loop reads it each sample).
     #[inline]
-    fn commit<const NO_CREEP: bool>(&mut self, u: T, y: T) -> T {
-        self.y = y;
-        self.u = u;
+    fn commit<const NO_CREEP: bool, const KEEP_Y: bool>(&mut self, u: T, y: T) -> T {
+        if KEEP_Y {
+            self.y = y;
+        } else {
+            self.keep_y(y);
+        }
+        self.keep_u(u);
         if NO_CREEP {
             return u;
         }
         if let Some(c) = &mut self.creep {
-            c.commit(self.y);
+            c.commit(y);
         }
         u
     }
@@ -782,12 +902,13 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
         };
         let u0 = u0.clamp_to(self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
-        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
-        self.u = u0;
-        self.evals = 0;
+        let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
+        self.keep_u(u0);
+        self.keep_y_at_rest(y);
+        self.set_evals(0);
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
-            c.settle(self.y);
+            c.settle(y);
         }
     }
 
@@ -795,11 +916,12 @@ impl<T: Real, M: ImsModel<T>> Ims<T, M> {
     pub fn reset_volts(&mut self, u0: T) {
         let u0 = super::rest_volts(u0, self.volts_min, self.volts_max);
         self.state = self.model.init(u0);
-        self.y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
-        self.u = u0;
+        let y = self.model.step(&mut self.state, u0, self.dt_s) + self.quad * u0 * u0;
+        self.keep_u(u0);
+        self.keep_y_at_rest(y);
         self.step_hint = T::ONE;
         if let Some(c) = &mut self.creep {
-            c.settle(self.y);
+            c.settle(y);
         }
     }
 }
@@ -974,7 +1096,7 @@ mod invert_step_tests {
             let y_ref = 8.0 * (1.0 - (2.0 * core::f64::consts::PI * 7.0 * t).cos())
                 + 0.5 * (2.0 * core::f64::consts::PI * 130.0 * t).sin();
             let inv = m
-                .invert_step(&st, y_ref, 1e-12, 1.0, &m.pieces(), false)
+                .invert_step(&st, y_ref, || 1e-12, 1.0, &m.pieces(), false)
                 .expect("converges");
             let mut s2 = st;
             let y = m.step(&mut s2, inv.u, 1e-4);
@@ -992,7 +1114,7 @@ mod invert_step_tests {
                 .invert_step(
                     &st,
                     y_ref,
-                    8.0 * f32::EPSILON * 17.0,
+                    || 8.0 * f32::EPSILON * 17.0,
                     1.0,
                     &m.pieces(),
                     false,
