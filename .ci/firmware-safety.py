@@ -61,9 +61,11 @@ EXC_FRAME = 104
 # ADC1_2; spi-converters: TIM2).
 CONTROL = re.compile(r"piezo_core::pipeline::Pipeline\W.*::step(::h[0-9a-f]{16})?$")
 # Entered from the control interrupt only once after a fault or a configuration change
-# (`Pipeline::restart`, #[cold]): it and what only it reaches may stay in flash (ITCM is 64 KB
-# and the two-axis build's per-sample code alone nearly fills it).
-COLD = re.compile(r"piezo_core::pipeline::Pipeline\W.*::restart(::h[0-9a-f]{16})?$")
+# (`Pipeline::restart`, and `Pipeline::settle_pending`, which runs it or decides the fused
+# path once after the law primed or was changed; both #[cold]): they and what only they
+# reach may stay in flash (ITCM is 64 KB and the two-axis build's per-sample code alone
+# nearly fills it).
+COLD = re.compile(r"piezo_core::pipeline::Pipeline\W.*::(restart|settle_pending)(::h[0-9a-f]{16})?$")
 # The NMI (-2) and HardFault (-1) preempt every configurable level: their stacks add on top,
 # except a HardFault that first moves MSP to the stack's top (checked: `hardfault_entry`).
 PRIORITY = {"ADC1_2": 3, "TIM2": 3, "USART3": 1, "NonMaskableInt": -2, "HardFault": -1}
@@ -440,7 +442,7 @@ def main():
         in_flash = lambda fs: sorted(name(f) for f in fs if f in addr_of and addr_of[f] >= itcm_hi and not LINKER.match(f))
         far, cold = in_flash(hot), set(reach(h)) - hot
         print(f"{name(h)}: {len(hot) - len(far)} functions of the per-sample path in ITCM, {len(far)} in flash;"
-              f" {len(cold)} more behind the restart (cold), {len(in_flash(cold))} of them in flash")
+              f" {len(cold)} more behind the restart and the pending settle (cold), {len(in_flash(cold))} of them in flash")
         for f in far[:int(os.environ.get("ITCM_LIST", "12"))]:
             print(f"  in flash: {f}")
         ok = ok and not far
