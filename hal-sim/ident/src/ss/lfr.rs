@@ -399,9 +399,11 @@ impl Lfr {
         let (n, nz) = (self.linear.order(), self.channels());
         let mut a = self.linear.a();
         // With the limit the feedback is bounded far out: the linear part alone.
-        for b in (0..self.basis.len()).filter(|_| !limited) {
-            let e = self.e.columns(b * nz, nz);
-            a += e * &self.f;
+        if !limited {
+            for b in 0..self.basis.len() {
+                let e = self.e.columns(b * nz, nz);
+                a += e * &self.f;
+            }
         }
         debug_assert_eq!(a.shape(), (n, n));
         Some(
@@ -1234,7 +1236,11 @@ pub fn refine_linear(
         iterations,
         ..Default::default()
     };
-    fit_stages(linear, recs, &opts)
+    fit_stages(linear, &scored(recs)?, &opts)
+}
+
+fn scored(recs: &[crate::record::Record]) -> anyhow::Result<Vec<Scored>> {
+    recs.iter().map(Scored::of).collect()
 }
 
 /// Identifies the LFR on `recs` (periodic records), started from the linear model; the
@@ -1244,11 +1250,8 @@ pub fn identify(
     recs: &[crate::record::Record],
     opts: &LfrOptions,
 ) -> anyhow::Result<LfrFit> {
-    let mut fit = fit_stages(linear, recs, opts)?;
-    let data = recs
-        .iter()
-        .map(Scored::of)
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let data = scored(recs)?;
+    let mut fit = fit_stages(linear, &data, opts)?;
     let inputs: Vec<&[Vec<f64>]> = data.iter().map(|d| d.u.as_slice()).collect();
     let peaks = fit.model.channel_peaks(&inputs)?;
     // A silent channel (peak 0) keeps a tiny limit: its feedback is nothing either way.
@@ -1260,19 +1263,11 @@ pub fn identify(
 }
 
 /// [`identify`] without the limit (the limit is set on the final model only).
-fn fit_stages(
-    linear: &Modal,
-    recs: &[crate::record::Record],
-    opts: &LfrOptions,
-) -> anyhow::Result<LfrFit> {
+fn fit_stages(linear: &Modal, data: &[Scored], opts: &LfrOptions) -> anyhow::Result<LfrFit> {
     anyhow::ensure!(
         !opts.basis.is_empty() && opts.basis.iter().all(|b| b.valid()),
         "the LFR needs basis functions (play half-widths >= 0, rms time constants >= 1 sample)"
     );
-    let data = recs
-        .iter()
-        .map(Scored::of)
-        .collect::<anyhow::Result<Vec<_>>>()?;
     let samples: usize = data
         .iter()
         .map(|d| d.windows.iter().map(|w| w.1 - w.0).sum::<usize>())
@@ -1297,7 +1292,7 @@ fn fit_stages(
     let (mdl, c, start_rms, it0) = if !statics.is_empty() && statics.len() < opts.basis.len() {
         let first = fit_stages(
             linear,
-            recs,
+            data,
             &LfrOptions {
                 basis: statics,
                 ..opts.clone()
@@ -1312,14 +1307,14 @@ fn fit_stages(
             );
         }
         let mut m = widen(&first.model, &opts.basis);
-        let c = project(&mut m, &data)?;
+        let c = project(&mut m, data)?;
         (m, c, first.start_rms, first.iterations)
     } else {
         let mut mdl = match opts.channels {
-            Channels::Outputs(k) => start(linear, &opts.basis, &data, k)?,
-            Channels::Modes => start_modes(linear, &opts.basis, &data)?.0,
+            Channels::Outputs(k) => start(linear, &opts.basis, data, k)?,
+            Channels::Modes => start_modes(linear, &opts.basis, data)?.0,
         };
-        let c = project(&mut mdl, &data)?;
+        let c = project(&mut mdl, data)?;
         if opts.progress {
             eprintln!(
                 "lfr: start (linear, least-squares C, D): RMS {:.4e} on {} scored samples",
@@ -1332,7 +1327,7 @@ fn fit_stages(
     let params = layout(&mdl, modes.as_deref());
     let lm = Lm {
         params: &params,
-        data: &data,
+        data,
         stride: opts.stride.max(1),
         ftol: opts.ftol,
         samples,
