@@ -5,6 +5,7 @@
 //! ```text
 //! piezo diagnose-bench --cases 300 --seed 1 --out out/diagnose-bench
 //! piezo diagnose-bench --cases 300 --seed 1 --case 17 --out out/one   # one case again
+//! piezo diagnose-bench --cases 60 --seed 8 --consistency   # also the confident causes
 //! ```
 //!
 //! Diagnose is a black box here: the training and validation records go in through the
@@ -16,6 +17,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
+use crate::ident::diagnose::consistency::{self, Arrangement};
 use crate::ident::diagnose::{self, Options, Signals};
 use crate::independent::{self, Case, CAUSES};
 
@@ -42,6 +44,10 @@ pub struct Args {
     /// Fail (exit 1) when the share of hidden causes named (over all cases) is below this.
     #[arg(long)]
     pub min_recall: Option<f64>,
+    /// Also run the check `piezo diagnose` runs on a pair (the rule again with the records'
+    /// roles swapped) and score the confident causes (named both ways) in a second table.
+    #[arg(long)]
+    pub consistency: bool,
 }
 
 /// One case's outcome.
@@ -61,60 +67,104 @@ pub struct Outcome {
     /// Wall time of drawing and simulating the case (s).
     pub gen_s: f64,
     pub presence_ok: bool,
+    /// With `--consistency`: the causes named both as given and with the records swapped
+    /// (sorted; empty when the check failed, see `error`).
+    pub confident: Option<Vec<String>>,
+}
+
+impl Outcome {
+    /// The outcome of naming `named` (sorted) where `truth` is hidden.
+    fn scored(&self, named: Vec<String>) -> Self {
+        let missing: Vec<String> = self
+            .truth
+            .iter()
+            .filter(|c| !named.iter().any(|n| n == *c))
+            .map(|c| c.to_string())
+            .collect();
+        let extra: Vec<String> = named
+            .iter()
+            .filter(|n| !self.truth.contains(&n.as_str()))
+            .cloned()
+            .collect();
+        Self {
+            exact: self.error.is_none() && missing.is_empty() && extra.is_empty(),
+            named,
+            missing,
+            extra,
+            ..self.clone()
+        }
+    }
+
+    /// The same case scored on its confident causes (itself without `--consistency`).
+    pub fn confident_only(&self) -> Self {
+        match &self.confident {
+            Some(c) => self.scored(c.clone()),
+            None => self.clone(),
+        }
+    }
 }
 
 fn signals(r: &crate::record::Record) -> Result<Signals> {
     Signals::new(r.t.clone(), r.u.clone(), r.y.clone()).context("generated record")
 }
 
-/// Runs diagnose on one case (as `piezo diagnose --train train.csv --valid valid.csv`).
-fn run_case(case: &Case) -> (Outcome, serde_json::Value) {
+/// Runs diagnose on one case (as `piezo diagnose --train train.csv --valid valid.csv`; with
+/// `consistency` also its check with the records swapped, as the CLI runs it).
+fn run_case(case: &Case, consistency: bool) -> (Outcome, serde_json::Value) {
     let t0 = Instant::now();
+    let opt = Options::default();
     let res = (|| -> Result<_> {
-        let train = signals(&case.train)?;
-        let valid = signals(&case.valid)?;
-        diagnose::diagnose_records(&[train], &[valid], &Options::default())
+        let train = [signals(&case.train)?];
+        let valid = [signals(&case.valid)?];
+        let d = diagnose::diagnose_records(&train, &valid, &opt)?;
+        let c = if consistency {
+            let others = [Arrangement::swapped(&train, &valid)];
+            Some(consistency::check("as given", &d, &others, &opt)?)
+        } else {
+            None
+        };
+        Ok((d, c))
     })();
     let time_s = t0.elapsed().as_secs_f64();
-    let (named, error, json) = match res {
-        Ok(d) => {
-            let mut named: Vec<String> = d
-                .findings
-                .iter()
-                .map(|f| f.cause.name().to_string())
-                .collect();
-            named.sort();
-            (named, None, d.json())
-        }
-        Err(e) => (Vec::new(), Some(format!("{e:#}")), serde_json::Value::Null),
+    let sorted = |v: Vec<diagnose::Cause>| {
+        let mut n: Vec<String> = v.iter().map(|c| c.name().to_string()).collect();
+        n.sort();
+        n
     };
-    let truth = case.causes.clone();
-    let missing: Vec<String> = truth
-        .iter()
-        .filter(|c| !named.iter().any(|n| n == *c))
-        .map(|c| c.to_string())
-        .collect();
-    let extra: Vec<String> = named
-        .iter()
-        .filter(|n| !truth.contains(&n.as_str()))
-        .cloned()
-        .collect();
-    let exact = error.is_none() && missing.is_empty() && extra.is_empty();
-    (
-        Outcome {
-            index: case.index,
-            truth,
-            named,
-            missing,
-            extra,
-            exact,
-            error,
-            time_s,
-            gen_s: 0.0,
-            presence_ok: case.presence_ok,
-        },
-        json,
-    )
+    let (named, confident, error, json) = match res {
+        Ok((d, c)) => {
+            let mut json = d.json();
+            if let Some(c) = &c {
+                json["consistency"] = c.json();
+            }
+            (
+                sorted(d.findings.iter().map(|f| f.cause).collect()),
+                c.map(|c| sorted(c.confident())),
+                None,
+                json,
+            )
+        }
+        Err(e) => (
+            Vec::new(),
+            consistency.then(Vec::new),
+            Some(format!("{e:#}")),
+            serde_json::Value::Null,
+        ),
+    };
+    let blank = Outcome {
+        index: case.index,
+        truth: case.causes.clone(),
+        named: Vec::new(),
+        missing: Vec::new(),
+        extra: Vec::new(),
+        exact: false,
+        error,
+        time_s,
+        gen_s: 0.0,
+        presence_ok: case.presence_ok,
+        confident,
+    };
+    (blank.scored(named), json)
 }
 
 fn label(v: &[impl AsRef<str>]) -> String {
@@ -324,7 +374,7 @@ pub fn run(args: Args) -> Result<()> {
         let g0 = Instant::now();
         let case = independent::draw_case(args.seed, i);
         let gen_s = g0.elapsed().as_secs_f64();
-        let (mut o, json) = run_case(&case);
+        let (mut o, json) = run_case(&case, args.consistency);
         o.gen_s = gen_s;
         let k = done.fetch_add(1, Ordering::SeqCst) + 1;
         let verdict = if o.exact {
@@ -342,13 +392,16 @@ pub fn run(args: Args) -> Result<()> {
             w.join(", ")
         };
         println!(
-            "[{k:>3}/{total}] case {i:>3}: {} axis, {:.0} kHz, {:.1} s / {:.1} s; truth {}; named {}; {verdict}; {:.2} s (drawn in {:.1} s){}",
+            "[{k:>3}/{total}] case {i:>3}: {} axis, {:.0} kHz, {:.1} s / {:.1} s; truth {}; named {}; {verdict}{}; {:.2} s (drawn in {:.1} s){}",
             case.plant.axes.len(),
             case.fs_hz / 1000.0,
             case.train.len() as f64 / case.fs_hz,
             case.valid.len() as f64 / case.fs_hz,
             label(&o.truth),
             label(&o.named),
+            o.confident
+                .as_ref()
+                .map_or_else(String::new, |c| format!("; confident {}", label(c))),
             o.time_s,
             gen_s,
             if case.presence_ok { "" } else { " (presence check missed)" }
@@ -369,8 +422,17 @@ pub fn run(args: Args) -> Result<()> {
         pool.install(|| indices.par_iter().map(|&i| one(i)).collect::<Result<_>>())?
     };
     outs.sort_by_key(|o| o.index);
-    let t = table(args.seed, &outs, start.elapsed().as_secs_f64());
-    let md = t.markdown();
+    let wall_s = start.elapsed().as_secs_f64();
+    let t = table(args.seed, &outs, wall_s);
+    let mut md = t.markdown();
+    if args.consistency {
+        let confident: Vec<Outcome> = outs.iter().map(Outcome::confident_only).collect();
+        let _ = write!(
+            md,
+            "\n## Confident causes only\n\nThe causes named both as given and with the records' roles swapped (what `piezo diagnose` reports as `confident` for a pair); times include both runs.\n\n{}",
+            table(args.seed, &confident, wall_s).markdown()
+        );
+    }
     println!("\n{md}");
     if let Some(dir) = &args.out {
         std::fs::write(dir.join("table.md"), &md)
@@ -428,6 +490,7 @@ mod tests {
             time_s: 1.0,
             gen_s: 0.0,
             presence_ok: true,
+            confident: None,
         }
     }
 
@@ -452,5 +515,19 @@ mod tests {
         assert!(t
             .markdown()
             .contains("| drift | 1 | 0 (0.0 %) | 3 | 1 (33.3 %) |"));
+    }
+
+    #[test]
+    fn confident_causes_are_scored_as_a_second_answer() {
+        let mut a = o(vec!["creep"], &["creep", "drift"]);
+        assert!(!a.exact);
+        assert_eq!(a.confident_only().extra, ["drift"]);
+        a.confident = Some(vec!["creep".into()]);
+        let c = a.confident_only();
+        assert!(c.exact && c.extra.is_empty() && c.named == ["creep"]);
+        a.confident = Some(vec![]);
+        assert_eq!(a.confident_only().missing, ["creep"]);
+        let t = table(1, &[a.confident_only()], 1.0);
+        assert_eq!(t.recall(), (0, 1));
     }
 }
