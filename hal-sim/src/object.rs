@@ -409,20 +409,12 @@ pub fn identify(tr: &Traces, observer_hz: f64, rate_hz: f64, skip: usize) -> Res
         }
     }
     let step = (hi - lo) / grid as f64;
-    let (mut a, mut b) = (best.1 - step, best.1 + step);
-    let phi = (5f64.sqrt() - 1.0) / 2.0;
-    for _ in 0..30 {
-        let c1 = b - phi * (b - a);
-        let c2 = a + phi * (b - a);
-        let r1 = fit_at(c1).map_or(f64::INFINITY, |r| r.0);
-        let r2 = fit_at(c2).map_or(f64::INFINITY, |r| r.0);
-        if r1 < r2 {
-            b = c2;
-        } else {
-            a = c1;
-        }
-    }
-    let gap = 0.5 * (a + b);
+    let (gap, _) = crate::ident::optim::golden(
+        &mut |g| fit_at(g).map_or(f64::INFINITY, |r| r.0),
+        best.1 - step,
+        best.1 + step,
+        32,
+    );
     let (res, p) = fit_at(gap).ok_or_else(|| anyhow::anyhow!("identify: singular regression"))?;
     Ok(ObjectFit {
         gap_um: gap,

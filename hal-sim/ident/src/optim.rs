@@ -1,5 +1,5 @@
 //! Global (differential evolution, particle swarm) and local (Levenberg-Marquardt) optimisers
-//! for identification.
+//! for identification, and golden-section search on one coordinate ([`golden`]).
 //!
 //! All work inside a box `lo <= x <= hi`. DE or PSO ([`Optimizer`]) is the global search
 //! (002 uses PSO with an RMSE fitness, 002 eq. (6)-(7); [`pso`]); LM then polishes on the
@@ -499,6 +499,40 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// Minimises `f` on `[a, b]` by golden-section search with `evals` evaluations (at least
+/// two); returns the best point evaluated and its value. Non-finite values count as worse
+/// than any finite.
+pub fn golden(f: &mut dyn FnMut(f64) -> f64, a: f64, b: f64, evals: usize) -> (f64, f64) {
+    let r = 0.5 * (5f64.sqrt() - 1.0);
+    let mut eval = |x: f64| {
+        let v = f(x);
+        if v.is_finite() {
+            v
+        } else {
+            f64::INFINITY
+        }
+    };
+    let (mut a, mut b) = (a, b);
+    let (mut c, mut d) = (b - r * (b - a), a + r * (b - a));
+    let (mut fc, mut fd) = (eval(c), eval(d));
+    for _ in 2..evals.max(2) {
+        if fc <= fd {
+            (b, d, fd) = (d, c, fc);
+            c = b - r * (b - a);
+            fc = eval(c);
+        } else {
+            (a, c, fc) = (c, d, fd);
+            d = a + r * (b - a);
+            fd = eval(d);
+        }
+    }
+    if fc <= fd {
+        (c, fc)
+    } else {
+        (d, fd)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -666,5 +700,25 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("start point"), "{e}");
+    }
+
+    #[test]
+    fn golden_finds_the_minimum_of_a_parabola_inside_its_bracket() {
+        let mut n = 0;
+        let (x, v) = golden(
+            &mut |x| {
+                n += 1;
+                (x - 0.3) * (x - 0.3) + 2.0
+            },
+            -1.0,
+            1.0,
+            30,
+        );
+        assert_eq!(n, 30);
+        assert!((x - 0.3).abs() < 1e-5, "{x}");
+        assert!((v - 2.0).abs() < 1e-9);
+        // NaN is worse than anything finite; the bracket's end is approached.
+        let (x, _) = golden(&mut |x| if x > 0.9 { f64::NAN } else { -x }, 0.0, 1.0, 40);
+        assert!((0.85..=0.9).contains(&x), "{x}");
     }
 }

@@ -569,7 +569,7 @@ pub(super) fn lag_as_mode(with_delay: &Fitted, tiers: &Tiers, search: bool) -> F
                 .into_par_iter()
                 .map(|zeta| {
                     let s = if search {
-                        super::search::golden(
+                        crate::optim::golden(
                             &mut |x| fit(&mode(zeta, x)).1,
                             -std::f64::consts::LN_2,
                             std::f64::consts::LN_2,

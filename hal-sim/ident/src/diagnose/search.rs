@@ -1,5 +1,4 @@
-//! Nelder-Mead on the few nonlinear coordinates (the linear ones are solved exactly), and
-//! golden-section search on one.
+//! Nelder-Mead on the few nonlinear coordinates (the linear ones are solved exactly).
 
 /// Minimises `f` from `x0` with initial steps `steps`; at most `max_evals` evaluations.
 /// Returns the best point and its value. Non-finite values count as worse than any finite.
@@ -86,40 +85,6 @@ pub fn nelder_mead(
     pts.swap_remove(0)
 }
 
-/// Minimises `f` on `[a, b]` by golden-section search with `evals` evaluations (at least
-/// two); returns the best point evaluated and its value. Non-finite values count as worse
-/// than any finite.
-pub fn golden(f: &mut dyn FnMut(f64) -> f64, a: f64, b: f64, evals: usize) -> (f64, f64) {
-    let r = 0.5 * (5f64.sqrt() - 1.0);
-    let mut eval = |x: f64| {
-        let v = f(x);
-        if v.is_finite() {
-            v
-        } else {
-            f64::INFINITY
-        }
-    };
-    let (mut a, mut b) = (a, b);
-    let (mut c, mut d) = (b - r * (b - a), a + r * (b - a));
-    let (mut fc, mut fd) = (eval(c), eval(d));
-    for _ in 2..evals.max(2) {
-        if fc <= fd {
-            (b, d, fd) = (d, c, fc);
-            c = b - r * (b - a);
-            fc = eval(c);
-        } else {
-            (a, c, fc) = (c, d, fd);
-            d = a + r * (b - a);
-            fd = eval(d);
-        }
-    }
-    if fc <= fd {
-        (c, fc)
-    } else {
-        (d, fd)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -145,25 +110,5 @@ mod tests {
         let (x, _) = nelder_mead(&mut f, &[0.4], &[1.0], 30, 0.0);
         assert!(x[0].abs() < 0.5);
         assert!(count <= 32);
-    }
-
-    #[test]
-    fn golden_finds_the_minimum_of_a_parabola_inside_its_bracket() {
-        let mut n = 0;
-        let (x, v) = golden(
-            &mut |x| {
-                n += 1;
-                (x - 0.3) * (x - 0.3) + 2.0
-            },
-            -1.0,
-            1.0,
-            30,
-        );
-        assert_eq!(n, 30);
-        assert!((x - 0.3).abs() < 1e-5, "{x}");
-        assert!((v - 2.0).abs() < 1e-9);
-        // NaN is worse than anything finite; the bracket's end is approached.
-        let (x, _) = golden(&mut |x| if x > 0.9 { f64::NAN } else { -x }, 0.0, 1.0, 40);
-        assert!((0.85..=0.9).contains(&x), "{x}");
     }
 }
